@@ -1,0 +1,119 @@
+"""Collision geometry between robot bodies, orbit discs and the arena, vectorised over poses.
+
+Bodies are rectangles (L along the heading, W across, centred on the pose). Touching is not colliding:
+every test takes a tolerance ``tol_um`` and reports a collision only when bodies interpenetrate by more.
+The planner, the replay verifier and the simulator all use these functions, so they agree on what a
+collision is.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .robots import heading_vectors, right_vectors
+
+
+def _as_poses(poses) -> np.ndarray:
+    return np.atleast_2d(np.asarray(poses, dtype=np.float64))
+
+
+def point_rectangle_distance(points, poses, length_um, width_um) -> np.ndarray:
+    """Signed distance (um) from points to body rectangles; negative inside.
+
+    ``points`` is ``(K, 2)``, ``poses`` is ``(M, 3)``; returns ``(M, K)``. ``length_um``/``width_um`` are
+    scalars or ``(M,)``.
+    """
+    poses = _as_poses(poses)
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    half_l = 0.5 * np.broadcast_to(np.asarray(length_um, dtype=np.float64), poses.shape[:1])[:, None]
+    half_w = 0.5 * np.broadcast_to(np.asarray(width_um, dtype=np.float64), poses.shape[:1])[:, None]
+    h = heading_vectors(poses[:, 2])  # (M, 2)
+    rt = right_vectors(poses[:, 2])
+    d = pts[None, :, :] - poses[:, None, :2]  # (M, K, 2)
+    u = np.abs(np.einsum("mkj,mj->mk", d, h)) - half_l  # along the body
+    v = np.abs(np.einsum("mkj,mj->mk", d, rt)) - half_w  # across the body
+    outside = np.hypot(np.maximum(u, 0.0), np.maximum(v, 0.0))
+    inside = np.minimum(np.maximum(u, v), 0.0)
+    return outside + inside
+
+
+def bodies_hit_discs(poses, length_um, width_um, centres, radii, *, tol_um: float = 0.0) -> np.ndarray:
+    """Whether each body intersects each disc by more than ``tol_um``: ``(M, K)`` bool."""
+    dist = point_rectangle_distance(centres, poses, length_um, width_um)
+    radii = np.broadcast_to(np.asarray(radii, dtype=np.float64), (np.atleast_2d(centres).shape[0],))
+    return dist < radii[None, :] - tol_um
+
+
+def penetration_depth(poses_a, length_a, width_a, poses_b, length_b, width_b) -> np.ndarray:
+    """Separating-axis penetration depth (um) of body pairs, row by row; <= 0 means apart or touching.
+
+    The depth is the smallest overlap of the two rectangles' projections over the four candidate axes
+    (both bodies' heading and right vectors): the distance one body must move to separate them.
+    """
+    pa, pb = _as_poses(poses_a), _as_poses(poses_b)
+    m = max(pa.shape[0], pb.shape[0])
+    pa = np.broadcast_to(pa, (m, 3))
+    pb = np.broadcast_to(pb, (m, 3))
+    la = 0.5 * np.broadcast_to(np.asarray(length_a, dtype=np.float64), (m,))
+    wa = 0.5 * np.broadcast_to(np.asarray(width_a, dtype=np.float64), (m,))
+    lb = 0.5 * np.broadcast_to(np.asarray(length_b, dtype=np.float64), (m,))
+    wb = 0.5 * np.broadcast_to(np.asarray(width_b, dtype=np.float64), (m,))
+    ha, ra = heading_vectors(pa[:, 2]), right_vectors(pa[:, 2])
+    hb, rb = heading_vectors(pb[:, 2]), right_vectors(pb[:, 2])
+    d = pb[:, :2] - pa[:, :2]
+    depth = np.full(m, np.inf)
+    for axis in (ha, ra, hb, rb):
+        ext_a = la * np.abs(np.sum(ha * axis, axis=1)) + wa * np.abs(np.sum(ra * axis, axis=1))
+        ext_b = lb * np.abs(np.sum(hb * axis, axis=1)) + wb * np.abs(np.sum(rb * axis, axis=1))
+        overlap = ext_a + ext_b - np.abs(np.sum(d * axis, axis=1))
+        depth = np.minimum(depth, overlap)
+    return depth
+
+
+def bodies_overlap(poses_a, length_a, width_a, poses_b, length_b, width_b, *, tol_um: float = 1e-6) -> np.ndarray:
+    """Whether body pairs interpenetrate by more than ``tol_um`` (row by row): ``(M,)`` bool."""
+    return penetration_depth(poses_a, length_a, width_a, poses_b, length_b, width_b) > tol_um
+
+
+def pairwise_overlaps(poses, lengths_um, widths_um, *, tol_um: float = 1e-6) -> list[tuple[int, int, float]]:
+    """All pairs ``(i, j, depth_um)`` of the ``N`` bodies that interpenetrate by more than ``tol_um``."""
+    poses = _as_poses(poses)
+    n = poses.shape[0]
+    if n < 2:
+        return []
+    i, j = np.triu_indices(n, k=1)
+    lengths = np.broadcast_to(np.asarray(lengths_um, dtype=np.float64), (n,))
+    widths = np.broadcast_to(np.asarray(widths_um, dtype=np.float64), (n,))
+    depth = penetration_depth(poses[i], lengths[i], widths[i], poses[j], lengths[j], widths[j])
+    hit = depth > tol_um
+    return [(int(a), int(b), float(dd)) for a, b, dd in zip(i[hit], j[hit], depth[hit])]
+
+
+def outside_arena(poses, length_um, width_um, arena_um, *, tol_um: float = 1e-6) -> np.ndarray:
+    """How far (um) each body sticks out of the arena ``[0, w] x [0, h]``; 0 when inside. ``(M,)``."""
+    from .robots import body_corners
+
+    corners = body_corners(poses, length_um, width_um)  # (M, 4, 2)
+    w, h = arena_um
+    over = np.maximum.reduce(
+        [
+            -corners[..., 0],
+            corners[..., 0] - w,
+            -corners[..., 1],
+            corners[..., 1] - h,
+            np.zeros(corners.shape[:2]),
+        ]
+    ).max(axis=1)
+    return np.where(over > tol_um, over, 0.0)
+
+
+def disc_overlaps(centres, radii, *, tol_um: float = 0.0) -> list[tuple[int, int, float]]:
+    """Pairs ``(i, j, overlap_um)`` of discs that overlap by more than ``tol_um``."""
+    c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
+    r = np.broadcast_to(np.asarray(radii, dtype=np.float64), (c.shape[0],))
+    if c.shape[0] < 2:
+        return []
+    i, j = np.triu_indices(c.shape[0], k=1)
+    overlap = r[i] + r[j] - np.hypot(*(c[i] - c[j]).T)
+    hit = overlap > tol_um
+    return [(int(a), int(b), float(o)) for a, b, o in zip(i[hit], j[hit], overlap[hit])]

@@ -1,0 +1,220 @@
+"""Replay verification of a plan, on a code path independent of the planner.
+
+The planner builds plans from paths; this module only integrates SPEC section 3's closed-form motion
+step by step, finely sampled, and checks what a lab would care about:
+
+- every step names a primitive whose turning set is an accessible control state of the design;
+- no two bodies ever interpenetrate (touching is allowed) and every body stays inside the arena;
+- a robot moving straight that reaches its slot in contact with the structure (or, for G_1, meeting its
+  partner at the same moment) docks and stops there; a docked robot only ever receives straight-motion
+  primitives afterwards (it keeps pushing, SPEC 5);
+- at the end every robot is docked at its slot.
+
+It deliberately re-implements the motion formulas instead of calling :mod:`stressbots.kinematics`, so
+that a bug there cannot hide a bad plan.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .collision import outside_arena, penetration_depth
+from .plans import Plan
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class ReplayReport:
+    """Outcome of a replay. ``problems`` is empty iff ``ok``; ``trace`` holds sampled poses for pictures."""
+
+    ok: bool
+    problems: tuple[str, ...]
+    final: np.ndarray  # (n, 3) scenario order, rad
+    docked: np.ndarray  # (n,) bool
+    dock_times_s: np.ndarray  # (n,) NaN where never docked
+    trace_t: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    trace_poses: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0, 3)))
+
+
+def _motion(p0: np.ndarray, turning: np.ndarray, speed: np.ndarray, radius: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Poses ``(K, n, 3)`` at times ``t`` (K,) from ``p0`` (n, 3): SPEC 3's straight line / clockwise arc."""
+    x, y, th = p0[:, 0], p0[:, 1], p0[:, 2]
+    s = t[:, None] * speed[None, :]  # arc length (K, n)
+    dphi = np.where(turning[None, :], s / radius[None, :], 0.0)
+    th1 = th[None, :] + dphi
+    arc_x = x + radius * (np.cos(th)[None, :] - np.cos(th1))
+    arc_y = y + radius * (np.sin(th1) - np.sin(th)[None, :])
+    lin_x = x + s * np.sin(th)[None, :]
+    lin_y = y + s * np.cos(th)[None, :]
+    out = np.empty(t.shape + p0.shape)
+    out[..., 0] = np.where(turning[None, :], arc_x, lin_x)
+    out[..., 1] = np.where(turning[None, :], arc_y, lin_y)
+    out[..., 2] = np.mod(th1, TWO_PI)
+    return out
+
+
+def replay(
+    plan: Plan,
+    scenario,
+    goals: np.ndarray | None = None,
+    *,
+    accessible_turning: set[frozenset[str]] | None = None,
+    max_step_um: float = 2.0,
+    tol_um: float = 0.5,
+    heading_tol_rad: float = 1e-4,
+    trace_every_um: float | None = 10.0,
+) -> ReplayReport:
+    """Replay ``plan`` on ``scenario``'s robots from their start poses and check it (see module doc).
+
+    Parameters
+    ----------
+    goals:
+        Slots ``(n, 3)`` in scenario order (rad); default the plan's ``goals``.
+    accessible_turning:
+        The turning sets of the design's accessible control states; when given, every plan primitive
+        must be one of them.
+    max_step_um:
+        Largest distance any robot travels between two checked samples.
+    tol_um:
+        Interpenetration (and docking position) tolerance; touching bodies are fine.
+    """
+    names = list(scenario.names)
+    n = len(names)
+    problems: list[str] = []
+    if sorted(plan.robots) != sorted(names):
+        return ReplayReport(False, ("plan robots differ from the scenario's",), np.full((n, 3), np.nan), np.zeros(n, bool), np.full(n, np.nan))
+    order = [plan.robots.index(nm) for nm in names]  # plan column of each scenario robot
+    turning_all = plan.turning_matrix()[:, order]
+    if accessible_turning is not None:
+        for p in plan.primitives:
+            if frozenset(p.turning) not in accessible_turning:
+                problems.append(f"primitive {p.name} (turning {sorted(p.turning)}) is not an accessible control state")
+    if goals is None:
+        goals = np.array([plan.goals[nm] if nm in plan.goals else (np.nan,) * 3 for nm in names], dtype=np.float64)
+    goals = np.asarray(goals, dtype=np.float64)
+
+    speed = scenario.speeds_um_s
+    radius = scenario.turn_radii_um
+    length = scenario.lengths_um
+    width = scenario.widths_um
+    arena = scenario.arena_um
+    pose = scenario.starts.copy()
+    pose[:, 2] = np.mod(pose[:, 2], TWO_PI)
+    docked = np.zeros(n, dtype=bool)
+    dock_time = np.full(n, np.nan)
+    pairs_i, pairs_j = np.triu_indices(n, k=1)
+    t_now = 0.0
+    trace_t: list[float] = [0.0]
+    trace_p: list[np.ndarray] = [pose.copy()]
+    vmax = float(speed.max())
+    reported: set[tuple] = set()
+
+    def note(key: tuple, text: str) -> None:
+        if key not in reported:
+            reported.add(key)
+            problems.append(text)
+
+    for k, step in enumerate(plan.steps):
+        dur = step.duration_s
+        turning = turning_all[k]
+        for i in np.flatnonzero(docked & turning):
+            note(("turn-docked", i), f"step {k} ({step.primitive}): docked robot {names[i]} receives a turning primitive")
+        if dur <= 0:
+            continue
+        moving = ~docked
+        # Docking events: straight-moving robots whose slot lies ahead on their line within this step.
+        t_dock = np.full(n, np.inf)
+        for i in np.flatnonzero(moving & ~turning & np.isfinite(goals[:, 0])):
+            g = goals[i]
+            dth = (g[2] - pose[i, 2] + math.pi) % TWO_PI - math.pi
+            if abs(dth) > heading_tol_rad:
+                continue
+            h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
+            d = g[:2] - pose[i, :2]
+            along = float(d @ h)
+            lateral = abs(float(d[0] * h[1] - d[1] * h[0]))
+            if lateral <= tol_um and -tol_um <= along <= speed[i] * dur + tol_um:
+                t_dock[i] = max(along, 0.0) / speed[i]
+        ksteps = max(2, int(math.ceil(vmax * dur / max_step_um)) + 1)
+        t = np.linspace(0.0, dur, ksteps)
+        t = np.unique(np.concatenate([t, t_dock[np.isfinite(t_dock)]]))
+        traj = _motion(pose, turning & moving, speed, radius, t)  # (K, n, 3)
+        traj[:, docked, :] = pose[docked]
+        # Accept a docking event only against the structure: touching a docked body, or meeting the
+        # partner that docks at the same moment (G_1).
+        accepted = np.zeros(n, dtype=bool)
+        cand = np.flatnonzero(np.isfinite(t_dock))
+        for i in cand:
+            gi = goals[i]
+            touching = False
+            for j in range(n):
+                if j == i:
+                    continue
+                if docked[j] or (np.isfinite(t_dock[j]) and abs(t_dock[j] - t_dock[i]) * speed[i] <= tol_um):
+                    pj = pose[j] if docked[j] else goals[j]
+                    depth = penetration_depth(gi, length[i], width[i], pj, length[j], width[j])[0]
+                    if depth >= -tol_um:
+                        touching = True
+                        break
+            if touching:
+                accepted[i] = True
+        for i in np.flatnonzero(accepted):
+            after = t >= t_dock[i]
+            h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
+            stop = pose[i, :2] + speed[i] * t_dock[i] * h
+            traj[after, i, 0:2] = stop
+            traj[after, i, 2] = pose[i, 2]
+        # Collisions between every pair of bodies at every sample.
+        if len(pairs_i):
+            K = traj.shape[0]
+            a = traj[:, pairs_i, :].reshape(-1, 3)
+            b = traj[:, pairs_j, :].reshape(-1, 3)
+            depth = penetration_depth(
+                a, np.tile(length[pairs_i], K), np.tile(width[pairs_i], K), b, np.tile(length[pairs_j], K), np.tile(width[pairs_j], K)
+            ).reshape(K, -1)
+            bad = depth > tol_um
+            for p in np.flatnonzero(bad.any(axis=0)):
+                kk = int(np.argmax(bad[:, p]))
+                i, j = int(pairs_i[p]), int(pairs_j[p])
+                note(
+                    ("overlap", i, j),
+                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, p].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, {step.primitive})",
+                )
+        if arena is not None:
+            K = traj.shape[0]
+            out = outside_arena(traj.reshape(-1, 3), np.tile(length, K), np.tile(width, K), arena, tol_um=tol_um).reshape(K, n)
+            for i in np.flatnonzero((out > 0).any(axis=0)):
+                kk = int(np.argmax(out[:, i] > 0))
+                note(("arena", int(i)), f"{names[i]} leaves the arena by {out[:, i].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k})")
+        pose = traj[-1].copy()
+        for i in np.flatnonzero(accepted):
+            docked[i] = True
+            dock_time[i] = t_now + t_dock[i]
+        if trace_every_um is not None:
+            stride = max(1, int(round(trace_every_um / max(vmax * (t[1] - t[0]) if len(t) > 1 else 1.0, 1e-9))))
+            trace_t.extend((t_now + t[stride::stride]).tolist())
+            trace_p.extend(traj[stride::stride])
+            if (len(t) - 1) % stride:
+                trace_t.append(t_now + t[-1])
+                trace_p.append(traj[-1])
+        t_now += dur
+
+    for i in np.flatnonzero(~docked):
+        if np.isfinite(goals[i, 0]):
+            dist = float(np.hypot(*(pose[i, :2] - goals[i, :2])))
+            problems.append(f"{names[i]} is not docked at its slot at the end (ends {dist:.1f} um from it)")
+        else:
+            problems.append(f"{names[i]} has no slot")
+    return ReplayReport(
+        ok=not problems,
+        problems=tuple(problems),
+        final=pose,
+        docked=docked,
+        dock_times_s=dock_time,
+        trace_t=np.asarray(trace_t),
+        trace_poses=np.asarray(trace_p),
+    )
