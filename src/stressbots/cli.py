@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.console import Console
 
@@ -73,6 +74,283 @@ def demo(
     from . import demo as demo_mod
 
     demo_mod.run_demo(out_dir, console=out, quiet=quiet)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Presentation of an analysis (shared with the demo)
+
+
+def _bits(state, n: int) -> str:
+    return (" " if n <= 16 else "").join(str(int(x)) for x in state)
+
+
+def render_analysis(analysis, console: Console, *, title: str | None = None, max_rows: int = 32) -> None:
+    """Print a control analysis as rich tables: robots, verdict, states, control matrix, primitives."""
+    from rich.table import Table
+
+    a = analysis
+    n = a.n
+    e = a.electrodes
+    head = f"{title}: " if title else ""
+    def line(text: str) -> None:
+        console.print(text, soft_wrap=True, highlight=False)
+
+    def heading(text: str) -> None:
+        console.print()
+        console.print(f"[bold]{text}[/bold]", soft_wrap=True, highlight=False)
+
+    if a.is_string:
+        line(f"[bold]{head}{n} robot{'s' if n != 1 else ''}, STRING[/bold]: order D_1..D_{n} = {', '.join(a.order)}")
+        line(f"Lemma 1: {a.count} accessible control states, the primitives P_0..P_{n} (P_k: D_1..D_k arm down).")
+    else:
+        line(f"[bold]{head}{n} robot{'s' if n != 1 else ''}, not STRING[/bold]:")
+        for r in a.reasons:
+            line(f"  - {r}")
+        line(f"{a.count} accessible control states (exhaustive search); each one is a primitive, P0 = all arms up.")
+    line(
+        f"Limits: levels in [0, {e.max_V:g}] V, margin_V {e.margin_V:g} V; drive band [{e.drive_low_V:g}, "
+        f"{e.drive_high_V:g}] V at {e.drive_frequency_hz:g} Hz; {len(a.levels)} admissible level cells."
+    )
+
+    rank = {i: k for k, i in enumerate(a.order_index)} if a.is_string else {}
+    heading("Robots (scenario order)")
+    robots = Table()
+    robots.add_column("robot")
+    robots.add_column("snap-down V_d (V)", justify="right")
+    robots.add_column("release V_u (V)", justify="right")
+    if a.is_string:
+        robots.add_column("order", justify="right")
+    for i, nm in enumerate(a.names[:max_rows]):
+        row = [nm, f"{a.snap_down_V[i]:g}", f"{a.release_V[i]:g}"]
+        if a.is_string:
+            row.append(f"D_{rank[i] + 1}")
+        robots.add_row(*row)
+    if n > max_rows:
+        robots.add_row(f"... {n - max_rows} more", "", "", *([""] if a.is_string else []))
+    console.print(robots)
+
+    heading(f"Accessible control states: {a.count} (1 = arm down = turning; robots in scenario order)")
+    states = Table()
+    states.add_column("#", justify="right")
+    states.add_column(" ".join(a.names) if n <= 16 else "arm states", no_wrap=True)
+    states.add_column("primitive")
+    by_state = {p.state: p.name for p in a.primitives}
+    for k, row in enumerate(a.accessible_states[:max_rows]):
+        states.add_row(str(k + 1), _bits(row, n), by_state.get(tuple(row.tolist()), ""))
+    if a.count > max_rows:
+        states.add_row("...", f"{a.count - max_rows} more (see --json)", "")
+    console.print(states)
+
+    k_cols = min(len(a.primitives), 24)
+    if n <= max_rows:
+        rows_lbl = [f"D_{i + 1} {a.order[i]}" for i in range(n)] if a.is_string else list(a.names)
+        heading(
+            "Control matrix M (1 = the robot turns under the primitive"
+            + ("; rows D_1..D_n)" if a.is_string else "; rows in scenario order)")
+        )
+        m = Table()
+        m.add_column("")
+        for p in a.primitives[:k_cols]:
+            m.add_column(p.name, justify="right")
+        if len(a.primitives) > k_cols:
+            m.add_column("...")
+        for i in range(n):
+            cells = [str(int(x)) for x in a.control_matrix[i, :k_cols]]
+            m.add_row(rows_lbl[i], *cells, *(["..."] if len(a.primitives) > k_cols else []))
+        console.print(m)
+
+    heading("Primitives (reach the arm state with Holds, then Drive)")
+    prims = Table()
+    prims.add_column("primitive")
+    prims.add_column("turning (arm down)")
+    if a.is_string:
+        prims.add_column("Hold from below (V)", justify="right")
+        prims.add_column("Hold from above (V)", justify="right")
+    for p in a.primitives[:max_rows]:
+        row = [p.name, ", ".join(p.turning) or "none (all straight)"]
+        if a.is_string:
+            up, down = a.raise_levels_V[p.index], a.release_levels_V[p.index]
+            row += [f"{up:g}" if np.isfinite(up) else ("-" if p.index == 0 else "2 levels (tie)"),
+                    f"{down:g}" if np.isfinite(down) else ("-" if p.index == n else "2 levels (tie)")]
+        prims.add_row(*row)
+    if len(a.primitives) > max_rows:
+        prims.add_row(f"... {len(a.primitives) - max_rows} more", "", *(["", ""] if a.is_string else []))
+    console.print(prims)
+
+
+def render_waveform(waveform, console: Console, *, title: str = "Waveform") -> None:
+    """Print a waveform's segments as a table (levels in V, durations in s)."""
+    from rich.table import Table
+
+    from .waveform import Hold
+
+    console.print(f"[bold]{title}[/bold]", soft_wrap=True, highlight=False)
+    t = Table()
+    t.add_column("#", justify="right")
+    t.add_column("segment")
+    t.add_column("level(s) (V)", justify="right")
+    t.add_column("duration (s)", justify="right")
+    for k, seg in enumerate(waveform):
+        if isinstance(seg, Hold):
+            t.add_row(str(k), "Hold", f"{seg.volts:g}", f"{seg.duration_s:g}")
+        else:
+            t.add_row(str(k), "Drive", f"{seg.low_V:g} .. {seg.high_V:g}", f"{seg.duration_s:g}")
+    console.print(t)
+
+
+def _print_json(obj) -> None:
+    """Exactly one JSON document on stdout (no rich markup, no wrapping)."""
+    import json
+
+    from .outputs import _jsonable
+
+    sys.stdout.write(json.dumps(_jsonable(obj), allow_nan=False) + "\n")
+    sys.stdout.flush()
+
+
+# ----------------------------------------------------------------------------------------------------
+# states, design, waveform
+
+
+@app.command()
+def states(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML), e.g. examples/four-robots.toml.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print only the SPEC 7 JSON object on stdout."),
+) -> None:
+    """Which arm-state patterns (control states) the one global voltage can reach.
+
+    Searches exactly: levels in [0, max_V], each at least margin_V from every snap-down and release
+    voltage, starting from all arms up (0 V). Says whether the design is STRING (and its order
+    D_1..D_n, D_1 = lowest snap-down voltage) or why not, and lists the accessible states, the control
+    matrix M and the primitives P_k with the Hold level that reaches each.
+
+    Example: `stressbots states examples/four-robots.toml --json` prints
+    `{"robots": [...], "string": true, "order": [...], "accessible_states": [[0, 0, 0, 0], ...], "count": 5}`
+    (states in scenario order, sorted).
+    """
+    from .electrostatics import analyse_scenario
+
+    sc = scenario_arg(scenario)
+    analysis = analyse_scenario(sc)
+    if as_json:
+        _print_json(analysis.to_json_dict())
+        return
+    render_analysis(analysis, out, title=f"{scenario} ({sc.name})")
+
+
+@app.command()
+def design(
+    robots: int = typer.Option(..., "--robots", "-n", help="Number of robots N (>= 1).", show_default=False),
+    max_v: float = typer.Option(200.0, "--max-V", help="Largest level the hardware may apply (V)."),
+    margin_v: float = typer.Option(5.0, "--margin-V", help="delta_v: distance every level keeps from every threshold (V)."),
+    drive_low_v: float = typer.Option(75.0, "--drive-low-V", help="Low level of the power-delivery band (V)."),
+    drive_high_v: float = typer.Option(105.0, "--drive-high-V", help="High level of the power-delivery band (V)."),
+    drive_frequency_hz: float = typer.Option(10000.0, "--drive-frequency-hz", help="Drive frequency (Hz), written to the fragment."),
+    hold_s: float = typer.Option(0.001, "--hold-s", help="How long each setting level is held (s), written to the fragment."),
+    ties: bool = typer.Option(
+        False, "--ties/--no-ties", help="Let consecutive robots share V_d or V_u (not both): fits about twice as many robots."
+    ),
+    sd_v: Optional[float] = typer.Option(
+        None, "--sd-V", help="Also estimate the yield when every threshold scatters with this standard deviation (V).", show_default=False
+    ),
+    trials: int = typer.Option(10000, "--trials", help="Monte Carlo trials for the yield."),
+    seed: int = typer.Option(0, "--seed", help="Random seed for the yield (same seed, same estimate)."),
+    as_json: bool = typer.Option(False, "--json", help="Write JSON instead of a TOML scenario fragment."),
+    out_file: Optional[Path] = typer.Option(
+        None, "--out", help="Write to this file (atomically) instead of stdout; .json implies --json.", show_default=False
+    ),
+) -> None:
+    """Design STRING snap-down/release voltages for N robots, or say why N does not fit.
+
+    Places the release voltages between 0 V and the drive band and the snap-down voltages between the
+    band and max_V, evenly, so the smallest gap between thresholds (and so the room for fabrication
+    scatter) is as large as the margins and the drive-band rule (V_u <= drive_low - 2 delta_v,
+    V_d >= drive_high + 2 delta_v) allow. Output: a scenario fragment ([electrodes] and [[robots]]
+    D1..DN) that `stressbots states` loads; add start poses to plan with it.
+
+    Examples: `stressbots design --robots 4`;
+    `stressbots design --robots 12 --ties --sd-V 2 --out design.toml`.
+    """
+    from .design import design_string, estimate_yield
+    from .electrostatics import Electrodes
+    from .outputs import to_json, write_text
+
+    e = Electrodes(
+        max_V=max_v,
+        margin_V=margin_v,
+        drive_low_V=drive_low_v,
+        drive_high_V=drive_high_v,
+        drive_frequency_hz=drive_frequency_hz,
+        hold_s=hold_s,
+    )
+    d = design_string(robots, e, ties=ties)
+    y = estimate_yield(d, sd_v, trials=trials, seed=seed) if sd_v is not None else None
+    use_json = as_json or (out_file is not None and out_file.suffix.lower() == ".json")
+    text = to_json(d.to_json_dict(y)) if use_json else d.to_toml(y)
+    if out_file is None:
+        sys.stdout.write(text)
+        return
+    if out_file.exists() and out_file.is_dir():
+        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
+    write_text(out_file, text)
+    err.print(f"wrote {out_file}: STRING design for {d.n} robots, smallest gap {d.min_gap_V:g} V", highlight=False)
+    if y is not None:
+        err.print(f"yield (sd {y.sd_V:g} V): {y.fraction:.4f}, 95% CI {y.ci_low:.4f}-{y.ci_high:.4f}", highlight=False)
+
+
+@app.command()
+def waveform(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages and the limits.", show_default=False),
+    out_file: Path = typer.Option(
+        ..., "--out", help="Output file: .npy (samples, columns t_s and volts), .csv (same) or .json (segments).", show_default=False
+    ),
+    steps: Optional[str] = typer.Option(
+        None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False
+    ),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (SPEC 7) instead of --steps.", show_default=False),
+    rate_hz: float = typer.Option(100_000.0, "--rate-hz", help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
+) -> None:
+    """Synthesise the voltage waveform of a list of primitives and write it.
+
+    Each step reaches its primitive's arm state from the previous one with the fewest Holds (levels
+    keep margin_V from every threshold and stay in [0, max_V]), then drives for the given time: a
+    square wave between drive_low_V and drive_high_V at drive_frequency_hz. Refuses inaccessible states
+    and a drive band that would flip an arm. Primitive names are those `stressbots states` prints.
+
+    Examples: `stressbots waveform examples/four-robots.toml --steps P1:2.5,P0:1.0 --out wf.npy`;
+    `stressbots waveform SCENARIO --plan out/plan.json --out wf.csv --rate-hz 50000`.
+    """
+    from .electrostatics import analyse_scenario
+    from .outputs import check_not_input
+    from .waveform import export, parse_steps, replay, steps_from_plan, synthesize
+
+    if (steps is None) == (plan is None):
+        raise StressbotsError("give exactly one of --steps or --plan", source="stressbots waveform")
+    check_not_input(out_file, [scenario, plan])
+    if out_file.exists() and out_file.is_dir():
+        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
+    if out_file.suffix.lower() not in (".npy", ".csv", ".json"):
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .npy, .csv or .json file", source="--out")
+    sc = scenario_arg(scenario)
+    analysis = analyse_scenario(sc)
+    if plan is not None:
+        from .plans import load as load_plan
+
+        step_list = steps_from_plan(load_plan(plan), analysis, source=str(plan))
+    else:
+        step_list = parse_steps(steps, analysis)
+    wf = synthesize(analysis, step_list)
+    decoded = replay(wf, analysis.snap_down_V, analysis.release_V)
+    summary = export(wf, out_file, rate_hz=rate_hz, drive_frequency_hz=sc.electrodes.drive_frequency_hz)
+    levels = ", ".join(f"{v:g}" for v in summary.levels_V)
+    out.print(
+        f"wrote {out_file}: {summary.segments} segments ({summary.holds} holds, {summary.drives} drives), "
+        f"{summary.duration_s:g} s" + (f", {summary.samples} samples at {summary.rate_hz:g} Hz" if summary.samples else ""),
+        highlight=False,
+    )
+    out.print(f"levels used (V): {levels}; min {summary.min_V:g} V, max {summary.max_V:g} V", highlight=False)
+    bad = [d for d in decoded.drives if not d.ok]
+    out.print(f"decoded: {len(decoded.drives)} drives, " + ("every arm as intended" if not bad else f"{len(bad)} with flipped arms"), highlight=False)
 
 
 def _click_base(name: str) -> type[BaseException]:
