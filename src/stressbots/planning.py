@@ -1,0 +1,846 @@
+"""The nominal n-robot assembly planner (seed Appendix 2, generalised).
+
+Every robot receives the same signal, so the planner can only choose a sequence of control primitives
+P_k (SPEC 4: under P_k the robots D_1..D_k turn, the others drive straight). The seed reduces the
+parallel problem to two robots moving together followed by single robots, and this module does the same:
+
+**Step 1 - G_1.** D_n and D_{n-1} form the initial pair while D_1..D_{n-2} orbit in place (every
+primitive used, P_n, P_{n-1}, P_{n-2}, turns them). D_{n-1} follows a route to its slot using
+P_{n-1}/P_{n-2} (D_n drives straight meanwhile); D_n is driven with P_n/P_{n-1} while D_{n-1} orbits.
+The seed does this in two stages: D_n first goes to a pose a_n (D_{n-1} orbiting back to its start), then
+D_{n-1} drives its whole route while D_n drives straight into its slot. That fails when D_{n-1}'s route
+is long: D_n's straight corridor leaves the arena or crosses an orbit (SPEC 5, "a known limit"). Here
+D_{n-1}'s route may be cut into *pieces*. Between two pieces D_n runs the same short straight corridor
+into its slot and then loops back along a path whose length is exactly a whole number of D_{n-1}'s orbit
+periods, so D_{n-1} orbits back to where it stopped. One piece is exactly the seed's scheme.
+
+**Steps 2..n-1 - docking.** D_i (i = n-2 .. 1) docks with P_i/P_{i-1} while D_1..D_{i-1} orbit and the
+docked robots push. It may first wait on its orbit (P_i): the planner tries several departure phases
+and takes the fastest collision-free route.
+
+**Routes** avoid the orbit discs (radius r*), the structure and the arena edge with a clearance, and
+end with a straight approach into the slot (touching allowed). A route is first tried direct (one
+shortest one-way path), then through a lazily checked roadmap of waypoint poses (random and tangent to
+the discs), growing until a route is found.
+
+Every plan is replayed by :func:`stressbots.replay.replay`, an independent integrator, before it is
+returned.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra as csgraph_dijkstra
+
+from . import paths as pathlib
+from .collision import bodies_hit_discs, disc_overlaps, outside_arena, pairwise_overlaps, penetration_depth
+from .electrostatics import ControlAnalysis, analyse_scenario
+from .errors import PlanningError
+from .kinematics import advance, move
+from .plans import Plan, PlanPrimitive, PlanStep, merge_steps
+from .replay import ReplayReport, replay
+from .robots import TWO_PI, Pose, orbit_radii, turning_centres
+from .structures import Structure, target_structures
+
+__all__ = ["PlannerOptions", "PlanResult", "plan_assembly", "lower_bound_s"]
+
+
+@dataclass(frozen=True)
+class PlannerOptions:
+    """Planner settings (um, s).
+
+    Attributes
+    ----------
+    clearance_um:
+        Distance kept from orbit discs, the structure and the arena edge (room for control error).
+    approach_um:
+        Length of the straight final approach into every slot (capped by the slot's clear corridor).
+    sample_um:
+        Spacing of the collision-check samples along routes.
+    departure_phases:
+        How many departure phases on its orbit a docking robot tries.
+    roadmap_nodes:
+        Sizes of the successive waypoint roadmaps tried when no direct route is clear.
+    max_pieces:
+        Largest number of pieces D_{n-1}'s route may be cut into while forming G_1.
+    seed:
+        Seed of the roadmap's random waypoints (the plan is a deterministic function of it).
+    """
+
+    clearance_um: float = 10.0
+    approach_um: float = 100.0
+    sample_um: float = 5.0
+    departure_phases: int = 12
+    roadmap_nodes: tuple[int, ...] = (80, 250, 700)
+    max_pieces: int = 6
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """A verified nominal plan and what was learnt making it."""
+
+    plan: Plan
+    structure: Structure
+    analysis: ControlAnalysis
+    replay: ReplayReport
+    summary: dict
+    notes: tuple[str, ...] = field(default=())
+
+
+# ----------------------------------------------------------------------------------------------------
+# Obstacles
+
+
+@dataclass(frozen=True)
+class _Obstacles:
+    """Static obstacles for one robot's route: orbit discs, docked bodies (boxes) and the arena."""
+
+    disc_centres: np.ndarray
+    disc_radii: np.ndarray
+    disc_labels: tuple[str, ...]
+    box_poses: np.ndarray
+    box_lengths: np.ndarray
+    box_widths: np.ndarray
+    box_labels: tuple[str, ...]
+    arena: tuple[float, float] | None
+
+    def with_disc(self, centre, radius, label) -> "_Obstacles":
+        return _Obstacles(
+            np.vstack([self.disc_centres, np.reshape(centre, (1, 2))]),
+            np.append(self.disc_radii, radius),
+            self.disc_labels + (label,),
+            self.box_poses,
+            self.box_lengths,
+            self.box_widths,
+            self.box_labels,
+            self.arena,
+        )
+
+    def hits(self, samples: np.ndarray, length: float, width: float, clearance: float) -> np.ndarray:
+        """Per sample, whether the body hits any obstacle (keeping ``clearance``): ``(M,)`` bool.
+
+        A cheap test on the body centre (half-diagonal ``hd``) first; the exact rectangle test runs only
+        on the samples near an obstacle.
+        """
+        samples = np.asarray(samples, dtype=np.float64)
+        bad = np.zeros(len(samples), dtype=bool)
+        hd = 0.5 * math.hypot(length, width)
+        xy = samples[:, :2]
+        if len(self.disc_radii):
+            d = np.hypot(xy[:, None, 0] - self.disc_centres[None, :, 0], xy[:, None, 1] - self.disc_centres[None, :, 1])
+            near = (d < (self.disc_radii + clearance + hd)[None, :]).any(axis=1)
+            if near.any():
+                idx = np.flatnonzero(near)
+                hit = bodies_hit_discs(samples[idx], length, width, self.disc_centres, self.disc_radii + clearance)
+                bad[idx] |= hit.any(axis=1)
+        if len(self.box_lengths):
+            box_hd = 0.5 * np.hypot(self.box_lengths, self.box_widths)
+            d = np.hypot(xy[:, None, 0] - self.box_poses[None, :, 0], xy[:, None, 1] - self.box_poses[None, :, 1])
+            near = d < (box_hd + hd + clearance)[None, :]
+            si, bi = np.nonzero(near)
+            if len(si):
+                depth = penetration_depth(samples[si], length, width, self.box_poses[bi], self.box_lengths[bi], self.box_widths[bi])
+                np.logical_or.at(bad, si[depth > -clearance], True)
+        if self.arena is not None:
+            w, h = self.arena
+            m = hd + clearance
+            near = (xy[:, 0] < m) | (xy[:, 0] > w - m) | (xy[:, 1] < m) | (xy[:, 1] > h - m)
+            if near.any():
+                idx = np.flatnonzero(near)
+                shifted = samples[idx] - np.array([clearance, clearance, 0.0])
+                bad[idx] |= outside_arena(shifted, length, width, (w - 2 * clearance, h - 2 * clearance)) > 0
+        return bad
+
+    def first_hit(self, samples: np.ndarray, length: float, width: float, clearance: float, *, box_tol: float | None = None) -> str | None:
+        """Label of an obstacle the body hits along ``samples`` (M, 3), or None.
+
+        Discs and the arena keep ``clearance``; boxes keep ``clearance`` too unless ``box_tol`` is given
+        (then only interpenetration deeper than ``box_tol`` counts: touching the structure is docking).
+        """
+        if len(samples) == 0:
+            return None
+        if len(self.disc_radii):
+            hit = bodies_hit_discs(samples, length, width, self.disc_centres, self.disc_radii + clearance)
+            if hit.any():
+                return self.disc_labels[int(np.argmax(hit.any(axis=0)))]
+        if len(self.box_lengths):
+            m, b = len(samples), len(self.box_lengths)
+            depth = penetration_depth(
+                np.repeat(samples, b, axis=0),
+                length,
+                width,
+                np.tile(self.box_poses, (m, 1)),
+                np.tile(self.box_lengths, m),
+                np.tile(self.box_widths, m),
+            ).reshape(m, b)
+            limit = -clearance if box_tol is None else box_tol
+            bad = depth > limit
+            if bad.any():
+                return self.box_labels[int(np.argmax(bad.any(axis=0)))]
+        if self.arena is not None:
+            w, h = self.arena
+            inner = (w - 2 * clearance, h - 2 * clearance)
+            shifted = samples - np.array([clearance, clearance, 0.0])
+            if (outside_arena(shifted, length, width, inner) > 0).any():
+                return "the arena edge"
+        return None
+
+
+def _path_hit(obst: _Obstacles, path: pathlib.Path, length: float, width: float, opts: PlannerOptions) -> str | None:
+    return obst.first_hit(path.sample(opts.sample_um), length, width, opts.clearance_um)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Route search: direct, then a lazily checked roadmap
+
+
+_KNN = 16  # successors per roadmap node
+
+
+class _NoRoute(Exception):
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float):
+    """Sample many 3-segment paths at once: poses ``(P, 3)`` and the path index of every sample ``(P,)``.
+
+    ``seg_lengths`` is ``(E, S)``; ``words`` holds each path's kinds (e.g. ``"RSR"``). Samples are at most
+    ``step_um`` apart along each path and include both ends.
+    """
+    e, nseg = seg_lengths.shape
+    kinds = np.array([[w[j] == "R" for j in range(nseg)] for w in words.tolist()], dtype=bool)
+    curv = np.where(kinds, 1.0 / radius, 0.0)
+    joints = [starts]
+    for j in range(nseg - 1):
+        joints.append(move(joints[-1], seg_lengths[:, j], curv[:, j]))
+    joints = np.stack(joints, axis=1)  # (E, S, 3) pose at the start of each segment
+    total = seg_lengths.sum(axis=1)
+    counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
+    owner = np.repeat(np.arange(e), counts)
+    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    frac = (np.arange(owner.size) - offsets[owner]) / (counts[owner] - 1)
+    s = frac * total[owner]
+    cum = np.concatenate([np.zeros((e, 1)), np.cumsum(seg_lengths, axis=1)[:, :-1]], axis=1)  # (E, S)
+    seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
+    seg = np.clip(seg, 0, nseg - 1)
+    local = s - cum[owner, seg]
+    poses = move(joints[owner, seg], local, curv[owner, seg])
+    return poses, owner
+
+
+def _edges_clear(obst: "_Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions") -> np.ndarray:
+    """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool."""
+    if len(starts) == 0:
+        return np.zeros(0, dtype=bool)
+    words, seg = pathlib.shortest_path_segments(starts, goals, radius)
+    # Coarse samples, with the clearance inflated by the most any body point moves between two samples
+    # (half a step, scaled by 1 + half-diagonal / radius on arcs): conservative, 4x fewer samples.
+    step = 4.0 * opts.sample_um
+    inflate = 0.5 * step * (1.0 + 0.5 * math.hypot(length, width) / radius)
+    poses, owner = _batch_samples(np.asarray(starts, float), seg, np.asarray(words), radius, step)
+    bad = obst.hits(poses, length, width, opts.clearance_um + inflate)
+    blocked = np.zeros(len(starts), dtype=bool)
+    np.logical_or.at(blocked, owner, bad)
+    return ~blocked
+
+
+def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: _Obstacles, length: float, width: float, opts: PlannerOptions) -> np.ndarray:
+    """Collision-free waypoint poses: tangent to the orbit discs and uniformly random."""
+    x0, y0, x1, y1 = region
+    nodes = []
+    # Poses tangent to rings around each disc, both travel directions: how a route skirts an orbit.
+    for c, r in zip(obst.disc_centres, obst.disc_radii):
+        ring = r + opts.clearance_um + 0.5 * math.hypot(length, width) + 5.0
+        ang = np.linspace(0.0, TWO_PI, 12, endpoint=False) + rng.uniform(0, TWO_PI / 12)
+        px = c[0] + ring * np.sin(ang)
+        py = c[1] + ring * np.cos(ang)
+        for sense in (0.5 * math.pi, -0.5 * math.pi):
+            nodes.append(np.stack([px, py, np.mod(ang + sense, TWO_PI)], axis=1))
+    rand = np.column_stack([rng.uniform(x0, x1, count), rng.uniform(y0, y1, count), rng.uniform(0, TWO_PI, count)])
+    nodes.append(rand)
+    allnodes = np.vstack(nodes)
+    return allnodes[~obst.hits(allnodes, length, width, opts.clearance_um)]
+
+
+def _route(
+    sources: np.ndarray,
+    source_costs: np.ndarray,
+    target: np.ndarray,
+    radius: float,
+    length: float,
+    width: float,
+    obst: _Obstacles,
+    opts: PlannerOptions,
+    rng: np.random.Generator,
+    who: str,
+    *,
+    extra_check: Callable[[int, pathlib.Path], str | None] | None = None,
+) -> tuple[int, pathlib.Path]:
+    """Cheapest collision-free route from one of ``sources`` to ``target`` (both clear).
+
+    ``source_costs`` (um) are added to each source's route length (waiting time times speed).
+    ``extra_check(source_index, path)`` may veto a whole route (e.g. time-dependent conflicts).
+    Returns ``(source_index, path)``; raises :class:`_NoRoute` with the reason.
+    """
+    sources = np.atleast_2d(sources)
+    blocked_by = obst.first_hit(target[None, :], length, width, opts.clearance_um)
+    if blocked_by is not None:
+        raise _NoRoute(f"{who}: the start of its straight approach is blocked by {blocked_by}")
+    free = ~obst.hits(sources, length, width, opts.clearance_um)
+    if not free.any():
+        raise _NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {obst.first_hit(sources[:1], length, width, opts.clearance_um)}")
+    sources, source_costs = sources[free], np.asarray(source_costs)[free]
+    index_of = np.flatnonzero(free)
+    # 1. direct shortest paths, cheapest first
+    direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
+    reasons: list[str] = []
+    for s in np.argsort(direct, kind="stable"):
+        p = pathlib.shortest_path(sources[s], target, radius)
+        hit = _path_hit(obst, p, length, width, opts)
+        if hit is None and extra_check is not None:
+            hit = extra_check(int(index_of[s]), p)
+        if hit is None:
+            return int(index_of[s]), p
+        reasons.append(hit)
+    # 2. roadmaps of growing size: k-nearest edges, all checked in one batch, then Dijkstra
+    pts = np.vstack([sources[:, :2], target[None, :2], obst.disc_centres]) if len(obst.disc_radii) else np.vstack([sources[:, :2], target[None, :2]])
+    if obst.arena is not None:
+        region = (0.0, 0.0, obst.arena[0], obst.arena[1])
+    else:
+        pad = 4.0 * radius + length
+        region = (pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad)
+    ns = len(sources)
+    for count in opts.roadmap_nodes:
+        way = _sample_nodes(rng, count, region, obst, length, width, opts)
+        nodes = np.vstack([sources, target[None, :], way])
+        k = len(nodes)
+        ti = ns
+        ii, jj = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+        w = pathlib.shortest_path_lengths(nodes[ii.ravel()], nodes[jj.ravel()], radius).reshape(k, k)
+        np.fill_diagonal(w, np.inf)
+        w[:, :ns] = np.inf  # never route back into a source
+        w[ti, :] = np.inf  # the target is the end
+        knn = min(_KNN, k - 1)
+        nbr = np.argpartition(w, knn - 1, axis=1)[:, :knn]  # each node's nearest successors
+        src = np.repeat(np.arange(k), knn)
+        dst = nbr.ravel()
+        into_target = np.argpartition(w[:, ti], knn - 1)[:knn]  # and the target's nearest predecessors
+        src = np.concatenate([src, into_target])
+        dst = np.concatenate([dst, np.full(knn, ti)])
+        pairs = np.unique(np.stack([src, dst], axis=1), axis=0)
+        pairs = pairs[np.isfinite(w[pairs[:, 0], pairs[:, 1]])]
+        ok = _edges_clear(obst, nodes[pairs[:, 0]], nodes[pairs[:, 1]], radius, length, width, opts)
+        pairs = pairs[ok]
+        if not len(pairs):
+            continue
+        # super-source (index k) to every source with its waiting cost
+        rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
+        cols = np.concatenate([pairs[:, 1], np.arange(ns)])
+        vals = np.concatenate([w[pairs[:, 0], pairs[:, 1]], source_costs + 1e-9]) + 1e-9
+        graph = csr_matrix((vals, (rows, cols)), shape=(k + 1, k + 1))
+        for _ in range(20):
+            dist, pred = csgraph_dijkstra(graph, directed=True, indices=k, return_predecessors=True)
+            if not np.isfinite(dist[ti]):
+                break
+            seq = [ti]
+            while pred[seq[-1]] != k:
+                seq.append(int(pred[seq[-1]]))
+            seq = seq[::-1]
+            segs: list = []
+            for a, b in zip(seq[:-1], seq[1:]):
+                segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
+            path = pathlib.Path(tuple(nodes[seq[0]]), radius, tuple(segs))
+            veto = extra_check(int(index_of[seq[0]]), path) if extra_check is not None else None
+            if veto is None:
+                return int(index_of[seq[0]]), path
+            reasons.append(veto)
+            # forbid this route's first leg and look for another
+            graph = graph.tolil()
+            graph[seq[0], seq[1] if len(seq) > 1 else ti] = 0
+            graph = graph.tocsr()
+            graph.eliminate_zeros()
+    common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
+    raise _NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
+
+
+# ----------------------------------------------------------------------------------------------------
+# The planner
+
+
+class _Timeline:
+    """Nominal poses of the whole group as primitives are applied (the planner's own forward model)."""
+
+    def __init__(self, scenario, rank: np.ndarray, names_by_rank: Sequence[str]):
+        self.scenario = scenario
+        self.rank = rank  # rank[i] = k means robot i (scenario order) is D_k (1-based)
+        self.names_by_rank = names_by_rank
+        self.poses = scenario.starts.copy()
+        self.poses[:, 2] = np.mod(self.poses[:, 2], TWO_PI)
+        self.docked = np.zeros(scenario.n, dtype=bool)
+        self.speed = scenario.speeds_um_s
+        self.radius = scenario.turn_radii_um
+        self.t = 0.0
+        self.steps: list[PlanStep] = []
+        self.travel = np.zeros(scenario.n)  # distance driven off-orbit per robot (um)
+
+    def apply(self, k: int, duration: float, *, counts_for: Sequence[int] = ()) -> None:
+        """Apply P_k for ``duration`` s (docked robots stay, they push against the structure)."""
+        if duration <= 0:
+            return
+        turning = self.rank <= k
+        moving = ~self.docked
+        new = advance(self.poses, turning, self.speed, self.radius, duration)
+        self.poses[moving] = new[moving]
+        for i in counts_for:
+            self.travel[i] += self.speed[i] * duration
+        self.steps.append(PlanStep(f"P{k}", float(duration)))
+        self.t += duration
+
+    def apply_path(self, i: int, path: pathlib.Path, turn_k: int, straight_k: int) -> None:
+        """Drive robot ``i`` along ``path`` with the two primitives that move it (R -> turn_k, S -> straight_k)."""
+        v = self.speed[i]
+        for kind, ell in path.segments:
+            self.apply(turn_k if kind == "R" else straight_k, ell / v, counts_for=(i,))
+
+    def dock(self, i: int, goal: np.ndarray, who: str, tol_um: float = 1e-3) -> None:
+        err = float(np.hypot(*(self.poses[i, :2] - goal[:2])))
+        dth = abs((self.poses[i, 2] - goal[2] + math.pi) % TWO_PI - math.pi)
+        if err > tol_um or dth > 1e-6:
+            raise PlanningError(f"internal: {who} ends {err:.3g} um / {math.degrees(dth):.3g} deg from its slot")
+        self.poses[i] = goal
+        self.docked[i] = True
+
+
+def _label(scn, i: int, rank: int) -> str:
+    return f"D{rank} ({scn.names[i]!r})"
+
+
+def _prechecks(scn, struct: Structure, rank: np.ndarray, opts: PlannerOptions) -> str | None:
+    """Reasons a structure cannot be planned from these starts at all (None if none found)."""
+    n = scn.n
+    starts = scn.starts
+    L, W, R = scn.lengths_um, scn.widths_um, scn.turn_radii_um
+    goals = struct.goal_poses(scn.names)
+    rstar = orbit_radii(L, W, R)
+    centres = turning_centres(starts, R)
+    lab = [_label(scn, i, rank[i]) for i in range(n)]
+    for i, j, d in pairwise_overlaps(starts, L, W, tol_um=1e-6):
+        return f"start bodies of {lab[i]} and {lab[j]} overlap by {d:.1f} um"
+    if scn.arena_um is not None:
+        out = outside_arena(starts, L, W, scn.arena_um)
+        for i in np.flatnonzero(out > 0):
+            return f"{lab[i]} starts {out[i]:.1f} um outside the arena"
+        out = outside_arena(goals, L, W, scn.arena_um)
+        for i in np.flatnonzero(out > 0):
+            return f"the slot of {lab[i]} is {out[i]:.1f} um outside the arena"
+    orbiting = np.flatnonzero(rank <= n - 1)  # D_1..D_{n-1} orbit at their starts
+    for a, b, o in disc_overlaps(centres[orbiting], rstar[orbiting]):
+        i, j = orbiting[a], orbiting[b]
+        return f"orbits of {lab[i]} and {lab[j]} overlap at the start by {o:.1f} um (orbit radius r* = {rstar[i]:.0f} um)"
+    if scn.arena_um is not None:
+        w, h = scn.arena_um
+        for i in orbiting:
+            c, r = centres[i], rstar[i]
+            over = max(r - c[0], c[0] + r - w, r - c[1], c[1] + r - h)
+            if over > 0:
+                return f"the orbit of {lab[i]} leaves the arena by {over:.1f} um"
+    # Robots D_j (j <= n-2) orbit until their own step: every slot filled before must stay clear.
+    for i in np.flatnonzero(rank <= n - 2):
+        later = np.flatnonzero(rank > rank[i])
+        hit = bodies_hit_discs(goals[later], L[later], W[later], centres[i][None, :], [rstar[i]])
+        for k in np.flatnonzero(hit[:, 0]):
+            j = later[k]
+            return f"the orbit of {lab[i]} crosses the slot of {lab[j]} (it orbits there until it docks)"
+        # and every other robot's start body (they are still there while D_i orbits)
+    for i in orbiting:
+        others = np.array([j for j in range(n) if j != i])
+        hit = bodies_hit_discs(starts[others], L[others], W[others], centres[i][None, :], [rstar[i]], tol_um=1e-6)
+        for k in np.flatnonzero(hit[:, 0]):
+            j = others[k]
+            return f"the orbit of {lab[i]} crosses the start of {lab[j]}"
+    return None
+
+
+def lower_bound_s(scn, struct: Structure, rank: np.ndarray, phases: int = 90) -> float:
+    """A lower bound (s) on the duration of any plan of the sequential scheme.
+
+    G_1 cannot finish before both D_n and D_{n-1} have driven their shortest paths; each later robot
+    D_i cannot dock before driving the shortest path from the best point of its orbit circle.
+    """
+    n = scn.n
+    goals = struct.goal_poses(scn.names)
+    starts = scn.starts
+    v, r = scn.speeds_um_s, scn.turn_radii_um
+    by_rank = {int(rank[i]): i for i in range(n)}
+    pair = [by_rank[n], by_rank[n - 1]]
+    t = max(pathlib.shortest_path_lengths(starts[pair], goals[pair], r[pair]) / v[pair])
+    for k in range(n - 2, 0, -1):
+        i = by_rank[k]
+        ang = np.linspace(0.0, TWO_PI, phases, endpoint=False)
+        on_orbit = advance(np.repeat(starts[i][None, :], phases, axis=0), np.ones(phases, bool), v[i], r[i], ang * r[i] / v[i])
+        t += float(np.min(pathlib.shortest_path_lengths(on_orbit, np.repeat(goals[i][None, :], phases, axis=0), r[i]))) / v[i]
+    return float(t)
+
+
+def _approach(struct: Structure, name: str, opts: PlannerOptions) -> float:
+    return float(min(opts.approach_um, struct.slot(name).approach_um))
+
+
+def _pre_approach(goal: np.ndarray, a: float) -> np.ndarray:
+    return np.array([goal[0] - a * math.sin(goal[2]), goal[1] - a * math.cos(goal[2]), goal[2]])
+
+
+class _Planner:
+    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions):
+        self.scn = scn
+        self.analysis = analysis
+        self.struct = struct
+        self.opts = opts
+        self.n = scn.n
+        order = analysis.order_index  # scenario indices of D_1..D_n
+        self.by_rank = {k + 1: int(i) for k, i in enumerate(order)}
+        self.rank = np.empty(self.n, dtype=int)
+        for k, i in self.by_rank.items():
+            self.rank[i] = k
+        self.goals = struct.goal_poses(scn.names)
+        self.L, self.W = scn.lengths_um, scn.widths_um
+        self.v, self.r = scn.speeds_um_s, scn.turn_radii_um
+        self.rstar = orbit_radii(self.L, self.W, self.r)
+        self.rng = np.random.default_rng(np.random.SeedSequence(opts.seed))
+        self.tl = _Timeline(scn, self.rank, [analysis.order[k] for k in range(self.n)])
+        self.notes: list[str] = []
+        self.route_lengths = np.zeros(self.n)
+
+    def lab(self, i: int) -> str:
+        return _label(self.scn, i, self.rank[i])
+
+    def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> _Obstacles:
+        orbiting = list(orbiting)
+        docked = list(docked)
+        centres = turning_centres(self.tl.poses[orbiting], self.r[orbiting]) if orbiting else np.zeros((0, 2))
+        return _Obstacles(
+            centres,
+            self.rstar[orbiting] if orbiting else np.zeros(0),
+            tuple(f"the orbit of {self.lab(i)}" for i in orbiting),
+            self.goals[docked] if docked else np.zeros((0, 3)),
+            self.L[docked] if docked else np.zeros(0),
+            self.W[docked] if docked else np.zeros(0),
+            tuple(f"the docked body of {self.lab(i)}" for i in docked),
+            self.scn.arena_um,
+        )
+
+    # -- docking of single robots (steps 2..n-1) -------------------------------------------------
+
+    def dock_single(self, k: int) -> None:
+        i = self.by_rank[k]
+        who = self.lab(i)
+        goal = self.goals[i]
+        a = _approach(self.struct, self.scn.names[i], self.opts)
+        pre = _pre_approach(goal, a)
+        orbiting = [self.by_rank[j] for j in range(1, k)]
+        docked = [self.by_rank[j] for j in range(k + 1, self.n + 1)]
+        obst = self.obstacles(orbiting, docked)
+        approach = pathlib.Path(tuple(pre), self.r[i], (("S", a),))
+        hit = obst.first_hit(approach.sample(self.opts.sample_um), self.L[i], self.W[i], self.opts.clearance_um, box_tol=0.5)
+        if hit is not None:
+            raise _NoRoute(f"{who}: the straight approach into its slot is blocked by {hit}")
+        m = self.opts.departure_phases
+        period = TWO_PI * self.r[i] / self.v[i]
+        waits = np.arange(m) * period / m
+        p0 = np.repeat(self.tl.poses[i][None, :], m, axis=0)
+        sources = advance(p0, np.ones(m, bool), self.v[i], self.r[i], waits)
+        s, path = _route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
+        self.tl.apply(k, float(waits[s]))
+        full = path.then(("S", a))
+        self.tl.apply_path(i, full, k, k - 1)
+        self.route_lengths[i] = full.length
+        self.tl.dock(i, goal, who)
+
+    # -- G_1 (step 1) -------------------------------------------------------------------------------
+
+    def form_pair(self) -> None:
+        n = self.n
+        N, M = self.by_rank[n], self.by_rank[n - 1]
+        gN, gM = self.goals[N], self.goals[M]
+        vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
+        TM = TWO_PI * rM / vM
+        lower = [self.by_rank[j] for j in range(1, n - 1)]
+        obst_low = self.obstacles(lower, [])
+        aM = _approach(self.struct, self.scn.names[M], self.opts)
+        aN = _approach(self.struct, self.scn.names[N], self.opts)
+        preM = _pre_approach(gM, aM)
+        whoN, whoM = self.lab(N), self.lab(M)
+        opts = self.opts
+
+        # D_{n-1}'s route: it may leave its orbit at any phase (D_n's first stage lasts that long).
+        m = opts.departure_phases
+        waits = np.arange(m) * TM / m
+        sourcesM = advance(np.repeat(self.tl.poses[M][None, :], m, axis=0), np.ones(m, bool), vM, rM, waits)
+        approachM = pathlib.Path(tuple(preM), rM, (("S", aM),))
+        hit = obst_low.first_hit(approachM.sample(opts.sample_um), self.L[M], self.W[M], opts.clearance_um)
+        if hit is not None:
+            raise _NoRoute(f"{whoM}: the straight approach into its slot is blocked by {hit}")
+
+        attempts: list[str] = []
+
+        def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
+            """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
+            fullM = routeM.then(("S", aM))
+            T = fullM.length / vM
+            for pieces in range(1, opts.max_pieces + 1):
+                why = self._schedule_pair(N, M, fullM, float(waits[sidx]), T, pieces, lower, aN)
+                if why is None:
+                    return None
+                attempts.append(why)
+            return attempts[-1] if attempts else "no schedule"
+
+        self._pair_schedule = None
+        try:
+            _route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
+        except _NoRoute as exc:
+            reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
+            raise _NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
+        self._run_pair_schedule()
+
+    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, T: float, pieces: int, lower: list[int], aN: float) -> str | None:
+        """Plan D_n around D_{n-1}'s route cut into ``pieces`` equal pieces; None on success."""
+        opts = self.opts
+        vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
+        LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
+        TM = TWO_PI * rM / vM
+        gN = self.goals[N]
+        tp = T / pieces
+        d = vN * tp  # D_n's straight run per piece
+        sN = _pre_approach(gN, d)
+        whoN = self.lab(N)
+        obst_low = self.obstacles(lower, [])
+        # D_n's corridor: clear of the lower orbits and the arena.
+        run = pathlib.Path(tuple(sN), rN, (("S", d),))
+        hit = obst_low.first_hit(run.sample(opts.sample_um), LN, WN, opts.clearance_um)
+        if hit is not None:
+            return f"{whoN}'s straight run of {d:.0f} um into its slot is blocked by {hit}"
+        # Where D_{n-1} stops between pieces (it orbits there while D_n loops back).
+        cuts = [fullM.pose_at(vM * tp * j) for j in range(1, pieces)]
+        for j, c in enumerate(cuts):
+            disc_c = turning_centres(np.array(c), rM)[0]
+            h = obst_low.with_disc(disc_c, self.rstar[M], "x").first_hit(np.array(c)[None, :], LM, WM, 0.0)
+            if h not in (None, "x"):
+                return f"{self.lab(M)} cannot orbit at its stop {j + 1} ({h})"
+            # its orbit disc must be clear of the lower orbits, the arena and D_n's corridor
+            ob = obst_low
+            if len(ob.disc_radii):
+                gap = np.hypot(*(ob.disc_centres - disc_c).T) - ob.disc_radii - self.rstar[M]
+                if (gap < opts.clearance_um).any():
+                    return f"{self.lab(M)}'s orbit at its stop {j + 1} touches {ob.disc_labels[int(np.argmin(gap))]}"
+            if self.scn.arena_um is not None:
+                w, hgt = self.scn.arena_um
+                rr = self.rstar[M] + opts.clearance_um
+                if min(disc_c[0] - rr, w - disc_c[0] - rr, disc_c[1] - rr, hgt - disc_c[1] - rr) < 0:
+                    return f"{self.lab(M)}'s orbit at its stop {j + 1} leaves the arena"
+            if bodies_hit_discs(run.sample(opts.sample_um), LN, WN, disc_c[None, :], [self.rstar[M] + opts.clearance_um]).any():
+                return f"{self.lab(M)}'s orbit at its stop {j + 1} crosses {whoN}'s corridor"
+        # B phases: D_n's run against D_{n-1}'s piece, sampled in time (touching only at the very end).
+        dt = opts.sample_um / max(vN, vM)
+        for j in range(pieces):
+            t = np.arange(0.0, tp + dt, dt)
+            t = np.clip(t, 0.0, tp)
+            pn = run.pose_at(np.minimum(vN * t, d))
+            pm = fullM.pose_at(np.minimum(vM * (j * tp + t), fullM.length))
+            depth = penetration_depth(pn, LN, WN, pm, LM, WM)
+            final = j == pieces - 1
+            limit = np.where(final & (t > tp - (self.opts.approach_um + opts.clearance_um) / min(vN, vM)), 0.5, -opts.clearance_um)
+            if (depth > limit).any():
+                return f"{whoN}'s straight run meets {self.lab(M)} before the end (piece {j + 1} of {pieces})"
+        # A phases: D_n's paths of a whole number of D_{n-1} periods.
+        a_paths = []
+        obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {self.lab(M)}")
+        first = self._timed_path(self.tl.poses[N], sN, vN, rN, LN, WN, wait0, TM, obst0)
+        if isinstance(first, str):
+            return f"{whoN} cannot reach the start of its run ({first})"
+        a_paths.append(first)
+        for j, c in enumerate(cuts):
+            disc_c = turning_centres(np.array(c), rM)[0]
+            ob = obst_low.with_disc(disc_c, self.rstar[M], f"the orbit of {self.lab(M)} at its stop {j + 1}")
+            loop = self._timed_path(gN, sN, vN, rN, LN, WN, 0.0, TM, ob)
+            if isinstance(loop, str):
+                return f"{whoN} cannot loop back to its run ({loop})"
+            a_paths.append(loop)
+        self._pair_schedule = (N, M, fullM, wait0, tp, pieces, run, a_paths)
+        return None
+
+    def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst) -> pathlib.Path | str:
+        """A collision-free path of duration ``wait0 + k * period`` (k >= 0 whole) from start to goal."""
+        start = np.asarray(start, float)
+        goal = np.asarray(goal, float)
+        base = pathlib.shortest_path(start, goal, r)
+        kmin = max(0, math.ceil((base.length / v - wait0) / period - 1e-9))
+        wants = [v * (wait0 + k * period) for k in range(kmin, kmin + 4)]
+        last = "no path of a fitting length"
+        for want in wants:
+            try:
+                p = pathlib.path_of_length(start, goal, r, want)
+            except pathlib.InfeasibleLengthError:
+                continue
+            hit = _path_hit(obst, p, L, W, self.opts)
+            if hit is None:
+                return p
+            last = f"blocked by {hit}"
+        # Route around the obstacles once, then stretch the route's tail to an exact length.
+        try:
+            _, routed = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, self.opts, self.rng, "")
+        except _NoRoute as exc:
+            return exc.reason.lstrip(": ") or last
+        for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
+            if routed.length > want + 1e-9:
+                continue
+            stretched = self._stretch(routed, want, obst, L, W)
+            if stretched is not None:
+                return stretched
+        return last
+
+    def _stretch(self, path: pathlib.Path, want: float, obst, L, W) -> pathlib.Path | None:
+        """Lengthen a route to exactly ``want`` um by replacing its tail with a path of a set length."""
+        nodes = path.nodes
+        segs = path.segments
+        for cut in range(len(segs) - 1, -1, -1):
+            head = pathlib.Path(path.start, path.radius, segs[:cut])
+            need = want - head.length
+            try:
+                tail = pathlib.path_of_length(nodes[cut], nodes[-1], path.radius, need)
+            except pathlib.InfeasibleLengthError:
+                continue
+            if _path_hit(obst, tail, L, W, self.opts) is None:
+                return pathlib.Path(path.start, path.radius, segs[:cut] + tail.segments)
+        return None
+
+    def _run_pair_schedule(self) -> None:
+        N, M, fullM, wait0, tp, pieces, run, a_paths = self._pair_schedule
+        n = self.n
+        vM = self.v[M]
+        # A_0: D_n drives to the start of its run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
+        self.tl.apply_path(N, a_paths[0], n, n - 1)
+        for j in range(pieces):
+            # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
+            piece = _sub_path(fullM, vM * tp * j, vM * tp * (j + 1))
+            before = self.tl.travel[N]
+            self.tl.apply_path(M, piece, n - 1, n - 2)
+            self.tl.travel[N] = before + self.v[N] * tp
+            if j + 1 < pieces:
+                self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
+        self.route_lengths[M] = fullM.length
+        self.route_lengths[N] = sum(p.length for p in a_paths) + pieces * run.length
+        if pieces > 1:
+            self.notes.append(
+                f"G_1: {self.lab(M)}'s route was cut into {pieces} pieces so that {self.lab(N)}'s straight run stays "
+                f"{run.length:.0f} um long (the seed's two-stage scheme would need {run.length * pieces:.0f} um)"
+            )
+        self.tl.dock(N, self.goals[N], self.lab(N))
+        self.tl.dock(M, self.goals[M], self.lab(M))
+
+
+def _sub_path(path: pathlib.Path, s0: float, s1: float) -> pathlib.Path:
+    """The part of ``path`` between arc lengths ``s0`` and ``s1`` (um), as a path of its own."""
+    segs = []
+    acc = 0.0
+    for kind, ell in path.segments:
+        a, b = max(s0, acc), min(s1, acc + ell)
+        if b > a:
+            segs.append((kind, b - a))
+        acc += ell
+    return pathlib.Path(tuple(path.pose_at(s0)), path.radius, tuple(segs))
+
+
+def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
+    return tuple(PlanPrimitive(p.name, tuple(p.turning)) for p in analysis.primitives)
+
+
+def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: Callable[[str], None] | None = None) -> PlanResult:
+    """Plan the assembly of ``scenario``'s target structure from its start poses.
+
+    Returns a :class:`PlanResult` whose plan has passed :func:`stressbots.replay.replay`. Raises
+    :class:`~stressbots.errors.PlanningError` naming what blocks the assembly when no plan is found.
+    """
+    opts = options or PlannerOptions()
+    say = progress or (lambda _msg: None)
+    scn = scenario
+    if scn.n < 2:
+        raise PlanningError("a structure needs at least 2 robots (G_1 is a pair)", source=scn.source)
+    scn.starts  # raises a ScenarioError naming a robot without a start
+    analysis = analyse_scenario(scn)
+    if not analysis.is_string:
+        raise PlanningError(
+            "the voltage design is not STRING, so primitives P_0..P_n do not exist: " + "; ".join(analysis.reasons),
+            source=scn.source,
+        )
+    order = analysis.order_index
+    robots_in_order = [scn.robots[i] for i in order]
+    structures = target_structures(robots_in_order, scn.structure)
+    rank = np.empty(scn.n, dtype=int)
+    for k, i in enumerate(order):
+        rank[i] = k + 1
+    # Cheapest candidates first (by the lower bound); skip those the starts rule out.
+    scored = []
+    first_reason = None
+    for st in structures:
+        why = _prechecks(scn, st, rank, opts)
+        if why is not None:
+            first_reason = first_reason or why
+            continue
+        scored.append((lower_bound_s(scn, st, rank), len(scored), st))
+    if not scored:
+        raise PlanningError(first_reason or "no structure fits", source=scn.source)
+    scored.sort(key=lambda x: (x[0], x[1]))
+    failures: list[str] = []
+    for lb, _, st in scored:
+        t0 = time.perf_counter()
+        planner = _Planner(scn, analysis, st, opts)
+        try:
+            say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
+            planner.form_pair()
+            for k in range(scn.n - 2, 0, -1):
+                say(f"docking {planner.lab(planner.by_rank[k])}")
+                planner.dock_single(k)
+        except _NoRoute as exc:
+            failures.append(exc.reason)
+            continue
+        steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
+        from .outputs import provenance
+
+        plan = Plan(
+            robots=scn.names,
+            primitives=_plan_primitives(analysis),
+            steps=steps,
+            goals={nm: Pose(*st.goal_poses([nm])[0]) for nm in scn.names},
+            provenance=provenance(opts.seed),
+        )
+        accessible = {frozenset(p.turning) for p in analysis.primitives}
+        rep = replay(plan, scn, accessible_turning=accessible)
+        if not rep.ok:
+            failures.append("internal: the plan failed its replay: " + "; ".join(rep.problems[:3]))
+            continue
+        duration = plan.duration_s
+        summary = {
+            "structure": st.shape,
+            "variant": st.variant,
+            "order": list(analysis.order),
+            "duration_s": duration,
+            "steps": len(steps),
+            "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
+            "lower_bound_s": lb,
+            "efficiency": lb / duration if duration > 0 else 1.0,
+            "planning_time_s": time.perf_counter() - t0,
+            "candidates": len(structures),
+            "notes": planner.notes,
+        }
+        return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes))
+    reason = max(set(failures), key=failures.count) if failures else "no plan found"
+    raise PlanningError(reason, source=scn.source)
