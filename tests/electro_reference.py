@@ -76,6 +76,8 @@ def string_orders(vd, vu, e: Electrodes) -> list[tuple[int, ...]]:
             return []
     if max(vu) > e.drive_low_V - 2 * m + tol or min(vd) < e.drive_high_V + 2 * m - tol:
         return []
+    if max(vu) >= e.drive_low_V or min(vd) <= e.drive_high_V:  # the band itself would flip an arm
+        return []
     if min(vu) < m - tol or max(vd) > e.max_V - m + tol:
         return []
     good = []
@@ -118,9 +120,9 @@ def string_integer_designs(draw, max_n: int = 5):
         dd = 0 if kind == "share_d" else draw(st.integers(gap, gap + 4))
         u.append(u[-1] + du)
         d.append(d[-1] + dd)
-    low = u[-1] + 2 * margin + draw(st.integers(0, 3))
+    low = u[-1] + 2 * margin + draw(st.integers(0 if margin else 1, 3))
     high = low + draw(st.integers(1, 10))
-    base = high + 2 * margin + draw(st.integers(0, 3))
+    base = high + 2 * margin + draw(st.integers(0 if margin else 1, 3))
     d = [base + x for x in d]
     max_v = d[-1] + margin + draw(st.integers(0, 5))
     perm = draw(st.permutations(range(n)))
@@ -142,9 +144,9 @@ def string_float_designs(draw, max_n: int = 8):
         kind = draw(st.sampled_from(["both", "both", "share_d", "share_u"]))
         u.append(u[-1] + (0.0 if kind == "share_u" else draw(step)))
         d.append(d[-1] + (0.0 if kind == "share_d" else draw(step)))
-    low = u[-1] + 2 * margin + draw(st.floats(0.0, 5.0))
+    low = u[-1] + 2 * margin + draw(st.floats(0.0 if margin else 0.01, 5.0))
     high = low + draw(st.floats(1.0, 20.0))
-    base = high + 2 * margin + draw(st.floats(0.0, 5.0))
+    base = high + 2 * margin + draw(st.floats(0.0 if margin else 0.01, 5.0))
     d = [base + x for x in d]
     max_v = d[-1] + margin + draw(st.floats(0.0, 10.0))
     perm = draw(st.permutations(range(n)))

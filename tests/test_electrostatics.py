@@ -159,6 +159,15 @@ def test_not_string_reasons(vd, vu, words):
     assert a.primitives[0].state == (0, 0)  # P0 is all up
 
 
+def test_margin_zero_drive_band_rule_is_strict():
+    # With margin 0 a snap-down voltage equal to drive_high_V would be snapped by the band itself.
+    e = Electrodes(max_V=200.0, margin_V=0.0, drive_low_V=75.0, drive_high_V=105.0)
+    assert classify_string([106.0, 150.0], [10.0, 75.0 - 1e-6], e).is_string
+    v = classify_string([105.0, 150.0], [10.0, 20.0], e, names=["X", "Y"])
+    assert not v.is_string and "X (105 V)" in v.reasons[0]
+    assert not classify_string([120.0, 150.0], [10.0, 75.0], e).is_string
+
+
 def test_d1_has_lowest_snap_down_ties_broken_by_release():
     e = Electrodes()
     v = classify_string([140.0, 140.0, 120.0], [50.0, 30.0, 15.0], e, names=["a", "b", "c"])

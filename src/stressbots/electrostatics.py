@@ -268,7 +268,9 @@ def classify_string(snap_down_V, release_V, electrodes: Electrodes, names: Seque
     2. no two robots share both values;
     3. distinct values of the same kind differ by at least ``2 margin_V`` (a level fits between them);
     4. the drive-band rule holds: every ``V_u <= drive_low_V - 2 margin_V`` and every
-       ``V_d >= drive_high_V + 2 margin_V``, so one drive band serves every state;
+       ``V_d >= drive_high_V + 2 margin_V``, so one drive band serves every state (strictly
+       ``V_u < drive_low_V`` and ``V_d > drive_high_V`` when the margin is 0: a drive level equal to a
+       threshold would flip that arm, SPEC 4 "preserves every arm only if high_V < V_d ...");
     5. every threshold can be crossed: a level ``>= 0`` fits below the lowest ``V_u`` and a level
        ``<= max_V`` above the highest ``V_d`` (margins included).
 
@@ -313,15 +315,16 @@ def classify_string(snap_down_V, release_V, electrodes: Electrodes, names: Seque
             reasons.append(
                 f"{kind} voltages closer than 2*margin_V = {v(2 * m)}, so no level fits between them: " + _listed(close)
             )
+    # With margin_V 0 the rule must still be strict: a drive level equal to a threshold flips the arm.
     u_max = e.drive_low_V - 2.0 * m
-    high = [f"{names[i]} ({v(vu[i])})" for i in np.flatnonzero(vu > u_max + tol)]
+    high = [f"{names[i]} ({v(vu[i])})" for i in np.flatnonzero((vu > u_max + tol) | (vu >= e.drive_low_V))]
     if high:
         reasons.append(
             f"release voltages above drive_low_V - 2*margin_V = {v(u_max)} (the drive band could release the arm): "
             + _listed(high)
         )
     d_min = e.drive_high_V + 2.0 * m
-    low = [f"{names[i]} ({v(vd[i])})" for i in np.flatnonzero(vd < d_min - tol)]
+    low = [f"{names[i]} ({v(vd[i])})" for i in np.flatnonzero((vd < d_min - tol) | (vd <= e.drive_high_V))]
     if low:
         reasons.append(
             f"snap-down voltages below drive_high_V + 2*margin_V = {v(d_min)} (the drive band could snap the arm down): "
