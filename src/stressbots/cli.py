@@ -134,14 +134,15 @@ def render_analysis(analysis, console: Console, *, title: str | None = None, max
     states.add_column("#", justify="right")
     states.add_column(" ".join(a.names) if n <= 16 else "arm states", no_wrap=True)
     states.add_column("primitive")
-    by_state = {p.state: p.name for p in a.primitives}
     for k, row in enumerate(a.accessible_states[:max_rows]):
-        states.add_row(str(k + 1), _bits(row, n), by_state.get(tuple(row.tolist()), ""))
+        # STRING: the state with j arms down is P_j; otherwise the sorted states are P0, P1, ...
+        states.add_row(str(k + 1), _bits(row, n), f"P{int(row.sum())}" if a.is_string else f"P{k}")
     if a.count > max_rows:
         states.add_row("...", f"{a.count - max_rows} more (see --json)", "")
     console.print(states)
 
-    k_cols = min(len(a.primitives), 24)
+    n_prims = a.primitive_states.shape[0]
+    k_cols = min(n_prims, 24)
     if n <= max_rows:
         rows_lbl = [f"D_{i + 1} {a.order[i]}" for i in range(n)] if a.is_string else list(a.names)
         heading(
@@ -150,13 +151,13 @@ def render_analysis(analysis, console: Console, *, title: str | None = None, max
         )
         m = Table()
         m.add_column("")
-        for p in a.primitives[:k_cols]:
-            m.add_column(p.name, justify="right")
-        if len(a.primitives) > k_cols:
+        for k in range(k_cols):
+            m.add_column(f"P{k}", justify="right")
+        if n_prims > k_cols:
             m.add_column("...")
         for i in range(n):
             cells = [str(int(x)) for x in a.control_matrix[i, :k_cols]]
-            m.add_row(rows_lbl[i], *cells, *(["..."] if len(a.primitives) > k_cols else []))
+            m.add_row(rows_lbl[i], *cells, *(["..."] if n_prims > k_cols else []))
         console.print(m)
 
     heading("Primitives (reach the arm state with Holds, then Drive)")
@@ -166,15 +167,15 @@ def render_analysis(analysis, console: Console, *, title: str | None = None, max
     if a.is_string:
         prims.add_column("Hold from below (V)", justify="right")
         prims.add_column("Hold from above (V)", justify="right")
-    for p in a.primitives[:max_rows]:
+    for p in (a.primitive_at(k) for k in range(min(n_prims, max_rows))):
         row = [p.name, ", ".join(p.turning) or "none (all straight)"]
         if a.is_string:
             up, down = a.raise_levels_V[p.index], a.release_levels_V[p.index]
             row += [f"{up:g}" if np.isfinite(up) else ("-" if p.index == 0 else "2 levels (tie)"),
                     f"{down:g}" if np.isfinite(down) else ("-" if p.index == n else "2 levels (tie)")]
         prims.add_row(*row)
-    if len(a.primitives) > max_rows:
-        prims.add_row(f"... {len(a.primitives) - max_rows} more", "", *(["", ""] if a.is_string else []))
+    if n_prims > max_rows:
+        prims.add_row(f"... {n_prims - max_rows} more", "", *(["", ""] if a.is_string else []))
     console.print(prims)
 
 
@@ -351,6 +352,69 @@ def waveform(
     out.print(f"levels used (V): {levels}; min {summary.min_V:g} V, max {summary.max_V:g} V", highlight=False)
     bad = [d for d in decoded.drives if not d.ok]
     out.print(f"decoded: {len(decoded.drives)} drives, " + ("every arm as intended" if not bad else f"{len(bad)} with flipped arms"), highlight=False)
+
+
+@app.command()
+def plan(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with start poses and goals or a [structure].", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for plan.json, plan.png and summary.json.", show_default=False),
+    seed: int = typer.Option(0, "--seed", help="Seed of the route search's random waypoints (recorded in plan.json)."),
+    clearance_um: float = typer.Option(10.0, "--clearance-um", min=0.0, help="Distance kept from orbits, the structure and the arena edge (um)."),
+    approach_um: float = typer.Option(100.0, "--approach-um", min=1.0, help="Straight final approach into every slot (um)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+) -> None:
+    """Plan the assembly: one sequence of primitives that docks every robot in its slot.
+
+    D_n and D_{n-1} form G_1 while the others orbit; then D_{n-2} .. D_1 dock one at a time
+    (seed Appendix 2, generalised). The plan is replayed by an independent verifier before it is written.
+
+    Example: `stressbots plan examples/four-robots.toml --out out/plan`
+    """
+    from . import plans as plans_mod
+    from .outputs import check_not_input, prepare_dir, save_figure, write_json
+    from .planning import PlannerOptions, plan_assembly
+    from .viz import plot_plan
+
+    scn = scenario_arg(scenario)
+    folder = prepare_dir(out_dir, inputs=[scenario])
+    for name in ("plan.json", "plan.png", "summary.json"):
+        check_not_input(folder / name, [scenario])
+    opts = PlannerOptions(clearance_um=clearance_um, approach_um=approach_um, seed=seed)
+    with err.status("planning...", spinner="dots") if not quiet else _nullcontext():
+        result = plan_assembly(scn, opts)
+    plans_mod.save(result.plan, folder / "plan.json")
+    write_json(folder / "summary.json", {**result.summary, "provenance": dict(result.plan.provenance)})
+    save_figure(plot_plan(scn, result), folder / "plan.png")
+    if not quiet:
+        _print_plan_summary(scn, result)
+        out.print(f"wrote {folder / 'plan.json'}, {folder / 'plan.png'}, {folder / 'summary.json'}")
+
+
+def _nullcontext():
+    import contextlib
+
+    return contextlib.nullcontext()
+
+
+def _print_plan_summary(scn, result) -> None:
+    from rich.table import Table
+
+    s = result.summary
+    rank = {name: k + 1 for k, name in enumerate(result.analysis.order)}
+    t = Table(title=f"{scn.name}: {s['structure']} ({s['variant']})", show_lines=False)
+    t.add_column("robot")
+    t.add_column("D_k", justify="right")
+    t.add_column("route (um)", justify="right")
+    t.add_column("docks at (s)", justify="right")
+    for i, name in enumerate(scn.names):
+        t.add_row(name, f"D{rank[name]}", f"{s['route_length_um'][name]:.0f}", f"{result.replay.dock_times_s[i]:.1f}")
+    out.print(t)
+    out.print(
+        f"duration {s['duration_s']:.1f} s in {s['steps']} steps; lower bound {s['lower_bound_s']:.1f} s; "
+        f"efficiency {s['efficiency']:.2f}; planned in {s['planning_time_s']:.2f} s"
+    )
+    for note in result.notes:
+        out.print(f"note: {note}")
 
 
 def _click_base(name: str) -> type[BaseException]:

@@ -36,6 +36,7 @@ Examples
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -64,7 +65,7 @@ __all__ = [
 TOLERANCE_V = 1e-9
 
 #: The state search stops with a :class:`~stressbots.errors.DesignError` beyond this many states.
-DEFAULT_MAX_STATES = 1 << 22
+DEFAULT_MAX_STATES = 1 << 21
 
 
 @dataclass(frozen=True)
@@ -387,7 +388,7 @@ def _search(
     start: np.ndarray,
     *,
     target: np.ndarray | None = None,
-    max_states: int = DEFAULT_MAX_STATES,
+    max_states: int | None = None,
     source: str | None = None,
 ):
     """Breadth-first search over arm states.
@@ -396,6 +397,7 @@ def _search(
     Without a target returns every reachable state ``(k, n)`` uint8 (unsorted). With a target returns the
     level indices of a shortest path to it, or ``None`` when it is unreachable.
     """
+    max_states = DEFAULT_MAX_STATES if max_states is None else int(max_states)
     n = snaps.shape[1]
     useful = np.flatnonzero(snaps.any(axis=1) | releases.any(axis=1))
     S = _pack(snaps[useful], n)
@@ -405,43 +407,55 @@ def _search(
     t_key = _keys(_pack(target, n))[0] if target is not None else None
     if t_key is not None and _keys(s0)[0] == t_key:
         return []
-    seen = np.sort(_keys(s0))
+    seen = np.sort(_keys(s0))  # every state found so far, sorted, for O(log V) membership tests
     found = [s0]
     layers: list[tuple[np.ndarray, np.ndarray]] = []  # per BFS layer: parent index, level index
     frontier = s0
-    chunk = max(1, 4_000_000 // max(1, L * W))
+    chunk = max(1, 4_000_000 // max(1, L * W))  # bounds the candidate array to ~4M rows
     while frontier.shape[0] and L:
-        new_states, new_parent, new_level = [], [], []
+        keys_l, states_l, parent_l, level_l = [], [], [], []
+        pending = 0
         for c0 in range(0, frontier.shape[0], chunk):
             f = frontier[c0 : c0 + chunk]
             cand = ((f[:, None, :] & keep[None, :, :]) | S[None, :, :]).reshape(-1, W)
-            k = _keys(cand)
-            uk, first = np.unique(k, return_index=True)
-            fresh = ~np.isin(uk, seen, assume_unique=True)
+            uk, first = np.unique(_keys(cand), return_index=True)
+            pos = np.minimum(np.searchsorted(seen, uk), seen.shape[0] - 1)
+            fresh = seen[pos] != uk
             if not fresh.any():
                 continue
             idx = first[fresh]
-            seen = np.union1d(seen, uk[fresh])
-            if seen.shape[0] > max_states:
-                raise _too_many(max_states, source)
-            new_states.append(cand[idx])
-            new_parent.append(c0 + idx // L)
-            new_level.append(useful[idx % L])
+            keys_l.append(uk[fresh])
+            states_l.append(cand[idx])
+            parent_l.append(c0 + idx // L)
+            level_l.append(useful[idx % L])
+            pending += int(idx.size)
+            if seen.shape[0] + pending > max_states:
+                # Chunks may share new states: count the distinct ones before giving up.
+                k_all, first = np.unique(np.concatenate(keys_l), return_index=True)
+                keys_l, states_l = [k_all], [np.concatenate(states_l)[first]]
+                parent_l, level_l = [np.concatenate(parent_l)[first]], [np.concatenate(level_l)[first]]
+                pending = int(k_all.size)
+                if seen.shape[0] + pending > max_states:
+                    raise _too_many(max_states, source)
             if t_key is not None:
-                hit = np.flatnonzero(uk[fresh] == t_key)
+                hit = np.flatnonzero(keys_l[-1] == t_key)
                 if hit.size:
-                    # Backtrack through the layers to the start.
-                    path = [int(new_level[-1][hit[0]])]
-                    parent = int(new_parent[-1][hit[0]])
+                    # Backtrack through the completed layers to the start.
+                    path = [int(level_l[-1][hit[0]])]
+                    parent = int(parent_l[-1][hit[0]])
                     for par, lev in reversed(layers):
                         path.append(int(lev[parent]))
                         parent = int(par[parent])
                     return path[::-1]
-        if not new_states:
+        if not keys_l:
             break
-        frontier = np.concatenate(new_states)
-        layers.append((np.concatenate(new_parent), np.concatenate(new_level)))
+        new_keys, first = np.unique(np.concatenate(keys_l), return_index=True)  # dedupe across chunks
+        if seen.shape[0] + new_keys.shape[0] > max_states:
+            raise _too_many(max_states, source)
+        frontier = np.concatenate(states_l)[first]
+        layers.append((np.concatenate(parent_l)[first], np.concatenate(level_l)[first]))
         found.append(frontier)
+        seen = np.sort(np.concatenate([seen, new_keys]))
     if t_key is not None:
         return None
     return _unpack(np.concatenate(found), n)
@@ -460,7 +474,7 @@ def reachable_states(
     electrodes: Electrodes,
     *,
     start=None,
-    max_states: int = DEFAULT_MAX_STATES,
+    max_states: int | None = None,
     source: str | None = None,
 ) -> np.ndarray:
     """Every control state reachable by admissible levels, by exhaustive search (any design).
@@ -534,9 +548,11 @@ class ControlAnalysis:
         Why the design is not STRING (empty when it is).
     accessible_states:
         ``(k, n)`` uint8, every accessible control state, rows sorted, scenario order.
-    primitives:
-        STRING: ``P_0..P_n`` (``P_k``: ``D_1..D_k`` down). Otherwise the accessible states themselves,
-        ``P0`` = all up, then in sorted order.
+    primitive_states:
+        ``(k, n)`` uint8, row ``j`` is the arm state of ``P_j``. STRING: ``P_j`` has ``D_1..D_j`` down.
+        Otherwise the accessible states themselves, ``P0`` = all up, then in sorted order. The
+        :class:`Primitive` values are built on demand (:attr:`primitives`, :meth:`primitive_at`), since a
+        non-STRING design can have millions.
     control_matrix:
         ``M``: STRING ``(n, n + 1)``, rows ``D_1..D_n``, ``M[i, k] = 1`` iff ``D_(i+1)`` turns under ``P_k``.
         Otherwise ``(n, k)``, rows in scenario order, columns the primitives.
@@ -558,7 +574,7 @@ class ControlAnalysis:
     order_index: tuple[int, ...] | None
     reasons: tuple[str, ...]
     accessible_states: np.ndarray
-    primitives: tuple[Primitive, ...]
+    primitive_states: np.ndarray
     control_matrix: np.ndarray
     levels: LevelTable
     method: str
@@ -584,11 +600,29 @@ class ControlAnalysis:
             "count": self.count,
         }
 
+    def primitive_at(self, k: int) -> Primitive:
+        """``P_k`` (``IndexError`` if there is none)."""
+        k = int(k)
+        if not 0 <= k < self.primitive_states.shape[0]:
+            raise IndexError(k)
+        row = self.primitive_states[k]
+        if self.is_string:
+            turning = self.order[:k]
+        else:
+            turning = tuple(self.names[i] for i in np.flatnonzero(row))
+        return Primitive(f"P{k}", k, tuple(row.tolist()), turning)
+
+    @cached_property
+    def primitives(self) -> tuple[Primitive, ...]:
+        """Every primitive, ``P_0, P_1, ...`` (see :attr:`primitive_states`)."""
+        return tuple(self.primitive_at(k) for k in range(self.primitive_states.shape[0]))
+
     def primitive(self, name: str) -> Primitive:
-        """The primitive called ``name`` (``KeyError`` if none)."""
-        for p in self.primitives:
-            if p.name == name:
-                return p
+        """The primitive called ``name``, e.g. ``"P2"`` (``KeyError`` if none)."""
+        if name[:1] == "P" and name[1:].isdigit() and str(int(name[1:])) == name[1:]:
+            k = int(name[1:])
+            if k < self.primitive_states.shape[0]:
+                return self.primitive_at(k)
         raise KeyError(name)
 
     def state_of(self, turning: Iterable[str]) -> np.ndarray:
@@ -601,11 +635,11 @@ class ControlAnalysis:
 
     def primitive_for_state(self, state) -> Primitive | None:
         """The primitive with these arm states, or ``None`` when the state is not accessible."""
-        key = tuple(int(x) for x in np.asarray(state).reshape(-1))
-        for p in self.primitives:
-            if p.state == key:
-                return p
-        return None
+        s = np.asarray(state).reshape(1, -1)
+        if s.shape[1] != self.n:
+            return None
+        hit = np.flatnonzero(np.all(self.primitive_states == s, axis=1))
+        return self.primitive_at(int(hit[0])) if hit.size else None
 
     def is_accessible(self, state) -> bool:
         s = np.asarray(state, dtype=np.uint8).reshape(1, -1)
@@ -636,7 +670,7 @@ def analyse_thresholds(
     *,
     names: Sequence[str] | None = None,
     method: str = "auto",
-    max_states: int = DEFAULT_MAX_STATES,
+    max_states: int | None = None,
     source: str | None = None,
 ) -> ControlAnalysis:
     """Analyse a design given as threshold arrays (scenario order).
@@ -670,9 +704,6 @@ def analyse_thresholds(
         else:
             states = _sorted_rows(prefix)
         order_names = tuple(names_t[i] for i in order)
-        prims = tuple(
-            Primitive(f"P{k}", k, tuple(prefix[k].tolist()), order_names[:k]) for k in range(n + 1)
-        )
         matrix = (np.arange(n)[:, None] < np.arange(n + 1)[None, :]).astype(np.uint8)
         raise_v, release_v = _string_levels(table, order)
         return ControlAnalysis(
@@ -685,7 +716,7 @@ def analyse_thresholds(
             order_index=tuple(int(i) for i in order),
             reasons=(),
             accessible_states=states,
-            primitives=prims,
+            primitive_states=prefix,
             control_matrix=matrix,
             levels=table,
             method="lemma1" if method == "auto" else "search",
@@ -693,10 +724,6 @@ def analyse_thresholds(
             release_levels_V=release_v,
         )
     states = _sorted_rows(_search(table.snaps, table.releases, np.zeros(n, np.uint8), max_states=max_states, source=source))
-    prims = tuple(
-        Primitive(f"P{k}", k, tuple(row.tolist()), tuple(names_t[i] for i in np.flatnonzero(row)))
-        for k, row in enumerate(states)
-    )
     return ControlAnalysis(
         names=names_t,
         snap_down_V=vd,
@@ -707,7 +734,7 @@ def analyse_thresholds(
         order_index=None,
         reasons=verdict.reasons,
         accessible_states=states,
-        primitives=prims,
+        primitive_states=states,
         control_matrix=np.ascontiguousarray(states.T),
         levels=table,
         method="search",
@@ -764,7 +791,7 @@ def _string_path(analysis: ControlAnalysis, j: int, k: int) -> list[float] | Non
     return [float(down[bottom]), float(up[k])]
 
 
-def level_sequence(analysis: ControlAnalysis, start, target, *, max_states: int = DEFAULT_MAX_STATES) -> tuple[float, ...]:
+def level_sequence(analysis: ControlAnalysis, start, target, *, max_states: int | None = None) -> tuple[float, ...]:
     """The fewest admissible levels (V) that take the arms from ``start`` to ``target``.
 
     For a STRING design between primitives this is SPEC 4's closed form: one level between ``V_d,k``

@@ -148,9 +148,9 @@ def _resolve(analysis: ControlAnalysis, primitive) -> np.ndarray:
         try:
             return np.array(analysis.primitive(primitive).state, dtype=np.uint8)
         except KeyError:
-            names = ", ".join(p.name for p in analysis.primitives[:8])
-            more = ", ..." if len(analysis.primitives) > 8 else ""
-            raise WaveformError(f"unknown primitive {primitive!r} (this design has {names}{more})") from None
+            raise WaveformError(
+                f"unknown primitive {primitive!r} (this design has P0..P{analysis.primitive_states.shape[0] - 1})"
+            ) from None
     s = np.asarray(primitive).reshape(-1)
     if s.size != analysis.n or not np.all((s == 0) | (s == 1)):
         raise WaveformError(f"an arm state needs {analysis.n} entries of 0 or 1")
@@ -518,7 +518,7 @@ def parse_steps(text: str, analysis: ControlAnalysis, *, option: str = "--steps"
             prim = analysis.primitive(name.strip())
         except KeyError:
             raise WaveformError(
-                f"unknown primitive {name.strip()!r}; this design has P0..P{len(analysis.primitives) - 1}", source=option
+                f"unknown primitive {name.strip()!r}; this design has P0..P{analysis.primitive_states.shape[0] - 1}", source=option
             ) from None
         try:
             d = float(dur)
