@@ -38,8 +38,11 @@ from .errors import DesignError
 
 __all__ = ["StringDesign", "YieldEstimate", "side_clearance", "max_robots", "design_string", "estimate_yield", "works", "check_limits"]
 
-#: Beyond this many robots the design is refused outright (a margin of 0 would otherwise allow any N).
-MAX_DESIGN_ROBOTS = 100_000
+#: Largest design produced (the check analyses it, with O(N^2) memory); a margin of 0 fits any N.
+MAX_DESIGN_ROBOTS = 2000
+
+#: Stands for "no limit" in :func:`max_robots` (margin 0).
+_UNLIMITED = 10**9
 
 
 def check_limits(electrodes: Electrodes) -> None:
@@ -87,22 +90,22 @@ def _k_max(width_V: float, margin_V: float) -> int:
     if side_clearance(width_V, 1, margin_V) < margin_V - TOLERANCE_V:
         return 0
     if margin_V <= TOLERANCE_V:
-        return MAX_DESIGN_ROBOTS
-    k = max(1, int((width_V - margin_V) / (2.0 * margin_V)))
+        return _UNLIMITED
+    k = min(_UNLIMITED, max(1, int((width_V - margin_V) / (2.0 * margin_V))))
     while k > 1 and side_clearance(width_V, k, margin_V) < margin_V - TOLERANCE_V:
         k -= 1
-    while side_clearance(width_V, k + 1, margin_V) >= margin_V - TOLERANCE_V and k < MAX_DESIGN_ROBOTS:
+    while k < _UNLIMITED and side_clearance(width_V, k + 1, margin_V) >= margin_V - TOLERANCE_V:
         k += 1
-    return min(k, MAX_DESIGN_ROBOTS)
+    return k
 
 
 def max_robots(electrodes: Electrodes, *, ties: bool = False) -> int:
-    """The largest N for which a STRING design fits the limits (0 if none does)."""
+    """The largest N for which a STRING design fits the limits (0 if none does; 10^9 means no limit)."""
     wu, wd = _side_widths(electrodes)
     ku, kd = _k_max(wu, electrodes.margin_V), _k_max(wd, electrodes.margin_V)
     if ku == 0 or kd == 0:
         return 0
-    return min(ku + kd - 1, MAX_DESIGN_ROBOTS) if ties else min(ku, kd)
+    return min(ku + kd - 1, _UNLIMITED) if ties else min(ku, kd)
 
 
 @dataclass(frozen=True)
@@ -187,12 +190,15 @@ class StringDesign:
         def num(x: float) -> str:
             return repr(float(x))
 
+        def short(items: list[str]) -> str:
+            return ", ".join(items if len(items) <= 10 else items[:4] + ["..."] + items[-2:])
+
         def lv(vals) -> str:
-            return ", ".join(f"P{k} {v:.6g}" for k, v in enumerate(vals) if math.isfinite(v))
+            return short([f"P{k} {v:.6g}" for k, v in enumerate(vals) if math.isfinite(v)])
 
         gap = f"{self.min_gap_V:.6g} V" if math.isfinite(self.min_gap_V) else "none (one robot)"
         lines = [
-            f"# STRING design for {self.n} robots (stressbots design); D_1..D_{self.n} = {', '.join(self.names)}.",
+            f"# STRING design for {self.n} robots (stressbots design); D_1..D_{self.n} = {short(list(self.names))}.",
             f"# smallest gap between thresholds {gap}; clearance to the nearest level {self.clearance_V:.6g} V"
             + ("; ties allowed" if self.ties else ""),
             f"# hold levels, raise to:   {lv(self.raise_levels_V)}",
@@ -237,6 +243,8 @@ def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> Stri
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise DesignError(f"must be a whole number >= 1, got {n!r}", source="--robots")
     n = int(n)
+    if n > MAX_DESIGN_ROBOTS:
+        raise DesignError(f"at most {MAX_DESIGN_ROBOTS} robots per design, got {n}", source="--robots")
     e = electrodes
     m = float(e.margin_V)
     wu, wd = _side_widths(e)
