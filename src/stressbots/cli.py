@@ -294,9 +294,9 @@ def design(
     if out_file.exists() and out_file.is_dir():
         raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
     write_text(out_file, text)
-    err.print(f"wrote {out_file}: STRING design for {d.n} robots, smallest gap {d.min_gap_V:g} V", highlight=False)
+    err.print(f"wrote {out_file}: STRING design for {d.n} robots, smallest gap {d.min_gap_V:g} V", highlight=False, soft_wrap=True)
     if y is not None:
-        err.print(f"yield (sd {y.sd_V:g} V): {y.fraction:.4f}, 95% CI {y.ci_low:.4f}-{y.ci_high:.4f}", highlight=False)
+        err.print(f"yield (sd {y.sd_V:g} V): {y.fraction:.4f}, 95% CI {y.ci_low:.4f}-{y.ci_high:.4f}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -348,10 +348,15 @@ def waveform(
         f"wrote {out_file}: {summary.segments} segments ({summary.holds} holds, {summary.drives} drives), "
         f"{summary.duration_s:g} s" + (f", {summary.samples} samples at {summary.rate_hz:g} Hz" if summary.samples else ""),
         highlight=False,
+        soft_wrap=True,
     )
-    out.print(f"levels used (V): {levels}; min {summary.min_V:g} V, max {summary.max_V:g} V", highlight=False)
+    out.print(f"levels used (V): {levels}; min {summary.min_V:g} V, max {summary.max_V:g} V", highlight=False, soft_wrap=True)
     bad = [d for d in decoded.drives if not d.ok]
-    out.print(f"decoded: {len(decoded.drives)} drives, " + ("every arm as intended" if not bad else f"{len(bad)} with flipped arms"), highlight=False)
+    out.print(
+        f"decoded: {len(decoded.drives)} drives, " + ("every arm as intended" if not bad else f"{len(bad)} with flipped arms"),
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 @app.command()
