@@ -82,6 +82,7 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644 & ~_umask())  # mkstemp makes 0600; results are ordinary readable files
         os.replace(tmp, target)
     except BaseException:
         try:
@@ -90,6 +91,12 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
             pass
         raise
     return target
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def write_text(path: Path | str, text: str) -> Path:

@@ -39,7 +39,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra as csgraph_dijkstra
 
 from . import paths as pathlib
-from .collision import bodies_hit_discs, disc_overlaps, outside_arena, pairwise_overlaps, penetration_depth
+from .collision import point_rectangle_distance, bodies_hit_discs, disc_overlaps, outside_arena, pairwise_overlaps, penetration_depth
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
 from .kinematics import advance, move
@@ -519,6 +519,7 @@ class _Planner:
         self.tl = _Timeline(scn, self.rank, [analysis.order[k] for k in range(self.n)])
         self.notes: list[str] = []
         self.route_lengths = np.zeros(self.n)
+        self._timed_cache: dict = {}
 
     def lab(self, i: int) -> str:
         return _label(self.scn, i, self.rank[i])
@@ -592,16 +593,30 @@ class _Planner:
 
         attempts: list[str] = []
 
+        # How far behind its slot D_n can run straight (lower orbits and the arena only).
+        gN_ = self.goals[N]
+        hN = np.array([math.sin(gN_[2]), math.cos(gN_[2])])
+        probe = np.arange(0.0, 4.0 * max(self.scn.arena_um or (5000.0, 5000.0)), opts.sample_um)
+        back = np.column_stack([gN_[0] - probe * hN[0], gN_[1] - probe * hN[1], np.full(probe.size, gN_[2])])
+        blocked = obst_low.hits(back, self.L[N], self.W[N], opts.clearance_um)
+        d_free = float(probe[np.argmax(blocked)] - opts.sample_um) if blocked.any() else float(probe[-1])
+        if d_free < aN:
+            raise _NoRoute(f"{whoN}: its straight approach into its slot is blocked ({d_free:.0f} um free behind it)")
+        budget = [40]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
+
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
             fullM = routeM.then(("S", aM))
             T = fullM.length / vM
-            for pieces in range(1, opts.max_pieces + 1):
-                why = self._schedule_pair(N, M, fullM, float(waits[sidx]), T, pieces, lower, aN)
+            for durs in self._cut_options(N, M, fullM, T, d_free, obst_low, aM):
+                if budget[0] <= 0:
+                    break
+                budget[0] -= 1
+                why = self._schedule_pair(N, M, fullM, float(waits[sidx]), durs, lower)
                 if why is None:
                     return None
                 attempts.append(why)
-            return attempts[-1] if attempts else "no schedule"
+            return attempts[-1] if attempts else f"{whoM}'s route is too long for {whoN}'s free corridor ({d_free:.0f} um)"
 
         self._pair_schedule = None
         try:
@@ -611,76 +626,146 @@ class _Planner:
             raise _NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
 
-    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, T: float, pieces: int, lower: list[int], aN: float) -> str | None:
-        """Plan D_n around D_{n-1}'s route cut into ``pieces`` equal pieces; None on success."""
+    def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, obst_low: _Obstacles, aM: float):
+        """Ways to cut D_{n-1}'s route (duration ``T`` s) into pieces for the G_1 schedule.
+
+        The last piece is the longest (D_n runs into its slot for that long, so it is at most the free
+        corridor ``d_free``); D_{n-1} must be able to orbit at every cut. Cut points are chosen greedily
+        from the end: each as early as the piece-length limit allows, among the positions where
+        D_{n-1}'s orbit is clear of the lower orbits, the arena and D_n's corridor.
+        """
+        opts = self.opts
+        vN, vM, rM = self.v[N], self.v[M], self.r[M]
+        t_max = d_free / vN
+        if T <= t_max + 1e-9:
+            yield (T,)
+        total = fullM.length
+        pos = np.arange(0.0, total, 10.0)
+        centres = turning_centres(fullM.pose_at(pos), rM)
+        rr = self.rstar[M] + opts.clearance_um
+        ok = np.ones(pos.size, dtype=bool)
+        if len(obst_low.disc_radii):
+            gap = np.hypot(centres[:, None, 0] - obst_low.disc_centres[None, :, 0], centres[:, None, 1] - obst_low.disc_centres[None, :, 1])
+            ok &= (gap - obst_low.disc_radii[None, :] - self.rstar[M] >= opts.clearance_um).all(axis=1)
+        if self.scn.arena_um is not None:
+            w, h = self.scn.arena_um
+            ok &= (centres[:, 0] >= rr) & (centres[:, 0] <= w - rr) & (centres[:, 1] >= rr) & (centres[:, 1] <= h - rr)
+        gN = self.goals[N]
+        seen = set()
+        # D_n loops back to its right and reaches about r + L/2 past the end of its run: earlier runs
+        # may stop short of the slot by that much, keeping the loops away from D_{n-1}'s last stops.
+        short = (self.r[N] + 0.5 * self.L[N] + self.W[N] + opts.clearance_um) / vN
+        for frac, margin in [(f, 0.0) for f in (1.0, 0.8, 0.62, 0.48, 0.36)] + [(f, short) for f in (1.0, 0.8, 0.62, 0.48)]:
+            tm = min(t_max * frac, T)
+            if tm < aM / vM or tm * opts.max_pieces < T or tm >= T - 1e-9:
+                continue
+            d = vN * tm
+            corridor = _pre_approach(gN, 0.5 * d)  # the run's swept rectangle, centred
+            clear = point_rectangle_distance(centres, corridor, d + self.L[N], self.W[N])[0] >= rr
+            good = ok & clear
+            good[0] = True  # D_{n-1}'s departure point: it orbits there anyway
+            t_piece = tm - margin  # longest earlier piece
+            if t_piece <= 0.2 * tm:
+                continue
+            cuts = [total - vM * tm]
+            while cuts[-1] > 1e-9:
+                lo = cuts[-1] - vM * t_piece
+                cand = np.flatnonzero(good & (pos >= lo - 1e-9) & (pos < cuts[-1] - 1e-9))
+                if len(cand) == 0 or len(cuts) > opts.max_pieces:
+                    cuts = []
+                    break
+                cuts.append(float(pos[cand[0]]))
+            if not cuts:
+                continue
+            # the last cut must itself be a good stop
+            k_last = int(np.searchsorted(pos, cuts[0] - 1e-9))
+            if k_last < pos.size and not good[k_last]:
+                continue
+            bounds = [0.0] + sorted(c for c in cuts if c > 1e-9) + [total]
+            durs = tuple((b - a) / vM for a, b in zip(bounds[:-1], bounds[1:]))
+            key = tuple(round(x, 6) for x in durs)
+            if key not in seen:
+                seen.add(key)
+                yield durs
+
+    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, durs: Sequence[float], lower: list[int]) -> str | None:
+        """Plan D_n around D_{n-1}'s route cut into pieces of durations ``durs`` (s); None on success.
+
+        D_n runs straight from ``s_N`` (its slot minus the last piece's run) during every piece, the
+        last run ending in its slot, and loops back to ``s_N`` between pieces on paths lasting a whole
+        number of D_{n-1}'s orbit periods, while D_{n-1} orbits back to where it stopped.
+        """
         opts = self.opts
         vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
         LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
         TM = TWO_PI * rM / vM
         gN = self.goals[N]
-        tp = T / pieces
-        d = vN * tp  # D_n's straight run per piece
+        pieces = len(durs)
+        d = vN * durs[-1]  # the longest run: the last one, into the slot
         sN = _pre_approach(gN, d)
-        whoN = self.lab(N)
+        whoN, whoM = self.lab(N), self.lab(M)
         obst_low = self.obstacles(lower, [])
-        # D_n's corridor: clear of the lower orbits and the arena.
         run = pathlib.Path(tuple(sN), rN, (("S", d),))
-        hit = obst_low.first_hit(run.sample(opts.sample_um), LN, WN, opts.clearance_um)
-        if hit is not None:
-            return f"{whoN}'s straight run of {d:.0f} um into its slot is blocked by {hit}"
-        # Where D_{n-1} stops between pieces (it orbits there while D_n loops back).
-        cuts = [fullM.pose_at(vM * tp * j) for j in range(1, pieces)]
+        run_samples = run.sample(opts.sample_um)
+        starts_t = np.concatenate([[0.0], np.cumsum(durs)])  # piece boundaries (s into D_{n-1}'s route)
+        cuts = [fullM.pose_at(vM * starts_t[j]) for j in range(1, pieces)]
+        # 1. D_{n-1} orbits at every stop: clear of the lower orbits, the arena and D_n's corridor.
         for j, c in enumerate(cuts):
             disc_c = turning_centres(np.array(c), rM)[0]
-            h = obst_low.with_disc(disc_c, self.rstar[M], "x").first_hit(np.array(c)[None, :], LM, WM, 0.0)
-            if h not in (None, "x"):
-                return f"{self.lab(M)} cannot orbit at its stop {j + 1} ({h})"
-            # its orbit disc must be clear of the lower orbits, the arena and D_n's corridor
-            ob = obst_low
-            if len(ob.disc_radii):
-                gap = np.hypot(*(ob.disc_centres - disc_c).T) - ob.disc_radii - self.rstar[M]
+            if len(obst_low.disc_radii):
+                gap = np.hypot(*(obst_low.disc_centres - disc_c).T) - obst_low.disc_radii - self.rstar[M]
                 if (gap < opts.clearance_um).any():
-                    return f"{self.lab(M)}'s orbit at its stop {j + 1} touches {ob.disc_labels[int(np.argmin(gap))]}"
+                    return f"{whoM}'s orbit at its stop {j + 1} touches {obst_low.disc_labels[int(np.argmin(gap))]}"
             if self.scn.arena_um is not None:
                 w, hgt = self.scn.arena_um
                 rr = self.rstar[M] + opts.clearance_um
                 if min(disc_c[0] - rr, w - disc_c[0] - rr, disc_c[1] - rr, hgt - disc_c[1] - rr) < 0:
-                    return f"{self.lab(M)}'s orbit at its stop {j + 1} leaves the arena"
-            if bodies_hit_discs(run.sample(opts.sample_um), LN, WN, disc_c[None, :], [self.rstar[M] + opts.clearance_um]).any():
-                return f"{self.lab(M)}'s orbit at its stop {j + 1} crosses {whoN}'s corridor"
-        # B phases: D_n's run against D_{n-1}'s piece, sampled in time (touching only at the very end).
+                    return f"{whoM}'s orbit at its stop {j + 1} leaves the arena"
+            if bodies_hit_discs(run_samples, LN, WN, disc_c[None, :], [self.rstar[M] + opts.clearance_um]).any():
+                return f"{whoM}'s orbit at its stop {j + 1} crosses {whoN}'s corridor"
+        # 2. B phases: D_n's run against D_{n-1}'s piece, sampled in time (touching only at the very end).
         dt = opts.sample_um / max(vN, vM)
         for j in range(pieces):
-            t = np.arange(0.0, tp + dt, dt)
-            t = np.clip(t, 0.0, tp)
-            pn = run.pose_at(np.minimum(vN * t, d))
-            pm = fullM.pose_at(np.minimum(vM * (j * tp + t), fullM.length))
+            tp = durs[j]
+            t = np.minimum(np.arange(0.0, tp + dt, dt), tp)
+            pn = run.pose_at(vN * t)
+            pm = fullM.pose_at(np.minimum(vM * (starts_t[j] + t), fullM.length))
             depth = penetration_depth(pn, LN, WN, pm, LM, WM)
             final = j == pieces - 1
-            limit = np.where(final & (t > tp - (self.opts.approach_um + opts.clearance_um) / min(vN, vM)), 0.5, -opts.clearance_um)
+            limit = np.where(final & (t > tp - (opts.approach_um + opts.clearance_um) / min(vN, vM)), 0.5, -opts.clearance_um)
             if (depth > limit).any():
-                return f"{whoN}'s straight run meets {self.lab(M)} before the end (piece {j + 1} of {pieces})"
-        # A phases: D_n's paths of a whole number of D_{n-1} periods.
-        a_paths = []
-        obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {self.lab(M)}")
+                return f"{whoN}'s straight run meets {whoM} before the end (piece {j + 1} of {pieces})"
+        # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods.
+        obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {whoM}")
         first = self._timed_path(self.tl.poses[N], sN, vN, rN, LN, WN, wait0, TM, obst0)
         if isinstance(first, str):
             return f"{whoN} cannot reach the start of its run ({first})"
-        a_paths.append(first)
+        a_paths = [first]
         for j, c in enumerate(cuts):
             disc_c = turning_centres(np.array(c), rM)[0]
-            ob = obst_low.with_disc(disc_c, self.rstar[M], f"the orbit of {self.lab(M)} at its stop {j + 1}")
-            loop = self._timed_path(gN, sN, vN, rN, LN, WN, 0.0, TM, ob)
+            ob = obst_low.with_disc(disc_c, self.rstar[M], f"the orbit of {whoM} at its stop {j + 1}")
+            end_j = run.pose_at(vN * durs[j])
+            loop = self._timed_path(end_j, sN, vN, rN, LN, WN, 0.0, TM, ob, route=False)
             if isinstance(loop, str):
                 return f"{whoN} cannot loop back to its run ({loop})"
             a_paths.append(loop)
-        self._pair_schedule = (N, M, fullM, wait0, tp, pieces, run, a_paths)
+        self._pair_schedule = (N, M, fullM, wait0, tuple(durs), run, a_paths)
         return None
 
-    def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst) -> pathlib.Path | str:
-        """A collision-free path of duration ``wait0 + k * period`` (k >= 0 whole) from start to goal."""
+    def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst, *, route: bool = True) -> pathlib.Path | str:
+        """A collision-free path of duration ``wait0 + k * period`` (k >= 0 whole) from start to goal.
+
+        Tries the direct paths of those lengths first; with ``route`` it then routes around the
+        obstacles and stretches the route to an exact length. Returns the path or the reason it failed.
+        """
         start = np.asarray(start, float)
         goal = np.asarray(goal, float)
+        key = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), round(wait0, 6), tuple(np.round(obst.disc_centres, 3).ravel()), route)
+        if key not in self._timed_cache:
+            self._timed_cache[key] = self._timed_path_uncached(start, goal, v, r, L, W, wait0, period, obst, route)
+        return self._timed_cache[key]
+
+    def _timed_path_uncached(self, start, goal, v, r, L, W, wait0, period, obst, route) -> pathlib.Path | str:
         base = pathlib.shortest_path(start, goal, r)
         kmin = max(0, math.ceil((base.length / v - wait0) / period - 1e-9))
         wants = [v * (wait0 + k * period) for k in range(kmin, kmin + 4)]
@@ -694,6 +779,8 @@ class _Planner:
             if hit is None:
                 return p
             last = f"blocked by {hit}"
+        if not route:
+            return last
         # Route around the obstacles once, then stretch the route's tail to an exact length.
         try:
             _, routed = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, self.opts, self.rng, "")
@@ -723,25 +810,27 @@ class _Planner:
         return None
 
     def _run_pair_schedule(self) -> None:
-        N, M, fullM, wait0, tp, pieces, run, a_paths = self._pair_schedule
+        N, M, fullM, wait0, durs, run, a_paths = self._pair_schedule
         n = self.n
-        vM = self.v[M]
+        vM, vN = self.v[M], self.v[N]
+        pieces = len(durs)
+        bounds = np.concatenate([[0.0], np.cumsum(durs)]) * vM
         # A_0: D_n drives to the start of its run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
         self.tl.apply_path(N, a_paths[0], n, n - 1)
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
-            piece = _sub_path(fullM, vM * tp * j, vM * tp * (j + 1))
+            piece = _sub_path(fullM, bounds[j], bounds[j + 1])
             before = self.tl.travel[N]
             self.tl.apply_path(M, piece, n - 1, n - 2)
-            self.tl.travel[N] = before + self.v[N] * tp
+            self.tl.travel[N] = before + vN * durs[j]
             if j + 1 < pieces:
                 self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
         self.route_lengths[M] = fullM.length
-        self.route_lengths[N] = sum(p.length for p in a_paths) + pieces * run.length
+        self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
             self.notes.append(
                 f"G_1: {self.lab(M)}'s route was cut into {pieces} pieces so that {self.lab(N)}'s straight run stays "
-                f"{run.length:.0f} um long (the seed's two-stage scheme would need {run.length * pieces:.0f} um)"
+                f"within {run.length:.0f} um (the seed's two-stage scheme would need {vN * sum(durs):.0f} um)"
             )
         self.tl.dock(N, self.goals[N], self.lab(N))
         self.tl.dock(M, self.goals[M], self.lab(M))
