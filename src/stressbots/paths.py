@@ -54,7 +54,8 @@ The true optimum is discontinuous: a goal a hair to the side of straight ahead n
 poses computed in floating point sit on such edges constantly (a goal on the turning circle, straight
 ahead, heading ``2 pi - 1e-16``). Where a path that is ``>= 1e-12`` relative (position; ``1e-12`` rad in
 heading) from the goal would avoid a loop, that path is returned: every path ends at its goal to that
-tolerance and is never longer than the exact optimum. Ties between families go to RSR.
+tolerance and is never longer than the exact optimum. Of two families of equal length (a tie), RSR is
+returned, unless the SRS is shorter by rounding or the SRS tolerance adjustment (see ``_srs_masses``).
 
 Public API
 ----------
@@ -312,6 +313,27 @@ def _geometry(starts, goals, r) -> _Geometry:
     )
 
 
+_SRS_ILL = 0.1  # delta - pi below which the SRS is ill-conditioned
+
+
+def _srs_masses(g: _Geometry, can_srs):
+    """Straights ``a``, ``b`` of the SRS ``w = a h(t1) + b h(t1 + delta)`` (um), where ``can_srs``.
+
+    Near ``delta = pi`` the two headings are almost opposite and ``a + b`` is ill-conditioned (it divides
+    a sideways offset by ``sin delta``): rounding in the goal alone would make the path longer than
+    the exact optimum. Shortening both straights by ``e`` moves the end by ``e |h1 + h2| <= e (delta -
+    pi)``, so ``e = tol / (delta - pi)`` keeps the end within tolerance and the length never above the
+    optimum. Only done where the rounding is amplified more than ``1 / _SRS_ILL`` times; elsewhere the
+    SRS is exact.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        b = np.maximum(g.d_sin_off / np.where(can_srs, g.sin_delta, -1.0), 0.0)
+        a = np.maximum(g.d_cos_off - b * g.cos_delta, 0.0)
+        e = np.minimum(np.minimum(a, b), g.tol / np.where(can_srs, g.delta - _PI, 1.0))
+    e = np.where(can_srs & (g.delta - _PI < _SRS_ILL), e, 0.0)
+    return a - e, b - e
+
+
 _CHUNK = 4096  # pairs per vectorised pass: keeps the temporaries in cache
 
 
@@ -322,9 +344,7 @@ def _solve_chunk(starts, goals, r, segments: bool):
     l_rsr = r * (delta + TWO_PI * outside) + d
     # SRS: w = a h(t1) + b h(t1 + delta), only possible (and useful) for delta > pi, w outside the window
     can_srs = outside & (delta > _PI)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        b = np.maximum(g.d_sin_off / np.where(can_srs, g.sin_delta, -1.0), 0.0)
-    a = np.maximum(g.d_cos_off - b * g.cos_delta, 0.0)
+    a, b = _srs_masses(g, can_srs)
     l_srs = a + b + r * delta
     use_srs = can_srs & (l_srs < l_rsr)
     if not segments:
@@ -490,13 +510,15 @@ def _classes(start, goal, radius) -> _Classes:
     delta, d, off, r = (float(v) for v in (g.delta, g.d, g.off, g.r))
     inside = off <= delta
     sd = math.sin(delta)
-    if delta > 0.0 and sd != 0.0:
+    if delta > _PI and not inside:
+        a, b = (float(v) for v in _srs_masses(g, np.bool_(True)))
+    elif delta > 0.0 and sd != 0.0:
         b = d * math.sin(off) / sd
         a = d * math.cos(off) - b * math.cos(delta)
     else:
         a, b = math.inf, math.inf
     if delta >= _PI:
-        lo0 = r * delta + (d if inside else (max(a, 0.0) + max(b, 0.0) if delta > _PI else math.inf))
+        lo0 = r * delta + (d if inside else (a + b if delta > _PI else math.inf))
         hi0 = math.inf if math.isfinite(lo0) else -math.inf
     elif inside:
         lo0 = r * delta + d
