@@ -52,10 +52,11 @@ Degenerate geometry and tolerance
 ---------------------------------
 The true optimum is discontinuous: a goal a hair to the side of straight ahead needs a whole loop. Goal
 poses computed in floating point sit on such edges constantly (a goal on the turning circle, straight
-ahead, heading ``2 pi - 1e-16``). Where a path that is ``>= 1e-12`` relative (position; ``1e-12`` rad in
-heading) from the goal would avoid a loop, that path is returned: every path ends at its goal to that
-tolerance and is never longer than the exact optimum. Of two families of equal length (a tie), RSR is
-returned, unless the SRS is shorter by rounding or the SRS tolerance adjustment (see ``_srs_masses``).
+ahead, heading ``2 pi - 1e-16``). Where a path ending within ``REL_TOL = 1e-12`` of the goal (relative to
+``r + |goal - start|``; ``ANGLE_TOL = 1e-12`` rad in heading) avoids a loop, that path is returned, and an
+SRS near a half turn, whose straights rounding would inflate, is shortened within the same tolerance.
+So every path ends at its goal to that tolerance and is never longer than the exact optimum. Of two
+families of equal length (a tie) RSR is returned, unless rounding makes the SRS shorter.
 
 Public API
 ----------
@@ -84,7 +85,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import TWO_PI, follow, move, poses_along, sample_arclengths, wrap
+from .kinematics import TWO_PI, follow, poses_along, sample_arclengths, wrap
 from .robots import Pose
 
 __all__ = [
