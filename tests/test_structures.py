@@ -131,7 +131,7 @@ def test_named_shape_valid_for_every_n(shape, n):
     assert len(keys) == len(cands)
 
 
-@settings(max_examples=25)
+@settings(max_examples=20)
 @given(
     shape=st.sampled_from(["tee", "cross", "comb", "ladder"]),
     n=st.integers(2, 12),
@@ -348,7 +348,10 @@ REJECTIONS = [
     ({"C": (130.0, 0.0, 260 * DEG)}, "D3/D4 (robots 'C'/'D') do not form G_1: headings 170.0 deg apart, must be opposite (180 deg, head-on)"),
     ({"B": (0.0, -195.2, UP)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 35.2 um from the nearest free side"),
     ({"B": (250.0, -160.0, UP)}, "D2 (robot 'B'): front edge overhangs the end of the free side it rests on by 20.0 um"),
-    ({"B": (0.0, -163.0, 1.0 * DEG)}, "D2 (robot 'B'): front edge is at 1.0 deg to the nearest free side"),
+    ({"B": (0.0, -30.0 - 130.0 * math.cos(DEG) - 30.0 * math.sin(DEG), 1.0 * DEG)},
+     "D2 (robot 'B'): front edge is at 1.0 deg to the free side it touches (must be parallel to it within 0.1 deg)"),
+    ({"B": (0.0, -163.0, 1.0 * DEG)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 2.5 um from the nearest free side and at 1.0 deg to it"),
+    ({"B": (0.0, -200.0, 1.0 * DEG)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 39.5 um from the nearest free side and at 1.0 deg to it"),
     ({"B": (0.0, -160.0, DOWN)}, "D2 (robot 'B'): its rear edge, not its front edge, is on a free side"),
     ({"B": (0.0, -150.0, UP)}, "D2 (robot 'B'): body overlaps D4 (robot 'D') by 300 um^2"),
     ({"A": (0.0, -160.0, UP)}, "D1 (robot 'A'): body overlaps D2 (robot 'B') by 15600 um^2"),
@@ -435,10 +438,10 @@ def test_rigid_motion_invariance(phi, dx, dy, which):
     assert np.allclose(_numbers(ta), _numbers(tb), atol=0.11)
 
 
-@settings(max_examples=10)
+@settings(max_examples=8)
 @given(phi=st.floats(0, 2 * math.pi), dx=st.floats(-1e4, 1e4), dy=st.floats(-1e4, 1e4))
 def test_named_shape_moves_with_its_frame(phi, dx, dy):
-    robots = robots_v(8)
+    robots = robots_v(6)
     ref = candidate_structures(robots, StructureSpec("comb", Pose(0.0, 0.0, 0.0)))
     mov = candidate_structures(robots, StructureSpec("comb", Pose(dx, dy, phi)))
     assert len(ref) == len(mov)

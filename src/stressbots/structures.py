@@ -22,6 +22,11 @@ Two ways to get a :class:`Structure`:
 - :func:`structure_from_goals` for explicit goals: validated against the docking order, rejected with a
   one-line :class:`~stressbots.errors.PlanningError` naming the robot, the reason and the numbers.
 
+Named shapes live in the frame ``[structure] at = [x, y, heading]``: origin at the G_1 junction (the
+common front-edge midpoint of D_n and D_{n-1}), the bar along the frame's right vector ``a``, stems and
+teeth along ``+-b`` (``b`` = the frame's heading). With heading 0 a canonical tee reads as the letter T.
+:data:`SHAPES` holds the exact definitions.
+
 Tolerances: :data:`POS_TOL_UM` (0.5 um) in position and :data:`ANG_TOL_RAD` (0.1 deg) in angle.
 Touching is not overlapping: bodies may interpenetrate by up to :data:`POS_TOL_UM` (floating noise in
 user-computed goals), so docking into a gap exactly one robot wide between two docked neighbours is valid.
@@ -337,7 +342,12 @@ class Structure:
         of touching robots merge (the two long sides of G_1 form one side of length L_n + L_{n-1}).
         ``min_length_um`` keeps only sides at least that long (e.g. a docking robot's width).
         """
-        sides = self._sides[self._k(k)]
+        k = self._k(k)
+        if len(self._sides) == self.n + 1:
+            sides = self._sides[k]
+        else:  # built by hand rather than by this module's constructors
+            slots = self.slots[:k]
+            sides = _free_sides(np.array([s.corners for s in slots]).reshape(k, 4, 2), [s.robot for s in slots])
         if min_length_um > 0.0:
             sides = tuple(s for s in sides if s.length_um + 2.0 * POS_TOL_UM >= min_length_um)
         return sides
@@ -604,16 +614,20 @@ def _flush_side(sides: Sequence[Side], corners: np.ndarray, h: np.ndarray):
     side = min(sides, key=score)
     angle, off, over, *_ = _edge_on_side(side, fl, fr, h)
     dist = front.distance(LineString(side.segment))
-    if angle > ANG_TOL_RAD + 1e-12 and dist <= 2.0 * POS_TOL_UM + off:
-        if angle > _HALF_PI:
-            return None, f"front edge faces away from the nearest free side ({math.degrees(angle):.1f} deg off)"
+    tilted = angle > ANG_TOL_RAD + 1e-12
+    deg = math.degrees(angle)
+    if angle > _HALF_PI:
+        return None, f"front edge faces away from the nearest free side (heading {deg:.1f} deg off its inward normal)"
+    if dist > POS_TOL_UM:
+        also = f" and at {deg:.1f} deg to it" if tilted else ""
+        return None, f"goal is not flush with the structure: front edge {dist:.1f} um from the nearest free side{also}"
+    if tilted:
         return None, (
-            f"front edge is at {math.degrees(angle):.1f} deg to the nearest free side "
+            f"front edge is at {deg:.1f} deg to the free side it touches "
             f"(must be parallel to it within {math.degrees(ANG_TOL_RAD):.1f} deg)"
         )
-    if off > POS_TOL_UM or dist > POS_TOL_UM:
-        gap = max(dist, off) if angle <= ANG_TOL_RAD + 1e-12 else dist
-        return None, f"goal is not flush with the structure: front edge {gap:.1f} um from the nearest free side"
+    if off > POS_TOL_UM:  # pragma: no cover - parallel and touching implies on the line
+        return None, f"goal is not flush with the structure: front edge {off:.1f} um from the nearest free side"
     return None, (
         f"front edge overhangs the end of the free side it rests on by {over:.1f} um "
         f"(side {side.length_um:.1f} um long, front edge within it required)"
