@@ -71,6 +71,8 @@ class PlannerOptions:
         Largest number of pieces D_{n-1}'s route may be cut into while forming G_1.
     seed:
         Seed of the roadmap's random waypoints (the plan is a deterministic function of it).
+    time_budget_s:
+        Wall time after which no further structure variant is tried.
     """
 
     clearance_um: float = 10.0
@@ -80,6 +82,7 @@ class PlannerOptions:
     roadmap_nodes: tuple[int, ...] = (80, 250, 700)
     max_pieces: int = 6
     seed: int = 0
+    time_budget_s: float = 120.0
 
 
 @dataclass(frozen=True)
@@ -237,20 +240,34 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     return poses, owner
 
 
-def _edges_clear(obst: "_Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions") -> np.ndarray:
-    """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool."""
+def _edges_clear(obst: "_Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions", recheck=None) -> np.ndarray:
+    """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool.
+
+    Two stages: coarse samples with the clearance inflated by the most any body point moves between two
+    samples (half a step, scaled by 1 + half-diagonal / radius on arcs) accept most edges cheaply and
+    conservatively; the edges that fail are checked again at full resolution and the true clearance.
+    """
     if len(starts) == 0:
         return np.zeros(0, dtype=bool)
+    starts = np.asarray(starts, float)
+    goals = np.asarray(goals, float)
     words, seg = pathlib.shortest_path_segments(starts, goals, radius)
-    # Coarse samples, with the clearance inflated by the most any body point moves between two samples
-    # (half a step, scaled by 1 + half-diagonal / radius on arcs): conservative, 4x fewer samples.
+    words = np.asarray(words)
+
+    def blocked(idx: np.ndarray, step: float, clearance: float) -> np.ndarray:
+        poses, owner = _batch_samples(starts[idx], seg[idx], words[idx], radius, step)
+        bad = obst.hits(poses, length, width, clearance)
+        out = np.zeros(len(idx), dtype=bool)
+        np.logical_or.at(out, owner, bad)
+        return out
+
     step = 4.0 * opts.sample_um
     inflate = 0.5 * step * (1.0 + 0.5 * math.hypot(length, width) / radius)
-    poses, owner = _batch_samples(np.asarray(starts, float), seg, np.asarray(words), radius, step)
-    bad = obst.hits(poses, length, width, opts.clearance_um + inflate)
-    blocked = np.zeros(len(starts), dtype=bool)
-    np.logical_or.at(blocked, owner, bad)
-    return ~blocked
+    clear = ~blocked(np.arange(len(starts)), step, opts.clearance_um + inflate)
+    again = np.flatnonzero(~clear & (True if recheck is None else np.asarray(recheck, bool)))
+    if len(again):
+        clear[again] = ~blocked(again, opts.sample_um, opts.clearance_um)
+    return clear
 
 
 def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: _Obstacles, length: float, width: float, opts: PlannerOptions) -> np.ndarray:
@@ -333,12 +350,14 @@ def _route(
         nbr = np.argpartition(w, knn - 1, axis=1)[:, :knn]  # each node's nearest successors
         src = np.repeat(np.arange(k), knn)
         dst = nbr.ravel()
-        into_target = np.argpartition(w[:, ti], knn - 1)[:knn]  # and the target's nearest predecessors
-        src = np.concatenate([src, into_target])
-        dst = np.concatenate([dst, np.full(knn, ti)])
+        # Sources and target connect to every node: near a tight goal only a few approaches are clear.
+        others = np.arange(ns + 1, k)
+        src = np.concatenate([src, others, np.repeat(np.arange(ns), len(others))])
+        dst = np.concatenate([dst, np.full(len(others), ti), np.tile(others, ns)])
         pairs = np.unique(np.stack([src, dst], axis=1), axis=0)
         pairs = pairs[np.isfinite(w[pairs[:, 0], pairs[:, 1]])]
-        ok = _edges_clear(obst, nodes[pairs[:, 0]], nodes[pairs[:, 1]], radius, length, width, opts)
+        ends = (pairs[:, 0] < ns) | (pairs[:, 1] == ti)  # edges at a source or the target: check finely
+        ok = _edges_clear(obst, nodes[pairs[:, 0]], nodes[pairs[:, 1]], radius, length, width, opts, recheck=ends)
         pairs = pairs[ok]
         if not len(pairs):
             continue
@@ -520,6 +539,7 @@ class _Planner:
         self.notes: list[str] = []
         self.route_lengths = np.zeros(self.n)
         self._timed_cache: dict = {}
+        self._route_cache: dict = {}
 
     def lab(self, i: int) -> str:
         return _label(self.scn, i, self.rank[i])
@@ -782,10 +802,15 @@ class _Planner:
         if not route:
             return last
         # Route around the obstacles once, then stretch the route's tail to an exact length.
-        try:
-            _, routed = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, self.opts, self.rng, "")
-        except _NoRoute as exc:
-            return exc.reason.lstrip(": ") or last
+        rkey = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), tuple(np.round(obst.disc_centres, 3).ravel()))
+        if rkey not in self._route_cache:
+            try:
+                self._route_cache[rkey] = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, self.opts, self.rng, "")[1]
+            except _NoRoute as exc:
+                self._route_cache[rkey] = exc.reason.lstrip(": ") or last
+        routed = self._route_cache[rkey]
+        if isinstance(routed, str):
+            return routed
         for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
             if routed.length > want + 1e-9:
                 continue
@@ -889,7 +914,11 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         raise PlanningError(first_reason or "no structure fits", source=scn.source)
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
+    t_start = time.perf_counter()
     for lb, _, st in scored:
+        if failures and time.perf_counter() - t_start > opts.time_budget_s:
+            failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
+            break
         t0 = time.perf_counter()
         planner = _Planner(scn, analysis, st, opts)
         try:
