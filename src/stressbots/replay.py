@@ -138,7 +138,8 @@ def replay(
             along = float(d @ h)
             lateral = abs(float(d[0] * h[1] - d[1] * h[0]))
             if lateral <= tol_um and -tol_um <= along <= speed[i] * dur + tol_um:
-                t_dock[i] = max(along, 0.0) / speed[i]
+                # within tolerance of the step's end counts as arriving at its end: never sample past it
+                t_dock[i] = min(max(along, 0.0) / speed[i], dur)
         ksteps = max(2, int(math.ceil(vmax * dur / max_step_um)) + 1)
         t = np.linspace(0.0, dur, ksteps)
         t = np.unique(np.concatenate([t, t_dock[np.isfinite(t_dock)]]))
