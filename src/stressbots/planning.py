@@ -588,7 +588,16 @@ class _Planner:
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
 
+    def _free_run(self, pose: np.ndarray, i: int, obst: _Obstacles, limit_um: float, *, backwards: bool) -> float:
+        """Longest straight run (um) of robot ``i`` from ``pose`` (ahead, or behind it) clear of ``obst``."""
+        h = np.array([math.sin(pose[2]), math.cos(pose[2])]) * (-1.0 if backwards else 1.0)
+        probe = np.arange(0.0, limit_um, self.opts.sample_um)
+        line = np.column_stack([pose[0] + probe * h[0], pose[1] + probe * h[1], np.full(probe.size, pose[2])])
+        blocked = obst.hits(line, self.L[i], self.W[i], self.opts.clearance_um)
+        return float(probe[np.argmax(blocked)] - self.opts.sample_um) if blocked.any() else float(probe[-1])
+
     def form_pair(self) -> None:
+        """Step 1: D_n and D_{n-1} form G_1 (see the module docstring for the scheme)."""
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         gN, gM = self.goals[N], self.goals[M]
@@ -611,31 +620,37 @@ class _Planner:
         if hit is not None:
             raise _NoRoute(f"{whoM}: the straight approach into its slot is blocked by {hit}")
 
-        attempts: list[str] = []
-
-        # How far behind its slot D_n can run straight (lower orbits and the arena only).
-        gN_ = self.goals[N]
-        hN = np.array([math.sin(gN_[2]), math.cos(gN_[2])])
-        probe = np.arange(0.0, 4.0 * max(self.scn.arena_um or (5000.0, 5000.0)), opts.sample_um)
-        back = np.column_stack([gN_[0] - probe * hN[0], gN_[1] - probe * hN[1], np.full(probe.size, gN_[2])])
-        blocked = obst_low.hits(back, self.L[N], self.W[N], opts.clearance_um)
-        d_free = float(probe[np.argmax(blocked)] - opts.sample_um) if blocked.any() else float(probe[-1])
+        # The final corridor: how far behind its slot D_n can run straight into it.
+        span = 2.0 * max(self.scn.arena_um or (5000.0, 5000.0))
+        d_free = self._free_run(gN, N, obst_low, span, backwards=True)
         if d_free < aN:
-            raise _NoRoute(f"{whoN}: its straight approach into its slot is blocked ({d_free:.0f} um free behind it)")
+            raise _NoRoute(f"{whoN}: its straight approach into its slot is blocked ({max(d_free, 0.0):.0f} um free behind it)")
+        # Parking tracks for D_n's runs during the earlier pieces: the final corridor itself (its runs
+        # stop short of the slot) and the free line ahead of D_n's start.
+        # Candidate tracks start on D_n's start orbit (at quarter turns), so reaching them is cheap.
+        parks: list = [None]
+        obst_park = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], "M")
+        quarter = np.arange(4) * 0.5 * math.pi * rN / vN
+        on_orbit = advance(np.repeat(self.tl.poses[N][None, :], 4, axis=0), np.ones(4, bool), vN, rN, quarter)
+        tracks = [(p, self._free_run(p, N, obst_park, span, backwards=False)) for p in on_orbit]
+        tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
+        parks.extend(tracks[:2])
+        attempts: list[str] = []
         budget = [40]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
             fullM = routeM.then(("S", aM))
             T = fullM.length / vM
-            for durs in self._cut_options(N, M, fullM, T, d_free, obst_low, aM):
-                if budget[0] <= 0:
-                    break
-                budget[0] -= 1
-                why = self._schedule_pair(N, M, fullM, float(waits[sidx]), durs, lower)
-                if why is None:
-                    return None
-                attempts.append(why)
+            for park in parks:
+                for durs in self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM):
+                    if budget[0] <= 0:
+                        return attempts[-1] if attempts else "no schedule"
+                    budget[0] -= 1
+                    why = self._schedule_pair(N, M, fullM, float(waits[sidx]), durs, park, lower)
+                    if why is None:
+                        return None
+                    attempts.append(why)
             return attempts[-1] if attempts else f"{whoM}'s route is too long for {whoN}'s free corridor ({d_free:.0f} um)"
 
         self._pair_schedule = None
@@ -646,18 +661,27 @@ class _Planner:
             raise _NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
 
-    def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, obst_low: _Obstacles, aM: float):
+    def _run_starts(self, N: int, durs: Sequence[float], park) -> list[np.ndarray]:
+        """Start pose of D_n's straight run in every piece: the parking track, the final corridor last."""
+        gN = self.goals[N]
+        final = _pre_approach(gN, self.v[N] * durs[-1])
+        if park is None:
+            return [final] * len(durs)
+        return [np.asarray(park[0], float)] * (len(durs) - 1) + [final]
+
+    def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, park, obst_low: _Obstacles, aM: float):
         """Ways to cut D_{n-1}'s route (duration ``T`` s) into pieces for the G_1 schedule.
 
-        The last piece is the longest (D_n runs into its slot for that long, so it is at most the free
-        corridor ``d_free``); D_{n-1} must be able to orbit at every cut. Cut points are chosen greedily
-        from the end: each as early as the piece-length limit allows, among the positions where
-        D_{n-1}'s orbit is clear of the lower orbits, the arena and D_n's corridor.
+        The last piece is D_n's run into its slot, so it lasts at most ``d_free / v_n``; the earlier
+        pieces are runs on the parking track ``park`` (``(pose, free length)``, or None for the final
+        corridor, where they may not be longer than the last). D_{n-1} must be able to orbit at every
+        cut. Cut points are chosen greedily from the end, each as early as the piece limit allows, among
+        the positions where D_{n-1}'s orbit clears the lower orbits, the arena and D_n's run corridors.
         """
         opts = self.opts
         vN, vM, rM = self.v[N], self.v[M], self.r[M]
-        t_max = d_free / vN
-        if T <= t_max + 1e-9:
+        t_last_max = d_free / vN
+        if park is None and T <= t_last_max + 1e-9:
             yield (T,)
         total = fullM.length
         pos = np.arange(0.0, total, 10.0)
@@ -672,21 +696,29 @@ class _Planner:
             ok &= (centres[:, 0] >= rr) & (centres[:, 0] <= w - rr) & (centres[:, 1] >= rr) & (centres[:, 1] <= h - rr)
         gN = self.goals[N]
         seen = set()
-        # D_n loops back to its right and reaches about r + L/2 past the end of its run: earlier runs
-        # may stop short of the slot by that much, keeping the loops away from D_{n-1}'s last stops.
+        # On the final corridor D_n loops back to its right and reaches about r + L/2 past the end of
+        # its run: earlier runs may stop short of the slot by that much (away from D_{n-1}'s last stops).
         short = (self.r[N] + 0.5 * self.L[N] + self.W[N] + opts.clearance_um) / vN
-        for frac, margin in [(f, 0.0) for f in (1.0, 0.8, 0.62, 0.48, 0.36)] + [(f, short) for f in (1.0, 0.8, 0.62, 0.48)]:
-            tm = min(t_max * frac, T)
-            if tm < aM / vM or tm * opts.max_pieces < T or tm >= T - 1e-9:
+        if park is None:
+            variants = [(f, 0.0) for f in (1.0, 0.8, 0.62, 0.48, 0.36)] + [(f, short) for f in (1.0, 0.8, 0.62, 0.48)]
+        else:
+            variants = [(f, 0.0) for f in (1.0, 0.7, 0.45, 0.3)]
+        for frac, margin in variants:
+            tm = min(t_last_max * frac, T)
+            if tm < aM / vM or tm >= T - 1e-9:
                 continue
-            d = vN * tm
-            corridor = _pre_approach(gN, 0.5 * d)  # the run's swept rectangle, centred
-            clear = point_rectangle_distance(centres, corridor, d + self.L[N], self.W[N])[0] >= rr
-            good = ok & clear
+            if park is None:
+                t_piece = tm - margin
+                keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm)]
+            else:
+                t_piece = park[1] / vN
+                keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm), (_pre_approach(np.asarray(park[0]), -0.5 * park[1]), park[1])]
+            if t_piece <= 0.2 * tm or (T - tm) / t_piece > opts.max_pieces:
+                continue
+            good = ok.copy()
+            for centre_pose, length in keep:
+                good &= point_rectangle_distance(centres, centre_pose, length + self.L[N], self.W[N])[0] >= rr
             good[0] = True  # D_{n-1}'s departure point: it orbits there anyway
-            t_piece = tm - margin  # longest earlier piece
-            if t_piece <= 0.2 * tm:
-                continue
             cuts = [total - vM * tm]
             while cuts[-1] > 1e-9:
                 lo = cuts[-1] - vM * t_piece
@@ -697,7 +729,6 @@ class _Planner:
                 cuts.append(float(pos[cand[0]]))
             if not cuts:
                 continue
-            # the last cut must itself be a good stop
             k_last = int(np.searchsorted(pos, cuts[0] - 1e-9))
             if k_last < pos.size and not good[k_last]:
                 continue
@@ -708,68 +739,59 @@ class _Planner:
                 seen.add(key)
                 yield durs
 
-    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, durs: Sequence[float], lower: list[int]) -> str | None:
+    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, durs: Sequence[float], park, lower: list[int]) -> str | None:
         """Plan D_n around D_{n-1}'s route cut into pieces of durations ``durs`` (s); None on success.
 
-        D_n runs straight from ``s_N`` (its slot minus the last piece's run) during every piece, the
-        last run ending in its slot, and loops back to ``s_N`` between pieces on paths lasting a whole
-        number of D_{n-1}'s orbit periods, while D_{n-1} orbits back to where it stopped.
+        During piece j D_{n-1} drives its piece (P_{n-1}/P_{n-2}) while D_n runs straight from
+        ``run_starts[j]``; the last run ends in D_n's slot as D_{n-1} reaches its own. Between pieces D_n
+        drives (P_n/P_{n-1}) from the end of one run to the start of the next on a path lasting a whole
+        number of D_{n-1}'s orbit periods, so D_{n-1}, orbiting, is back where it stopped.
         """
         opts = self.opts
         vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
         LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
         TM = TWO_PI * rM / vM
-        gN = self.goals[N]
         pieces = len(durs)
-        d = vN * durs[-1]  # the longest run: the last one, into the slot
-        sN = _pre_approach(gN, d)
+        starts = self._run_starts(N, durs, park)
+        runs = [pathlib.Path(tuple(s0), rN, (("S", vN * t),)) for s0, t in zip(starts, durs)]
         whoN, whoM = self.lab(N), self.lab(M)
         obst_low = self.obstacles(lower, [])
-        run = pathlib.Path(tuple(sN), rN, (("S", d),))
-        run_samples = run.sample(opts.sample_um)
-        starts_t = np.concatenate([[0.0], np.cumsum(durs)])  # piece boundaries (s into D_{n-1}'s route)
-        cuts = [fullM.pose_at(vM * starts_t[j]) for j in range(1, pieces)]
-        # 1. D_{n-1} orbits at every stop: clear of the lower orbits, the arena and D_n's corridor.
-        for j, c in enumerate(cuts):
-            disc_c = turning_centres(np.array(c), rM)[0]
-            if len(obst_low.disc_radii):
-                gap = np.hypot(*(obst_low.disc_centres - disc_c).T) - obst_low.disc_radii - self.rstar[M]
-                if (gap < opts.clearance_um).any():
-                    return f"{whoM}'s orbit at its stop {j + 1} touches {obst_low.disc_labels[int(np.argmin(gap))]}"
-            if self.scn.arena_um is not None:
-                w, hgt = self.scn.arena_um
-                rr = self.rstar[M] + opts.clearance_um
-                if min(disc_c[0] - rr, w - disc_c[0] - rr, disc_c[1] - rr, hgt - disc_c[1] - rr) < 0:
-                    return f"{whoM}'s orbit at its stop {j + 1} leaves the arena"
-            if bodies_hit_discs(run_samples, LN, WN, disc_c[None, :], [self.rstar[M] + opts.clearance_um]).any():
-                return f"{whoM}'s orbit at its stop {j + 1} crosses {whoN}'s corridor"
+        bounds_t = np.concatenate([[0.0], np.cumsum(durs)])
+        cuts = [fullM.pose_at(vM * bounds_t[j]) for j in range(1, pieces)]
+        # 1. Runs clear of the lower orbits and the arena.
+        for j, run in enumerate(runs):
+            hit = obst_low.first_hit(run.sample(opts.sample_um), LN, WN, opts.clearance_um)
+            if hit is not None:
+                return f"{whoN}'s straight run {j + 1} is blocked by {hit}"
         # 2. B phases: D_n's run against D_{n-1}'s piece, sampled in time (touching only at the very end).
         dt = opts.sample_um / max(vN, vM)
         for j in range(pieces):
             tp = durs[j]
             t = np.minimum(np.arange(0.0, tp + dt, dt), tp)
-            pn = run.pose_at(vN * t)
-            pm = fullM.pose_at(np.minimum(vM * (starts_t[j] + t), fullM.length))
+            pn = runs[j].pose_at(vN * t)
+            pm = fullM.pose_at(np.minimum(vM * (bounds_t[j] + t), fullM.length))
             depth = penetration_depth(pn, LN, WN, pm, LM, WM)
             final = j == pieces - 1
             limit = np.where(final & (t > tp - (opts.approach_um + opts.clearance_um) / min(vN, vM)), 0.5, -opts.clearance_um)
             if (depth > limit).any():
-                return f"{whoN}'s straight run meets {whoM} before the end (piece {j + 1} of {pieces})"
-        # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods.
+                return f"{whoN}'s straight run meets {whoM} (piece {j + 1} of {pieces})"
+        # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods; D_{n-1} orbits meanwhile.
         obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {whoM}")
-        first = self._timed_path(self.tl.poses[N], sN, vN, rN, LN, WN, wait0, TM, obst0)
+        first = self._timed_path(self.tl.poses[N], starts[0], vN, rN, LN, WN, wait0, TM, obst0)
         if isinstance(first, str):
-            return f"{whoN} cannot reach the start of its run ({first})"
+            return f"{whoN} cannot reach the start of its first run ({first})"
         a_paths = [first]
         for j, c in enumerate(cuts):
             disc_c = turning_centres(np.array(c), rM)[0]
             ob = obst_low.with_disc(disc_c, self.rstar[M], f"the orbit of {whoM} at its stop {j + 1}")
-            end_j = run.pose_at(vN * durs[j])
-            loop = self._timed_path(end_j, sN, vN, rN, LN, WN, 0.0, TM, ob, route=False)
-            if isinstance(loop, str):
-                return f"{whoN} cannot loop back to its run ({loop})"
-            a_paths.append(loop)
-        self._pair_schedule = (N, M, fullM, wait0, tuple(durs), run, a_paths)
+            end_j = np.array(runs[j].end)
+            same_track = np.allclose(starts[j], starts[j + 1])
+            link = self._timed_path(end_j, starts[j + 1], vN, rN, LN, WN, 0.0, TM, ob)
+            if isinstance(link, str):
+                what = "loop back to its run" if same_track else "move to its final corridor"
+                return f"{whoN} cannot {what} ({link})"
+            a_paths.append(link)
+        self._pair_schedule = (N, M, fullM, wait0, tuple(durs), runs, a_paths)
         return None
 
     def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst, *, route: bool = True) -> pathlib.Path | str:
@@ -835,12 +857,12 @@ class _Planner:
         return None
 
     def _run_pair_schedule(self) -> None:
-        N, M, fullM, wait0, durs, run, a_paths = self._pair_schedule
+        N, M, fullM, wait0, durs, runs, a_paths = self._pair_schedule
         n = self.n
         vM, vN = self.v[M], self.v[N]
         pieces = len(durs)
         bounds = np.concatenate([[0.0], np.cumsum(durs)]) * vM
-        # A_0: D_n drives to the start of its run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
+        # A_0: D_n drives to the start of its first run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
         self.tl.apply_path(N, a_paths[0], n, n - 1)
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
@@ -853,9 +875,11 @@ class _Planner:
         self.route_lengths[M] = fullM.length
         self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
+            parked = not np.allclose(runs[0].start, runs[-1].start)
             self.notes.append(
-                f"G_1: {self.lab(M)}'s route was cut into {pieces} pieces so that {self.lab(N)}'s straight run stays "
-                f"within {run.length:.0f} um (the seed's two-stage scheme would need {vN * sum(durs):.0f} um)"
+                f"G_1: {self.lab(M)}'s route was cut into {pieces} pieces; {self.lab(N)} ran "
+                f"{'on a parking track, then ' if parked else ''}a final corridor of {runs[-1].length:.0f} um "
+                f"(the seed's two-stage scheme would need {vN * sum(durs):.0f} um)"
             )
         self.tl.dock(N, self.goals[N], self.lab(N))
         self.tl.dock(M, self.goals[M], self.lab(M))
