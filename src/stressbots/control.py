@@ -1,0 +1,37 @@
+"""Control of the group through a plant: the Plant protocol (SPEC 6/7) and closed-loop assembly.
+
+A *plant* is whatever the voltage signal drives and the camera watches: the built-in simulator
+(:class:`stressbots.sim.SimulatedPlant`) or lab hardware (a waveform generator and a microscope camera).
+The controller talks to it only through :class:`Plant`, so hardware can stand in for the simulator
+unchanged.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, Sequence, runtime_checkable
+
+import numpy as np
+
+from .waveform import Segment
+
+__all__ = ["Plant"]
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """What the controller may do with the robots: look at them and apply a voltage waveform.
+
+    Methods
+    -------
+    observe() -> ndarray, shape (n, 3)
+        One camera frame: ``(x_um, y_um, theta_rad)`` per robot in scenario order (theta clockwise
+        from +y). A robot the camera does not see this frame is a row of NaN. Measurements carry the
+        camera's error; they are all a controller ever learns about the robots.
+    apply(waveform) -> None
+        Send a waveform (a sequence of :class:`stressbots.waveform.Hold` / :class:`~stressbots.waveform.Drive`)
+        and return when it has played. Arm states persist between calls (hysteresis), as on hardware.
+    """
+
+    def observe(self) -> np.ndarray: ...
+
+    def apply(self, waveform: Sequence[Segment]) -> None: ...
