@@ -9,6 +9,7 @@ options, into one ``error:`` line on stderr and exit status 2, with no traceback
 from __future__ import annotations
 
 import sys
+from enum import Enum
 from pathlib import Path
 from typing import Optional
 
@@ -420,6 +421,144 @@ def _print_plan_summary(scn, result) -> None:
     )
     for note in result.notes:
         out.print(f"note: {note}")
+
+
+# ----------------------------------------------------------------------------------------------------
+# simulate
+
+
+class NoiseChoice(str, Enum):
+    scenario = "scenario"
+    none = "none"
+    literature = "literature"
+
+
+def _noise_dict(noise) -> dict:
+    """A :class:`~stressbots.scenario.Noise` in the file's units (deg, deg/mm)."""
+    import math
+
+    return {
+        "speed_rel_sd": noise.speed_rel_sd,
+        "turn_radius_rel_sd": noise.turn_radius_rel_sd,
+        "heading_drift_deg_per_mm": math.degrees(noise.heading_drift_rad_per_um) * 1000.0,
+        "camera_position_sd_um": noise.camera_position_sd_um,
+        "camera_heading_sd_deg": math.degrees(noise.camera_heading_sd_rad),
+        "camera_dropout": noise.camera_dropout,
+    }
+
+
+@app.command()
+def simulate(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and trajectory.png.", show_default=False),
+    seed: int = typer.Option(0, "--seed", help="Seed of every random draw of the simulated plant (same seed, same run)."),
+    plan: Optional[Path] = typer.Option(
+        None, "--plan", help="Execute this plan.json open loop (required for now: closed loop comes later).", show_default=False
+    ),
+    noise: NoiseChoice = typer.Option(
+        NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
+    ),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+) -> None:
+    """Run the simulated plant: robots with control error, contact, compliance and a noisy camera.
+
+    With `--plan` the plan's waveform is played open loop (no feedback) from the start poses. With no
+    noise the robots end exactly in their slots (planner, waveform and simulator agree); with noise you
+    see how far open loop drifts. Writes DIR/result.json (success, seed, per-robot true and observed
+    final poses, errors and docked flags, the shape error after a best rigid alignment, the event log)
+    and DIR/trajectory.png.
+
+    Example: `stressbots simulate examples/four-robots.toml --plan out/plan/plan.json --seed 1 --out out/sim`
+    """
+    import time
+
+    from .assessment import assess
+    from .generate import LITERATURE_NOISE
+    from .outputs import check_not_input, prepare_dir, provenance, save_figure, write_json
+    from .plans import check_against
+    from .plans import load as load_plan
+    from .scenario import Noise
+    from .sim import SimulatedPlant, plan_waveform
+    from .viz import plot_run
+
+    scn = scenario_arg(scenario)
+    if plan is None:
+        raise StressbotsError(
+            "closed-loop simulation is not available yet; give --plan PLAN to execute a plan open loop",
+            source="stressbots simulate",
+        )
+    folder = prepare_dir(out_dir, inputs=[scenario, plan])
+    for name in ("result.json", "trajectory.png"):
+        check_not_input(folder / name, [scenario, plan])
+    the_plan = load_plan(plan)
+    check_against(the_plan, scn, source=str(plan))
+    goals = np.full((scn.n, 3), np.nan)
+    for i, r in enumerate(scn.robots):
+        g = the_plan.goals.get(r.name, r.goal)
+        if g is None:
+            raise StressbotsError(
+                f"no goal for robot {r.name!r}: the plan has no 'goals' and the scenario gives none, so the run cannot be assessed",
+                source=str(plan),
+                field="goals",
+            )
+        goals[i] = tuple(g)
+    if noise is NoiseChoice.none:
+        scn = scn.with_noise(Noise())
+    elif noise is NoiseChoice.literature:
+        scn = scn.with_noise(LITERATURE_NOISE)
+    wf = plan_waveform(scn, the_plan, source=str(plan))
+    t0 = time.perf_counter()
+    plant = SimulatedPlant(scn, seed=seed, record=True)
+    plant.apply(wf)
+    wall = time.perf_counter() - t0
+    observed = plant.observe()
+    a = assess(scn.names, plant.true_poses(), goals, plant.docked, scn.lengths_um, scn.widths_um)
+    summary = a.summary()
+    result = {
+        "success": a.success,
+        "seed": plant.seed,
+        "mode": "open loop",
+        "scenario": str(scenario),
+        "plan": str(plan),
+        "noise": _noise_dict(scn.noise),
+        "duration_s": plant.time_s,
+        "robots": [
+            {**row, "stuck": bool(plant.stuck[k]), "left_arena": bool(plant.arena_hits[k])}
+            for k, row in enumerate(a.robot_rows(observed))
+        ],
+        **{k: v for k, v in summary.items() if k != "success"},
+        "events": [e.as_dict() for e in plant.events],
+        "plant": {
+            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist())),
+            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist())),
+        },
+        "wall_time_s": wall,
+        "provenance": provenance(plant.seed),
+    }
+    write_json(folder / "result.json", result)
+    times, poses = plant.trace()
+    title = (
+        f"{scn.name}: open loop, noise {noise.value}, seed {plant.seed} - "
+        f"{'success' if a.success else 'failure'}, shape error {a.shape.rms_um:.3g} um RMS"
+    )
+    save_figure(plot_run(scn, times, poses, goals, plant.events, title=title), folder / "trajectory.png")
+    if quiet:
+        return
+    from rich.table import Table
+
+    t = Table(title=f"{scn.name}: plan {plan} open loop, {plant.time_s:.1f} s simulated in {wall * 1000:.0f} ms")
+    for col, just in (("robot", "left"), ("docked", "left"), ("position error (um)", "right"), ("heading error (deg)", "right")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for k, name in enumerate(scn.names):
+        t.add_row(name, "yes" if a.docked[k] else "no", f"{a.position_error_um[k]:.3g}", f"{a.heading_error_deg[k]:.3g}")
+    out.print(t)
+    out.print(
+        f"{'success' if a.success else 'failure'}: {int(a.docked.sum())}/{scn.n} docked, shape error {a.shape.rms_um:.3g} um RMS "
+        f"(tolerance {a.shape_tol_um:g} um), {len(plant.events)} events",
+        highlight=False,
+        soft_wrap=True,
+    )
+    out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
 
 
 def _click_base(name: str) -> type[BaseException]:

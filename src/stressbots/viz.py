@@ -120,3 +120,56 @@ def plot_structure(scenario, poses, goals, *, title: str = "", labels: Sequence[
 def heading_arrow(theta: float, length: float = 1.0) -> tuple[float, float]:
     """Heading vector (sin, cos) scaled: for quiver-style arrows."""
     return length * math.sin(theta), length * math.cos(theta)
+
+
+_EVENT_MARKS = {
+    "dock": ("o", "tab:green"),
+    "self_align": ("D", "tab:green"),
+    "stuck": ("X", "tab:red"),
+    "slide": ("v", "tab:orange"),
+    "blocked": ("s", "tab:red"),
+    "arena": ("P", "tab:purple"),
+    "contact": ("x", "0.3"),
+}
+
+
+def plot_run(scenario, times, poses, goals, events=(), *, title: str = ""):
+    """A simulated run: trajectories coloured by robot, start bodies (faint), final bodies (filled),
+    target slots (grey outlines) and contact events marked where the robot was when they happened.
+
+    ``times`` (M,) and ``poses`` (M, n, 3) are a sampled trajectory (e.g.
+    :meth:`stressbots.sim.SimulatedPlant.trace`); ``goals`` (n, 3) the slots; ``events`` the plant's
+    :class:`stressbots.sim.SimEvent` log.
+    """
+    plt = _plt()
+    n = scenario.n
+    cols = robot_colours(n)
+    L, W = scenario.lengths_um, scenario.widths_um
+    poses = np.asarray(poses, dtype=np.float64)
+    times = np.asarray(times, dtype=np.float64)
+    goals = np.asarray(goals, dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(8, 8))
+    for i in range(n):
+        ax.plot(poses[:, i, 0], poses[:, i, 1], color=cols[i], lw=1.1, alpha=0.9, zorder=2)
+    draw_bodies(ax, poses[0], L, W, cols, fill_alpha=0.1, edge_alpha=0.5)
+    if not np.isnan(goals).any():
+        draw_bodies(ax, goals, L, W, [(0.45, 0.45, 0.45)] * n, fill_alpha=0.0, lw=0.8, front=False, zorder=2.5)
+    draw_bodies(ax, poses[-1], L, W, cols, fill_alpha=0.55)
+    index = {name: k for k, name in enumerate(scenario.names)}
+    seen = set()
+    for ev in events:
+        if ev.kind not in _EVENT_MARKS or ev.robot not in index:
+            continue
+        i = index[ev.robot]
+        k = min(int(np.searchsorted(times, ev.time_s, side="right")) - 1, len(times) - 1)
+        marker, colour = _EVENT_MARKS[ev.kind]
+        ax.scatter(*poses[max(k, 0), i, :2], marker=marker, s=50, color=colour, zorder=6, label=ev.kind if ev.kind not in seen else None)
+        seen.add(ev.kind)
+    for i, name in enumerate(scenario.names):
+        ax.annotate(name, poses[0, i, :2], xytext=(6, 6), textcoords="offset points", fontsize=8, color=cols[i], zorder=5)
+    pts = np.vstack([poses[:, :, :2].reshape(-1, 2)] + ([goals[:, :2]] if not np.isnan(goals).any() else []))
+    _frame(ax, scenario, pts)
+    if seen:
+        ax.legend(loc="upper right", fontsize=8, title="events", title_fontsize=8)
+    ax.set_title(title or f"{scenario.name}: simulated run, {times[-1]:.1f} s", fontsize=10)
+    return fig
