@@ -48,7 +48,7 @@ from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
 
-__all__ = ["PlannerOptions", "PlanResult", "plan_assembly", "lower_bound_s"]
+__all__ = ["PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s"]
 
 
 @dataclass(frozen=True)
@@ -86,6 +86,31 @@ class PlannerOptions:
 
 
 @dataclass(frozen=True)
+class Phase:
+    """One phase of a plan, as a closed-loop controller follows it.
+
+    ``mover`` (scenario index) drives toward ``target`` with primitives ``turn_k`` (its arm down) and
+    ``straight_k`` (arm up); every robot with a lower voltage index orbits, higher ones push or (for
+    ``pair-B``) drive straight. Kinds: ``pair-A`` (D_n moves, D_{n-1} orbits), ``pair-B`` (D_{n-1} moves,
+    D_n runs straight: ``run`` is D_n's run start and length), ``wait`` (a docking robot orbits before
+    leaving), ``route`` (it drives to the start of its approach through ``waypoints``) and ``approach``
+    (its straight final approach into the slot).
+    """
+
+    kind: str
+    mover: int
+    turn_k: int
+    straight_k: int
+    t0_s: float
+    duration_s: float
+    target: tuple[float, float, float]
+    waypoints: tuple[tuple[float, float, float], ...] = ()
+    partner: int = -1
+    run: tuple[tuple[float, float, float], float] | None = None
+    last: bool = False
+
+
+@dataclass(frozen=True)
 class PlanResult:
     """A verified nominal plan and what was learnt making it."""
 
@@ -95,6 +120,7 @@ class PlanResult:
     replay: ReplayReport
     summary: dict
     notes: tuple[str, ...] = field(default=())
+    phases: tuple[Phase, ...] = field(default=())
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -301,12 +327,13 @@ def _route(
     who: str,
     *,
     extra_check: Callable[[int, pathlib.Path], str | None] | None = None,
-) -> tuple[int, pathlib.Path]:
+) -> tuple[int, pathlib.Path, tuple[np.ndarray, ...]]:
     """Cheapest collision-free route from one of ``sources`` to ``target`` (both clear).
 
     ``source_costs`` (um) are added to each source's route length (waiting time times speed).
     ``extra_check(source_index, path)`` may veto a whole route (e.g. time-dependent conflicts).
-    Returns ``(source_index, path)``; raises :class:`_NoRoute` with the reason.
+    Returns ``(source_index, path, waypoints)`` (the roadmap poses the route passes, ending with the
+    target: a closed-loop controller steers from one to the next); raises :class:`_NoRoute`.
     """
     sources = np.atleast_2d(sources)
     blocked_by = obst.first_hit(target[None, :], length, width, opts.clearance_um)
@@ -326,7 +353,7 @@ def _route(
         if hit is None and extra_check is not None:
             hit = extra_check(int(index_of[s]), p)
         if hit is None:
-            return int(index_of[s]), p
+            return int(index_of[s]), p, (np.asarray(target, float),)
         reasons.append(hit)
     # 2. roadmaps of growing size: k-nearest edges, all checked in one batch, then Dijkstra
     pts = np.vstack([sources[:, :2], target[None, :2], obst.disc_centres]) if len(obst.disc_radii) else np.vstack([sources[:, :2], target[None, :2]])
@@ -380,7 +407,7 @@ def _route(
             path = pathlib.Path(tuple(nodes[seq[0]]), radius, tuple(segs))
             veto = extra_check(int(index_of[seq[0]]), path) if extra_check is not None else None
             if veto is None:
-                return int(index_of[seq[0]]), path
+                return int(index_of[seq[0]]), path, tuple(nodes[q].copy() for q in seq[1:])
             reasons.append(veto)
             # forbid this route's first leg and look for another
             graph = graph.tolil()
@@ -410,6 +437,13 @@ class _Timeline:
         self.t = 0.0
         self.steps: list[PlanStep] = []
         self.travel = np.zeros(scenario.n)  # distance driven off-orbit per robot (um)
+        self.phases: list[Phase] = []
+
+    def phase(self, kind: str, mover: int, turn_k: int, straight_k: int, t0: float, target, **extra) -> None:
+        """Record the phase that just ran (from ``t0`` to now)."""
+        self.phases.append(
+            Phase(kind, int(mover), int(turn_k), int(straight_k), float(t0), float(self.t - t0), tuple(float(v) for v in target), **extra)
+        )
 
     def apply(self, k: int, duration: float, *, counts_for: Sequence[int] = ()) -> None:
         """Apply P_k for ``duration`` s (docked robots stay, they push against the structure)."""
@@ -579,11 +613,17 @@ class _Planner:
         waits = np.arange(m) * period / m
         p0 = np.repeat(self.tl.poses[i][None, :], m, axis=0)
         sources = advance(p0, np.ones(m, bool), self.v[i], self.r[i], waits)
-        s, path = _route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
+        s, path, waypoints = _route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
+        t0 = self.tl.t
         self.tl.apply(k, float(waits[s]))
-        full = path.then(("S", a))
-        self.tl.apply_path(i, full, k, k - 1)
-        self.route_lengths[i] = full.length
+        self.tl.phase("wait", i, k, k - 1, t0, sources[s])
+        t0 = self.tl.t
+        self.tl.apply_path(i, path, k, k - 1)
+        self.tl.phase("route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints))
+        t0 = self.tl.t
+        self.tl.apply_path(i, approach, k, k - 1)
+        self.tl.phase("approach", i, k, k - 1, t0, goal)
+        self.route_lengths[i] = path.length + a
         self.tl.dock(i, goal, who)
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
@@ -863,15 +903,24 @@ class _Planner:
         pieces = len(durs)
         bounds = np.concatenate([[0.0], np.cumsum(durs)]) * vM
         # A_0: D_n drives to the start of its first run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
+        t0 = self.tl.t
         self.tl.apply_path(N, a_paths[0], n, n - 1)
+        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M)
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
             piece = _sub_path(fullM, bounds[j], bounds[j + 1])
             before = self.tl.travel[N]
+            t0 = self.tl.t
             self.tl.apply_path(M, piece, n - 1, n - 2)
+            self.tl.phase(
+                "pair-B", M, n - 1, n - 2, t0, piece.end, partner=N,
+                run=(tuple(float(v) for v in runs[j].start), float(runs[j].length)), last=j + 1 == pieces,
+            )
             self.tl.travel[N] = before + vN * durs[j]
             if j + 1 < pieces:
+                t0 = self.tl.t
                 self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
+                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M)
         self.route_lengths[M] = fullM.length
         self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
@@ -983,6 +1032,6 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
             "candidates": len(structures),
             "notes": planner.notes,
         }
-        return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes))
+        return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes), tuple(planner.tl.phases))
     reason = max(set(failures), key=failures.count) if failures else "no plan found"
     raise PlanningError(reason, source=scn.source)
