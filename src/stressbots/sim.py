@@ -27,43 +27,53 @@ Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
 
 Contact (bodies never interpenetrate)
 -------------------------------------
-Within a Drive, the first contact is found by sampling the motion every :data:`SAMPLE_UM` of relative
-travel, a Lipschitz bound on the separating-axis gap between samples (so no contact between samples is
-missed), finer sampling of doubtful intervals and a 16-way bisection down to ~1e-10 um of travel.
-All robots stop at that instant, the contact rules below are applied, and the rest of the Drive
-continues. A robot's motion *pushes* into a touching body (or the arena edge) when moving it alone by
-:data:`PROBE_UM` deepens the contact. Rules, for each robot whose motion pushes:
+A broad phase first checks whether any two bodies (or a body and the arena edge) could come within
+:data:`NEAR_UM` during the Drive (bounding circles grown by each body's largest travel); if not, the
+Drive is one closed-form step. Otherwise the first contact is found by sampling the motion every
+:data:`SAMPLE_UM` of relative travel, a Lipschitz bound on the separating-axis gap between samples (so
+no contact between samples is missed), finer sampling of doubtful intervals and a 16-way bisection
+down to ~1e-10 um of travel. At that instant everyone stops, the rules below are applied, and the rest
+of the Drive continues. A contact is interpenetration beyond :data:`CONTACT_TOL_UM` (1e-9 um); a pair
+already touching whose motion does not push may graze by up to :data:`GRAZE_TOL_UM` (1e-4 um). A
+robot's motion *pushes* into a touching body (or the arena edge) when moving it alone by
+:data:`PROBE_UM` deepens the contact by more than :data:`PUSH_EPS_UM`. Rules, for every robot whose
+motion pushes (also applied at the end of every Drive, so a contact made on its last instant counts):
 
 1. **Self-aligning compliance (G_1).** Two robots with arms up pushing into each other head-on (each
-   one's motion approaches the contact at least :data:`HEAD_ON_MIN_APPROACH` of its speed, headings
-   opposed): with incidence ``alpha = theta_i - theta_j - pi`` and lateral misalignment ``w_y`` (offset of
-   the front-edge midpoints across the mean axis), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they form
-   G_1: both turn to the mean axis (each by half of alpha, so the pair rotates as a whole) and slide
-   until their front-edge midpoints coincide at the midpoint of the two, collinear and flush. Both are
-   docked. Outside those limits, or if the aligned pair would overlap a third body, both are stuck (H).
+   approaches the contact with at least :data:`HEAD_ON_MIN_APPROACH` of its speed; headings opposed):
+   with incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral misalignment ``w_y`` (offset of
+   the two front-edge midpoints across the mean axis), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they
+   form G_1: both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
+   their front-edge midpoints coincide at the midpoint of the two, collinear and flush. Both are docked.
+   Outside those limits, or if the aligned pair would overlap a third body or leave the arena, both stop
+   where they met: stuck (H).
 2. **Turning robot** (arm down or chattering) whose motion pushes into anything: blocked; it stops for
-   the rest of the Drive (it cannot pivot off an obstacle).
-3. **Arena edge**: a robot pushing out of the arena stops at the edge ("arena" event).
-4. **Straight robot against a static body** (one that does not move at the moment: docked, stopped
-   or stuck). The contact is on its front (a front corner on the body's face, the body's corner on its
-   front edge, or the front edge flush); ``alpha`` is the angle between its heading and the inward normal
-   of the body's face it meets (for a corner of the body poking its front edge: the adjacent face most
-   opposed to its heading).
+   the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle).
+3. **Arena edge**: a robot pushing out of the arena stops at the edge ("arena"; ``arena_hits``).
+4. **Straight robot (arm up) against a static body** (one that does not move now: docked, stopped or
+   stuck), contact on its front (its front corner on a face, the body's corner on its front edge, or
+   the front edge flush). The face met is the body's face the contact lies on; at a corner of the body
+   (two faces) the one the contact is not behind, and of equals the one most opposed to the robot's
+   heading. ``alpha`` is the signed angle between the robot's heading and that face's inward normal.
 
    - ``|alpha| <= 45 deg`` (the sticking cone): **docking compliance**. It rotates about the contact
-     point until its front edge is flush with that face, then stays there pushing: docked. If the
-     rotation would sweep into another body it stops at first touch: stuck (H).
-   - outside the cone with its *front corner* on the face: the corner does not stick; the robot
-     slides along the face without turning, at the tangential part of its velocity, until the corner
-     runs off the face's end ("slide", then "slide_off"; it then drives on) or into something (stuck).
+     point (the touching corner(s)) until its front edge is flush with the face, then stays there
+     pushing: docked. If the rotation would sweep into another body it stops at first touch: stuck (H).
+   - outside the cone with its *front corner* on the face: the corner does not stick; the robot slides
+     along the face without turning, at the tangential part of its velocity ``v sin|alpha|``, until the
+     corner runs :data:`SLIDE_OVERSHOOT_UM` past the face's end ("slide", then "slide_off"; it then drives
+     on, e.g. onto a collinear face of the next robot) or into something else (stuck). A slide is the
+     failure region H: the robot does not dock.
    - outside the cone with the body's corner on its front edge: stuck (H).
-   - a body's corner grazing its long side: it slides past, straight, without turning ("graze").
+   - a body's corner touching its long side: it slides past it, straight, without turning ("graze").
+   - pushing into several static bodies at once: it stops; docked if flush with one of them.
 5. Any other pushing contact (e.g. into a robot that is itself moving): the pushing robot stops
    ("contact"); it is re-checked every :data:`RECHECK_S` while its partner moves.
 
-A robot stopped by a rule is re-examined at every later Drive (and after every contact): it moves
-again as soon as its motion no longer pushes. ``docked`` and ``stuck`` flags clear when it moves.
-Compliance moves are instantaneous. Events are logged once per change of a contact's outcome.
+A stopped robot is re-examined after every contact and at every later Drive: it moves again as soon as
+its motion no longer pushes. ``docked`` and ``stuck`` clear when it moves. Compliance moves are
+instantaneous. An event is logged when a contact's outcome changes; outcomes are remembered while the
+pair stays within :data:`NEAR_UM`, so robots jostling against each other do not flood the log.
 
 Determinism
 -----------
@@ -416,6 +426,17 @@ class SimulatedPlant:
         straight = ~turning & ~chatter
         bound = speed * (1.0 + np.abs(kappa) * self._hd)  # fastest point of each body (um/s)
         ctx = (speed, kappa, straight, bound)
+        if self._quiet(bound, duration_s):
+            # Broad phase: nobody can come near anybody or the wall during this Drive; closed form only.
+            p0 = self._pose.copy()
+            free = _Motion(np.full(self.n, _FREE), np.zeros((self.n, 2)), np.full(self.n, math.inf), set(), False)
+            self._pose = self._poses_at(p0, free, ctx, np.array([duration_s]))[0]
+            self._contacts = {}
+            self._docked[:] = False
+            self._stuck[:] = False
+            if self._record:
+                self._record_segment(p0, free, ctx, duration_s, t_start)
+            return
         tau = 0.0
         stalls = 0
         forced: set[int] = set()
@@ -454,6 +475,20 @@ class SimulatedPlant:
                 stalls = 0
         # Contacts made at the very end still act: the last push of the Drive docks (or blocks) them.
         self._evaluate(ctx, t_start + duration_s, forced)
+
+    def _quiet(self, bound: np.ndarray, duration_s: float) -> bool:
+        """Whether no body can come within :data:`NEAR_UM` of another or of the arena edge in
+        ``duration_s`` (bounding circles grown by each body's largest travel)."""
+        P, I, J = self._pose, self._I, self._J
+        travel = bound * duration_s
+        if I.size:
+            centre = np.hypot(P[I, 0] - P[J, 0], P[I, 1] - P[J, 1])
+            if (centre - self._hd[I] - self._hd[J] - travel[I] - travel[J] <= NEAR_UM).any():
+                return False
+        if self.scenario.arena_um is not None:
+            if (_arena_gap(P, self._hl, self._hw, self.scenario.arena_um) - travel <= NEAR_UM).any():
+                return False
+        return bool((self._v > 0).all())
 
     def _record_segment(self, p0, motion, ctx, dt, t0) -> None:
         vmax = float(np.max(ctx[3])) if self.n else 0.0
@@ -583,14 +618,19 @@ class SimulatedPlant:
         slide_v = np.zeros((n, 2))
         slide_end = np.full(n, math.inf)
         excluded: set = set()
+        I, J = self._I, self._J
+        arena = self.scenario.arena_um
+        d0 = _depth(P[I], P[J], hl[I], hw[I], hl[J], hw[J]) if I.size else np.zeros(0)
+        g0 = _arena_gap(P, hl, hw, arena) if arena is not None else np.full(n, np.inf)
+        if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
+            self._contacts = {}
+            return _Motion(mode, slide_v, slide_end, excluded, False)
         probe = move(P, PROBE_UM, kappa)  # each robot alone, a hair further along its own motion
         # Touching pairs and whether each side's motion pushes into the other.
         push: dict[int, list[int]] = {}
         approach: dict[tuple[int, int], float] = {}
         touching: dict[int, list[int]] = {}
-        I, J = self._I, self._J
         if I.size:
-            d0 = _depth(P[I], P[J], hl[I], hw[I], hl[J], hw[J])
             t = np.flatnonzero(d0 > -TOUCH_UM)
             if t.size:
                 a, b = I[t], J[t]
@@ -605,18 +645,13 @@ class SimulatedPlant:
                         push.setdefault(x, []).append(y)
                     if ry > PUSH_EPS_UM:
                         push.setdefault(y, []).append(x)
-        if self.scenario.arena_um is not None:
-            g0 = _arena_gap(P, hl, hw, self.scenario.arena_um)
-            gp = _arena_gap(probe, hl, hw, self.scenario.arena_um)
+        if arena is not None:
+            gp = _arena_gap(probe, hl, hw, arena)
             for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
                 push.setdefault(i, []).append(ARENA)
-        near_pairs = set()
-        if I.size:
-            close = np.flatnonzero(d0 > -NEAR_UM)
-            near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close])}
-        arena_near = set()
-        if self.scenario.arena_um is not None:
-            arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
+        close = np.flatnonzero(d0 > -NEAR_UM)
+        near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close])}
+        arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
 
         def near(a: int, b: int) -> bool:
             return a in arena_near if b == ARENA else (min(a, b), max(a, b)) in near_pairs
