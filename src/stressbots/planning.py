@@ -108,6 +108,7 @@ class Phase:
     partner: int = -1
     run: tuple[tuple[float, float, float], float] | None = None
     last: bool = False
+    partner_end: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -905,7 +906,7 @@ class _Planner:
         # A_0: D_n drives to the start of its first run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
         t0 = self.tl.t
         self.tl.apply_path(N, a_paths[0], n, n - 1)
-        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M)
+        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]))
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
             piece = _sub_path(fullM, bounds[j], bounds[j + 1])
@@ -920,7 +921,7 @@ class _Planner:
             if j + 1 < pieces:
                 t0 = self.tl.t
                 self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
-                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M)
+                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]))
         self.route_lengths[M] = fullM.length
         self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
