@@ -383,26 +383,51 @@ class _Runner:
         need = pathlib.shortest_path(self.est[N], n_target, rN).length / vN
         while want / self.omega_hat[M] < need + 2.0 * self.tx:
             want += TWO_PI
-        duration = want / self.omega_hat[M]
         disc = [(turning_centres(self.est[M], self.r[M])[0], self.rstar[M])]
-        try:
-            path = pathlib.path_of_length(self.est[N], n_target, rN, vN * duration)
-        except pathlib.InfeasibleLengthError:
+        path = None
+        for _extra in range(4):
+            # some lengths are impossible (a gap between paths with and without a loop): then D_{n-1}
+            # orbits one more time rather than the phase ending early
+            duration = want / self.omega_hat[M]
+            try:
+                cand = pathlib.path_of_length(self.est[N], n_target, rN, vN * duration)
+            except pathlib.InfeasibleLengthError:
+                want += TWO_PI
+                continue
+            if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
+                cand = self.timed_detour(N, n_target, duration, lower, disc)
+                if cand is None or cand.length < vN * duration - 1.0:
+                    want += TWO_PI
+                    continue
+            path = cand
+            break
+        if path is None:
             path = pathlib.shortest_path(self.est[N], n_target, rN)
-        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
-            path = self.timed_detour(N, n_target, duration, lower, disc) or path
+            self.log("desync", N, "no path of the right duration; D_{n-1} will not be back at its departure")
         self.replans += 1
-        # open loop along the timed path until about 3 s remain, measuring D_{n-1}'s turn rate
+        # along the timed path until about 3 s remain, measuring D_{n-1}'s turn rate; when the measured
+        # rate predicts an end more than half a cycle off, D_n's remaining path is re-timed
         done = 0.0
+        turned = 0.0
         while path.length - done > 3.0 * vN:
             th0, t0 = self.est[M, 2], self.t
             sub = _sub_path(path, done, done + vN * self.tx)
             self.drive(self.path_steps(sub, vN, n, n - 1))
             done += vN * self.tx
             d_th = float(np.mod(self.est[M, 2] - th0, TWO_PI))
+            turned += d_th
             rate = d_th / max(self.t - t0, 1e-9)
             if 0.5 * self.omega_nom[M] < rate < 1.5 * self.omega_nom[M]:
                 self.omega_hat[M] = 0.8 * self.omega_hat[M] + 0.2 * rate
+            left_t = (want - turned) / self.omega_hat[M]
+            if abs((path.length - done) / vN - left_t) > 0.5 * self.tx and left_t > 3.0:
+                try:
+                    new = pathlib.path_of_length(self.est[N], n_target, rN, vN * left_t)
+                except pathlib.InfeasibleLengthError:
+                    continue
+                if not self.obstacles_hit(new.sample(10.0), N, lower, extra_discs=disc):
+                    path, done = new, 0.0
+                    self.replans += 1
         self.steer(N, n_target, n, n - 1, lower, extra_discs=disc, max_cycles=60)
 
     def _obstacles(self, i: int, orbiting, extra_discs):
@@ -589,7 +614,7 @@ class _Runner:
             end = run_len - (0.4 * a if ph.last else 0.0) + slack
             return max(0.0, (end - done) / self.v[N])
 
-        for _ in range(8):
+        for _ in range(20):
             if self.steer(M, target, n - 1, n - 2, lower, guard=room):
                 return
             # D_n's run is used up: it loops back to the start of its run while D_{n-1} orbits back
