@@ -261,6 +261,51 @@ def test_check_determinism_reports_a_plant_that_is_not_reproducible():
         check_determinism(sc, [[Drive(75.0, 105.0, 1.0)]] * 2, seed=0, plant_factory=Leaky)
 
 
+def _crowded(seed):
+    """2-4 random robots crowded in a 1.2 mm arena, amplified literature noise, random waveforms
+    (some with drive bands that flip or chatter arms)."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 5))
+    poses = []
+    while len(poses) < n:
+        p = np.array([rng.uniform(200, 1000), rng.uniform(200, 1000), rng.uniform(0, 2 * math.pi)])
+        if all(np.hypot(*(p[:2] - q[:2])) > 300 for q in poses):
+            poses.append(p)
+    robots = tuple(
+        Robot(f"R{k}", *THRESHOLDS[k], length_um=float(rng.uniform(200, 300)), width_um=float(rng.uniform(50, 80)),
+              speed_um_s=float(rng.uniform(80, 150)), turn_radius_um=float(rng.uniform(150, 250)), start=Pose(*poses[k]))
+        for k in range(n)
+    )
+    sc = Scenario("crowded", robots, Electrodes(), (1200.0, 1200.0), noise=LITERATURE_NOISE.scaled(3.0))
+    wfs = []
+    for _ in range(25):
+        wf = []
+        for _ in range(int(rng.integers(1, 4))):
+            if rng.random() < 0.6:
+                wf.append(Hold(float(rng.choice([0, 25, 52, 130, 150, 170, 190])), 0.001))
+            band = (75.0, 105.0) if rng.random() < 0.9 else (float(rng.choice([10, 75])), float(rng.choice([105, 130, 150])))
+            wf.append(Drive(*band, float(rng.uniform(0.05, 1.5))))
+        wfs.append(wf)
+    return sc, wfs
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_crowded_random_runs_never_interpenetrate_and_repeat_bit_for_bit(seed):
+    from stressbots.collision import outside_arena, pairwise_overlaps
+
+    sc, wfs = _crowded(seed)
+    a, b = SimulatedPlant(sc, seed=seed, record=True), SimulatedPlant(sc, seed=seed)
+    for wf in wfs:
+        a.apply(wf)
+        b.apply(wf)
+    assert a.true_poses().tobytes() == b.true_poses().tobytes() and a.events == b.events
+    _, poses = a.trace()
+    for p in poses:  # touching is allowed; a grazing pair may overlap by the 1e-4 um graze allowance
+        assert not pairwise_overlaps(p, sc.lengths_um, sc.widths_um, tol_um=1.01e-4)
+        assert not outside_arena(p, sc.lengths_um, sc.widths_um, sc.arena_um, tol_um=1.01e-4).any()
+    assert a.events  # crowded enough that contacts happen
+
+
 # ----------------------------------------------------------------------------------------------------
 # Zero noise: planner, waveform and simulator agree
 

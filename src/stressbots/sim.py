@@ -660,6 +660,7 @@ class SimulatedPlant:
         static = pushers | set(np.flatnonzero(speed <= 0).tolist()) | forced
         outcomes: dict[tuple[int, int], tuple[str, str]] = {}
         done: set[int] = set(forced)
+        slide_partner: dict[int, int] = {}
 
         # 1. Self-aligning compliance: straight robots pushing into each other head-on.
         for i in sorted(pushers):
@@ -712,6 +713,7 @@ class SimulatedPlant:
                 if slide is not None:
                     mode[i] = _SLIDE
                     slide_v[i], slide_end[i] = slide
+                    slide_partner[i] = j
                     excluded.add((min(i, j), max(i, j)))
                 continue
             if len(cs) > 1 and len(fronts) == len(cs):
@@ -726,7 +728,7 @@ class SimulatedPlant:
 
         # A slide is along a body that stays put; if the partner moves after all, stop instead.
         for i in np.flatnonzero(mode == _SLIDE).tolist():
-            (j,) = [j for (a, j) in outcomes if a == i]
+            j = slide_partner[i]
             if mode[j] != _HELD:
                 mode[i] = _HELD
                 slide_end[i] = math.inf
