@@ -105,7 +105,16 @@ def random_scenario(
     while placed < n:
         tries += 1
         if tries > max_tries:
-            raise RuntimeError(f"could not place {n} robots in a {w:.0f} x {h:.0f} um arena; make it larger")
+            if arena_um is not None and tries > 4 * max_tries:
+                raise RuntimeError(f"could not place {n} robots in a {w:.0f} x {h:.0f} um arena; make it larger")
+            # crowded: grow the arena by 10 % (the structure stays at its relative place) and retry
+            scale = 1.1
+            w, h = w * scale, h * scale
+            keep_centre = keep_centre * scale
+            goal_arr = goal_arr + np.concatenate([keep_centre - keep_centre / scale, [0.0]])
+            keep_pts = keep_pts + (keep_centre - keep_centre / scale)
+            spec = StructureSpec(shape, Pose(spec.at.x + keep_centre[0] - keep_centre[0] / scale, spec.at.y + keep_centre[1] - keep_centre[1] / scale, spec.at.theta))
+            tries, placed = 0, 0
         p = np.array([rng.uniform(0, w), rng.uniform(0, h), rng.uniform(0, TWO_PI)])
         c = turning_centres(p, r[placed])[0]
         R = rstar[placed]

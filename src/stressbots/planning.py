@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -677,7 +677,7 @@ class _Planner:
         tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
         parks.extend(tracks[:2])
         attempts: list[str] = []
-        budget = [40]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
+        budget = [24]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
@@ -868,7 +868,9 @@ class _Planner:
         rkey = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), tuple(np.round(obst.disc_centres, 3).ravel()))
         if rkey not in self._route_cache:
             try:
-                self._route_cache[rkey] = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, self.opts, self.rng, "")[1]
+                # D_n's timed legs are local manoeuvres: small roadmaps, or the G_1 search gets slow
+                light = replace(self.opts, roadmap_nodes=self.opts.roadmap_nodes[:2])
+                self._route_cache[rkey] = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")[1]
             except _NoRoute as exc:
                 self._route_cache[rkey] = exc.reason.lstrip(": ") or last
         routed = self._route_cache[rkey]
