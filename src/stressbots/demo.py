@@ -1,16 +1,24 @@
 """``stressbots demo``: the main job, end to end, on the built-in 4-robot scenario.
 
-Today the project's main job is the electrostatic control layer: analyse the built-in design (accessible
-control states, STRING order, control matrix, primitives), synthesise the waveform of every primitive
-in a tour ``P_0, P_1, ..., P_n, ..., P_0`` (each reached with the fewest Holds, then driven), check it
-with the decoder, and write the results. Later issues add planning and closed-loop assembly here.
+The main job so far, in three parts:
+
+1. the electrostatic control layer: analyse the built-in design (accessible control states, STRING
+   order, control matrix, primitives), synthesise the waveform of every primitive in a tour
+   ``P_0, P_1, ..., P_n, ..., P_0`` (each reached with the fewest Holds, then driven) and check it with
+   the decoder;
+2. the nominal assembly plan of the built-in tee (seed Appendix 2, verified by an independent replay);
+3. that plan played open loop on the simulated plant: without noise every robot ends in its slot
+   (planner, waveform and simulator agree); with the literature's error levels open loop drifts far,
+   which is why the closed-loop controller exists (a later issue adds it here).
 
 Outputs in the chosen folder:
 
 - ``states.json``: the analysis, exactly as ``stressbots states --json`` (SPEC 7);
 - ``waveform.json``: the tour's segments (:func:`stressbots.waveform.to_json`);
 - ``waveform.npy``: the tour sampled at 100 kS/s, columns time (s) and level (V);
-- ``waveform.png``: a picture of the tour with the robots' thresholds.
+- ``waveform.png``: a picture of the tour with the robots' thresholds;
+- ``plan/``: ``plan.json``, ``plan.png``, ``summary.json`` (as ``stressbots plan``);
+- ``open-loop/``: ``result.json`` and ``trajectory.png`` for the nominal and the noisy run.
 """
 
 from __future__ import annotations
@@ -121,6 +129,7 @@ def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
                 f"  t = {d.t_start_s:7.3f} s  {name}: decoded turning {', '.join(turning) or 'none'} (as intended)",
                 highlight=False,
             )
+    planned = _plan_and_simulate(scenario, out, console, quiet)
     verdict = f"STRING, order {', '.join(analysis.order)}" if analysis.is_string else "not STRING"
     console.print(
         f"demo: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; "
@@ -129,4 +138,57 @@ def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
         soft_wrap=True,
         highlight=False,
     )
-    return {"out_dir": str(out), "count": analysis.count, "steps": len(steps), "samples": summary.samples}
+    console.print(planned["line"], soft_wrap=True, highlight=False)
+    return {"out_dir": str(out), "count": analysis.count, "steps": len(steps), "samples": summary.samples, **planned["summary"]}
+
+
+def _plan_and_simulate(scenario, out: Path, console, quiet: bool) -> dict:
+    """Plan the built-in tee, then play the plan open loop without and with noise."""
+    from . import plans
+    from .assessment import assess
+    from .outputs import prepare_dir, provenance, save_figure, write_json
+    from .planning import plan_assembly
+    from .scenario import Noise
+    from .sim import run_plan
+    from .viz import plot_plan, plot_run
+
+    result = plan_assembly(scenario)
+    pdir = prepare_dir(out / "plan")
+    plans.save(result.plan, pdir / "plan.json")
+    write_json(pdir / "summary.json", {**result.summary, "provenance": dict(result.plan.provenance)})
+    save_figure(plot_plan(scenario, result), pdir / "plan.png")
+    s = result.summary
+    if not quiet:
+        console.print()
+        console.print(
+            f"[bold]Plan[/bold]: {s['structure']} in {s['duration_s']:.1f} s, {s['steps']} steps "
+            f"(lower bound {s['lower_bound_s']:.1f} s, efficiency {s['efficiency']:.2f}); replayed independently: ok",
+            highlight=False,
+        )
+        for note in result.notes:
+            console.print(f"  note: {note}", highlight=False)
+    odir = prepare_dir(out / "open-loop")
+    goals = result.plan.goal_array()
+    rows = {}
+    for label, scn, seed in (("nominal", scenario.with_noise(Noise()), 0), ("noisy", scenario, 1)):
+        plant = run_plan(scn, result.plan, seed=seed, record=True)
+        a = assess(scn.names, plant.true_poses(), goals, plant.docked, scn.lengths_um, scn.widths_um)
+        write_json(odir / f"result-{label}.json", {
+            "success": a.success, "seed": seed, "robots": a.robot_rows(plant.observe()), "mode": "open-loop",
+            **a.summary(), "events": [e.as_dict() for e in plant.events], "provenance": provenance(seed),
+        })
+        times, poses = plant.trace()
+        save_figure(plot_run(scn, times, poses, goals, plant.events), odir / f"trajectory-{label}.png")
+        rows[label] = a
+        if not quiet:
+            console.print(
+                f"[bold]Open loop, {label}[/bold]: {int(a.docked.sum())}/{scn.n} docked, worst position error "
+                f"{a.position_error_um.max():.3g} um, shape error {a.shape.rms_um:.3g} um RMS",
+                highlight=False,
+            )
+    line = (
+        f"plan: {s['duration_s']:.1f} s, efficiency {s['efficiency']:.2f}; open loop: nominal "
+        f"{'docks every robot' if rows['nominal'].success else 'FAILED'}, with literature noise the worst robot ends "
+        f"{rows['noisy'].position_error_um.max():.0f} um off; wrote plan/ and open-loop/ to {out}"
+    )
+    return {"line": line, "summary": {"plan_duration_s": s["duration_s"], "open_loop_nominal_success": rows["nominal"].success}}
