@@ -152,6 +152,10 @@ def test_demo_writes_its_outputs(run_cli, tmp_path):
     arr = np.load(out / "waveform.npy")
     assert arr.shape[1] == 2 and arr[:, 1].min() >= 0.0 and arr[:, 1].max() <= 200.0
     assert (out / "waveform.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    plan = json.loads((out / "plan" / "plan.json").read_text())
+    assert plan["format"] == "stressbots.plan/1" and len(plan["steps"]) > 0
+    nominal = json.loads((out / "open-loop" / "result-nominal.json").read_text())
+    assert nominal["success"] and all(r["docked"] and r["position_error_um"] < 1e-6 for r in nominal["robots"])
     q = run_cli("demo", "--out", out, "--quiet")
     assert q.code == 0 and len(q.out.strip().splitlines()) == 1
     f = tmp_path / "file"

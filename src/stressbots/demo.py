@@ -131,14 +131,16 @@ def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
             )
     planned = _plan_and_simulate(scenario, out, console, quiet)
     verdict = f"STRING, order {', '.join(analysis.order)}" if analysis.is_string else "not STRING"
-    console.print(
+    first = (
         f"demo: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; "
         f"tour of {len(steps)} primitives, {summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V "
-        f"within [0, {scenario.electrodes.max_V:g}] V; wrote states.json, waveform.json, waveform.npy, waveform.png to {out}",
-        soft_wrap=True,
-        highlight=False,
+        f"within [0, {scenario.electrodes.max_V:g}] V; wrote states.json, waveform.json, waveform.npy, waveform.png to {out}"
     )
-    console.print(planned["line"], soft_wrap=True, highlight=False)
+    if quiet:  # one summary line
+        console.print(f"{first}; {planned['line']}", soft_wrap=True, highlight=False)
+    else:
+        console.print(first, soft_wrap=True, highlight=False)
+        console.print(planned["line"], soft_wrap=True, highlight=False)
     return {"out_dir": str(out), "count": analysis.count, "steps": len(steps), "samples": summary.samples, **planned["summary"]}
 
 
