@@ -173,3 +173,194 @@ def plot_run(scenario, times, poses, goals, events=(), *, title: str = ""):
         ax.legend(loc="upper right", fontsize=8, title="events", title_fontsize=8)
     ax.set_title(title or f"{scenario.name}: simulated run, {times[-1]:.1f} s", fontsize=10)
     return fig
+
+
+# ----------------------------------------------------------------------------------------------------
+# Error bounds (stressbots bounds) and Monte Carlo studies (stressbots montecarlo)
+
+
+def _draw_cone(ax, cone, speed_um_s: float, radius_um: float, model, colour, *, fixed: str = "") -> None:
+    """One reachable cone in the robot's frame: the cone, arcs of intermediate duty cycles, and the
+    forward projections of its two extreme sequences (paths under the corner error cases)."""
+    from matplotlib.patches import Polygon as MplPolygon
+
+    from .bounds import arc_points, s2f_sequence, sequence_poses
+
+    ax.add_patch(MplPolygon(cone.polygon, closed=True, fc=(*colour[:3], 0.18), ec=colour, lw=1.0, zorder=2))
+    k_in = 1.0 / cone.radius_min_um
+    k_out = 0.0 if math.isinf(cone.radius_max_um) else 1.0 / cone.radius_max_um
+    for kappa in np.linspace(k_in, k_out, 5)[1:-1]:
+        pts = arc_points(1.0 / kappa if kappa > 0 else math.inf, cone.length_um)
+        ax.plot(pts[:, 0], pts[:, 1], color=colour, lw=0.6, ls=":", zorder=3)
+    errs = model.samples(3)
+    for r_ext in (cone.radius_min_um, cone.radius_max_um):
+        rho = 0.0 if math.isinf(r_ext) else min(radius_um / r_ext, 1.0)
+        dur = cone.length_um / speed_um_s
+        seq = s2f_sequence(rho, dur, dur / 40.0)
+        t = np.linspace(0.0, dur, 60)
+        p = sequence_poses((0.0, 0.0, 0.0), seq.turning, seq.durations_s, speed_um_s, radius_um, errs, t)
+        for g in range(p.shape[0]):
+            ax.plot(p[g, :, 0], p[g, :, 1], color="0.35", lw=0.4, alpha=0.5, zorder=1)
+    ax.annotate("", xy=(0, 0.25 * cone.length_um), xytext=(0, 0), arrowprops=dict(arrowstyle="->", color="k", lw=1.2))
+    ax.set_aspect("equal")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_xlabel("across (um)")
+    ax.set_ylabel("along (um)")
+    rmax = "inf" if math.isinf(cone.radius_max_um) else f"{cone.radius_max_um:.0f}"
+    ax.set_title(
+        f"{cone.label} ({cone.robot}): r' in [{cone.radius_min_um:.0f}, {rmax}] um\n{cone.duties[0]} .. {cone.duties[1]}"
+        + (f"; {fixed}" if fixed else ""),
+        fontsize=8,
+    )
+
+
+def plot_bounds(scenario, report):
+    """The error bounds of a scenario (``stressbots bounds``), six panels.
+
+    Top: ``delta_xy(t)`` and ``delta_theta(t)`` of pure turning (solid) and pure straight motion
+    (dashed) per robot, with ``t_2pi`` marked (where ``C_alpha,i`` is read); the regions A_i* in the
+    arena (filled; the nominal preimage of G_i* outside C_O faint, C_O dashed, an example a_i as an
+    arrow). Bottom: the reachable cones of fine motion (seed Fig. 4) with the forward projections of
+    their extreme sequences (grey paths, corner error cases): S_2f of a docking robot, S_3f of D_{n-1}
+    and of D_n.
+
+    ``report`` is a :class:`stressbots.bounds.BoundsReport`.
+    """
+    plt = _plt()
+    cols = robot_colours(scenario.n)
+    colour = {name: cols[i] for i, name in enumerate(scenario.names)}
+    fig = plt.figure(figsize=(16, 10))
+    gs = fig.add_gridspec(2, 3, hspace=0.32, wspace=0.28)
+    ax_xy, ax_th, ax_map = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[0, 2])
+    for rb in report.robots:
+        c = colour[rb.name]
+        for curve, ls in ((rb.delta_turning, "-"), (rb.delta_straight, "--")):
+            ax_xy.plot(curve.times_s, curve.xy_um, color=c, ls=ls, lw=1.2, label=f"{rb.label} {curve.sequence}")
+            ax_th.plot(curve.times_s, np.degrees(curve.theta_rad), color=c, ls=ls, lw=1.2)
+        for ax in (ax_xy, ax_th):
+            if math.isfinite(rb.t_2pi_s):
+                ax.axvline(rb.t_2pi_s, color=c, lw=0.6, ls=":")
+    ax_xy.set_xlabel("t (s)")
+    ax_xy.set_ylabel("delta_xy (um)")
+    ax_xy.set_title(f"delta_xy(t), {report.model.k:g}-sigma box (dotted: t_2pi)", fontsize=9)
+    ax_xy.legend(fontsize=6, ncol=2)
+    ax_th.set_xlabel("t (s)")
+    ax_th.set_ylabel("delta_theta (deg)")
+    ax_th.set_title("delta_theta(t): turning (solid), straight (dashed)", fontsize=9)
+    for ax in (ax_xy, ax_th):
+        ax.grid(True, lw=0.3, alpha=0.5)
+
+    # regions A_i*
+    st = report.structure
+    pts = []
+    for rb in report.robots:
+        c = colour[rb.name]
+        co = st.proximity_region(rb.name)
+        for ring in getattr(co, "geoms", [co]):
+            x, y = ring.exterior.xy
+            ax_map.plot(x, y, color=c, lw=0.7, ls="--", zorder=2)
+        reg = rb.region
+        if reg is not None:
+            X, Y = np.meshgrid(reg.xs_um, reg.ys_um, indexing="ij")
+            pre = reg.preimage.any(axis=2)
+            if pre.any():
+                ax_map.contourf(X, Y, pre.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.08)], zorder=1)
+                ax_map.contour(X, Y, pre.astype(float), levels=[0.5], colors=[(*c[:3], 0.5)], linewidths=0.5, zorder=1)
+            a = reg.mask.any(axis=2)
+            if a.any():
+                ax_map.contourf(X, Y, a.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.35)], zorder=2)
+                ex = reg.example()
+                ax_map.annotate("", xy=(ex[0] + 120 * math.sin(ex[2]), ex[1] + 120 * math.cos(ex[2])), xytext=(ex[0], ex[1]),
+                                arrowprops=dict(arrowstyle="->", color=c, lw=1.4), zorder=4)
+            pts.append([[reg.xs_um[0], reg.ys_um[0]], [reg.xs_um[-1], reg.ys_um[-1]]])
+    goals = st.goal_poses(scenario.names)
+    draw_bodies(ax_map, goals, scenario.lengths_um, scenario.widths_um, [colour[n] for n in scenario.names], fill_alpha=0.6, lw=0.8)
+    verdicts = ", ".join(f"{rb.label}: {'yes' if rb.guaranteed else 'no'}" for rb in report.robots)
+    if pts:
+        p = np.array(pts).reshape(-1, 2)
+        ax_map.set_xlim(p[:, 0].min(), p[:, 0].max())
+        ax_map.set_ylim(p[:, 1].min(), p[:, 1].max())
+    ax_map.set_aspect("equal")
+    ax_map.grid(True, lw=0.3, alpha=0.5)
+    ax_map.set_xlabel("x (um)")
+    ax_map.set_ylabel("y (um)")
+    ax_map.set_title(f"A_i* (solid), preimage of G_i* outside C_O (faint), C_O (dashed)\nguaranteed: {verdicts}", fontsize=8)
+
+    # reachable cones
+    by_label = {}
+    for cone in report.cones:
+        by_label.setdefault(cone.label, cone)
+    panels = [by_label.get("S_2f"), by_label.get("S_3f D_n-1"), by_label.get("S_3f D_n")]
+    fixed = {"S_3f D_n-1": "D_n keeps r'_n = 3 r", "S_3f D_n": "D_n-1 keeps r'_n-1 = 1.5 r"}
+    for col, cone in enumerate(panels):
+        ax = fig.add_subplot(gs[1, col])
+        if cone is None:
+            ax.axis("off")
+            continue
+        rob = scenario.robot(cone.robot)
+        _draw_cone(ax, cone, rob.speed_um_s, rob.turn_radius_um, report.model, colour[cone.robot], fixed=fixed.get(cone.label, ""))
+    fig.suptitle(
+        f"{report.scenario}: error bounds ({report.model.k:g} sigma: speed +-{100 * report.model.speed_rel:.1f} %, radius "
+        f"+-{100 * report.model.radius_rel:.1f} %, drift +-{math.degrees(report.model.drift_rad_per_um) * 1000:.2g} deg/mm)",
+        fontsize=11,
+    )
+    return fig
+
+
+def plot_montecarlo(summary: dict, outcomes, *, title: str = ""):
+    """Histograms of a Monte Carlo study: RMS shape error (successes and failures stacked, tolerance
+    line if known) and simulated duration. ``outcomes`` are :class:`stressbots.montecarlo.TrialOutcome`."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    ok = np.array([o.success for o in outcomes], dtype=bool)
+    shape = np.array([o.shape_error_rms_um for o in outcomes], dtype=float)
+    dur = np.array([o.duration_s for o in outcomes], dtype=float)
+    for ax, data, label in ((a1, shape, "RMS shape error (um)"), (a2, dur, "duration (s, simulated)")):
+        good = np.isfinite(data)
+        if good.any():
+            lo, hi = float(np.min(data[good])), float(np.max(data[good]))
+            bins = np.linspace(lo, hi if hi > lo else lo + 1.0, 31)
+            ax.hist([data[good & ok], data[good & ~ok]], bins=bins, stacked=True, color=["tab:green", "tab:red"],
+                    label=[f"success ({int((good & ok).sum())})", f"failure ({int((good & ~ok).sum())})"])
+        ax.set_xlabel(label)
+        ax.set_ylabel("trials")
+        ax.grid(True, lw=0.3, alpha=0.5)
+        ax.legend(fontsize=8)
+    tol = summary.get("shape_tolerance_um")
+    if tol is not None:
+        a1.axvline(tol, color="k", ls="--", lw=0.8)
+    ci = summary.get("success_rate_ci95", [math.nan, math.nan])
+    fig.suptitle(
+        title
+        or f"{summary.get('scenario', '')}: {summary['successes']}/{summary['trials']} successes, rate {summary['success_rate']:.3f} "
+        f"(95 % CI {ci[0]:.3f}-{ci[1]:.3f})",
+        fontsize=10,
+    )
+    return fig
+
+
+def plot_sweep(sweep: Sequence[dict], *, title: str = ""):
+    """Success rate against noise scale with 95 % Wilson intervals (``stressbots montecarlo --sweep``).
+
+    ``sweep`` rows hold ``noise_scale``, ``success_rate`` and ``success_rate_ci95``.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    x = np.array([row["noise_scale"] for row in sweep], dtype=float)
+    y = np.array([row["success_rate"] for row in sweep], dtype=float)
+    lo = np.array([row["success_rate_ci95"][0] for row in sweep], dtype=float)
+    hi = np.array([row["success_rate_ci95"][1] for row in sweep], dtype=float)
+    order = np.argsort(x)
+    x, y, lo, hi = x[order], y[order], lo[order], hi[order]
+    ax.fill_between(x, lo, hi, color="tab:blue", alpha=0.2, label="95 % CI (Wilson)")
+    ax.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o-", color="tab:blue", capsize=3, label="success rate")
+    ax.axhline(0.9, color="0.4", ls=":", lw=0.8)
+    ax.axvline(1.0, color="0.4", ls="--", lw=0.8)
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("noise scale (x the scenario's [noise])")
+    ax.set_ylabel("success rate")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(fontsize=8, loc="lower left")
+    trials = sweep[0]["trials"] if sweep else 0
+    ax.set_title(title or f"success rate vs noise ({trials} trials per point)", fontsize=10)
+    return fig
