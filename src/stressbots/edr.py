@@ -234,6 +234,7 @@ class _Runner:
         self.omega_nom = self.v / self.r
         self.omega_hat = self.omega_nom.copy()  # measured turn rates (rad/s), learnt while orbiting
         self._helper = None
+        self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
@@ -523,6 +524,19 @@ class _Runner:
         h = np.array([math.sin(goal[2]), math.cos(goal[2])])
         return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
 
+    def fine_start_on(self, ph, i: int) -> np.ndarray:
+        """The intermediate pose a_i on the nominal path, about 250 um before the slot.
+
+        There the route is still in its last clockwise turn or on its final straight: the slot lies ahead
+        and to the right, within reach of one interpolated arc, and the gross motion to a_i follows the
+        nominal route instead of looping to a pose off it.
+        """
+        if not ph.path or ph.path_start is None:
+            return self.fine_start(i, self.goals[i])
+        path = pathlib.Path(ph.path_start, self.r[i], ph.path)
+        s_f = min(2.5 * self.opts.fine_distance_um * 0.5, 0.8 * path.length)
+        return np.asarray(path.pose_at(path.length - s_f), dtype=np.float64)
+
     # -- docking of single robots -------------------------------------------------------------------
 
     def dock_single(self, k: int, route_phase) -> None:
@@ -530,9 +544,11 @@ class _Runner:
         orbiting = self.orbiting_below(k)
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
         for attempt in range(4):
-            a_pose = self.fine_start(i, self.goals[i])
-            # gross motion through the nominal route's waypoints, then to a_i
-            targets = [w for w in waypoints[:-1]] + [a_pose]
+            # a_i on the nominal route (moved with the structure when it was re-targeted)
+            a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, self.goals[i])
+            a_pose = self.retargeted(a_pose)
+            # gross motion through the nominal route's waypoints before a_i, then to a_i
+            targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
                 self.steer(i, tgt, k, k - 1, orbiting)
             waypoints = []
@@ -541,6 +557,26 @@ class _Runner:
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
             self.back_off(i, k)
         raise _Budget()
+
+    def _before(self, w, a_pose, route_phase, i) -> bool:
+        """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route."""
+        if route_phase is None or not route_phase.path:
+            return True
+        path = pathlib.Path(route_phase.path_start, self.r[i], route_phase.path)
+        s = path.sample(5.0)
+        kw = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(w)[:2]).T)))
+        ka = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(a_pose)[:2]).T)))
+        return kw < ka
+
+    def retargeted(self, pose: np.ndarray) -> np.ndarray:
+        """A nominal pose moved by the rigid motion the structure took when G_1 formed."""
+        if self._motion is None:
+            return np.asarray(pose, float)
+        phi, c_nom, c_meas = self._motion
+        d = np.asarray(pose[:2]) - c_nom
+        cph, sph = math.cos(phi), math.sin(phi)
+        rot = np.array([d[0] * cph + d[1] * sph, -d[0] * sph + d[1] * cph])
+        return np.array([c_meas[0] + rot[0], c_meas[1] + rot[1], float(np.mod(pose[2] + phi, TWO_PI))])
 
     def fine_dock(self, i: int, k: int, orbiting) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""
@@ -583,18 +619,96 @@ class _Runner:
     # -- G_1 --------------------------------------------------------------------------------------------
 
     def form_pair(self, phases) -> None:
+        """Step 1: follow the pair's phases; re-plan sigma_1 from the measured poses when out of step."""
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         lower = self.orbiting_below(n - 1)
-        for ph in phases:
+        queue = list(phases)
+        replans = 0
+        while queue:
+            ph = queue.pop(0)
+            ok = True
             if ph.kind == "pair-A":
-                self.orbit_sync(N, M, np.array(ph.target), float(ph.partner_end[2]), lower)
+                ok = self.follow_a_phase(N, M, ph, lower)
             elif ph.kind == "pair-B":
-                self.pair_piece(N, M, ph, lower)
+                ok = self.pair_piece(N, M, ph, lower)
+            if not ok:
+                replans += 1
+                if replans > 8:
+                    raise _Budget()
+                self.log("replan", N, f"G_1 out of step after a {ph.kind} phase: sigma_1 re-planned from the measured poses")
+                queue = self.replan_pair(N, M)
         self.close_pair(N, M, lower)
 
-    def pair_piece(self, N: int, M: int, ph, lower) -> None:
-        """D_{n-1} drives to the end of its piece while D_n runs straight; loop D_n back if it runs out."""
+    def follow_a_phase(self, N: int, M: int, ph, lower) -> bool:
+        """D_n drives to the start of its next run while D_{n-1} orbits back to its departure heading.
+
+        The phase lasts as long as D_{n-1}, at its measured turn rate, needs to come back to the planned
+        departure heading (the planned number of turns); D_n's path of exactly that duration is computed
+        once from its measured pose and driven open loop, then D_n steers into its region if it is not
+        there. Returns False when D_{n-1} ends out of step (the caller re-plans).
+        """
+        n = self.n
+        vN, rN = self.v[N], self.r[N]
+        target = np.array(ph.target)
+        disc = [(turning_centres(self.est[M], self.r[M])[0], self.rstar[M])]
+        turns_planned = self.omega_nom[M] * ph.duration_s
+        delta = float(np.mod(ph.partner_end[2] - self.est[M, 2], TWO_PI)) if ph.partner_end is not None else 0.0
+        k = max(0, round((turns_planned - delta) / TWO_PI))
+        path = None
+        for extra in range(3):
+            duration = (delta + TWO_PI * (k + extra)) / self.omega_hat[M]
+            try:
+                cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration)
+            except pathlib.InfeasibleLengthError:
+                continue
+            if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
+                cand = self.timed_detour(N, target, duration, lower, disc)
+                if cand is None or cand.length < vN * duration - 1.0:
+                    continue
+            path = cand
+            break
+        if path is None:
+            return False
+        self.replans += 1
+        done = 0.0
+        while path.length - done > 1e-6:
+            th0, t0 = self.est[M, 2], self.t
+            self.drive(self.path_steps(_sub_path(path, done, done + vN * self.tx), vN, n, n - 1))
+            done += vN * self.tx
+            rate = float(np.mod(self.est[M, 2] - th0, TWO_PI)) / max(self.t - t0, 1e-9)
+            if 0.5 * self.omega_nom[M] < rate < 1.5 * self.omega_nom[M]:
+                self.omega_hat[M] = 0.8 * self.omega_hat[M] + 0.2 * rate
+        if not self.arrived(self.est[N], target):
+            self.steer(N, target, n, n - 1, lower, extra_discs=disc, max_cycles=60)
+        if ph.partner_end is None:
+            return True
+        still = angle_difference(ph.partner_end[2], self.est[M, 2])  # > 0: D_{n-1} still has to turn
+        return -math.radians(3.0) <= still <= math.radians(40.0)
+
+    def replan_pair(self, N: int, M: int) -> list:
+        """Plan the pair's remaining phases from the measured poses (using D_{n-1}'s measured turn rate)."""
+        from dataclasses import replace as dc_replace
+
+        from .planning import PlannerOptions, _NoRoute, _Planner
+        from .robots import Pose
+
+        robots = []
+        for i, rb in enumerate(self.scn.robots):
+            speed = rb.speed_um_s * (self.omega_hat[i] / self.omega_nom[i]) if i == M else rb.speed_um_s
+            robots.append(dc_replace(rb, start=Pose(*self.est[i]), speed_um_s=float(speed)))
+        scn2 = self.scn.with_robots(robots)
+        for clearance in (PLAN_CLEARANCE_UM, 10.0):
+            planner = _Planner(scn2, self.analysis, self.pr.structure, PlannerOptions(clearance_um=clearance, seed=len(self.events)))
+            try:
+                planner.form_pair()
+            except (_NoRoute, PlanningError):
+                continue
+            return [p for p in planner.tl.phases if p.kind.startswith("pair")]
+        raise _Budget()
+
+    def pair_piece(self, N: int, M: int, ph, lower) -> bool:
+        """D_{n-1} drives to the end of its piece while D_n runs straight; False if D_n's run runs out."""
         n = self.n
         run_start = np.array(ph.run[0])
         run_len = float(ph.run[1])
@@ -602,11 +716,9 @@ class _Runner:
         target = np.array(ph.target)
         a = 0.0
         if ph.last:
-            target = self.fine_start(M, self.goals[M])
+            target = self.fine_start_on(ph, M)
             a = float(pathlib.shortest_path(target, self.goals[M], self.r[M]).length) * self.v[N] / self.v[M]
-        # D_{n-1} starts each piece a little before its departure heading (see orbit_sync): D_n drives
-        # straight meanwhile, so its run may be that much longer.
-        slack = 40.0 + self.v[N] * math.radians(25.0) / self.omega_hat[M]
+        slack = 40.0 + self.v[N] * math.radians(40.0) / self.omega_hat[M]
 
         def room() -> float:
             # D_n may run on until 0.4 a from its slot in the last piece (its partner is then a away)
@@ -614,20 +726,7 @@ class _Runner:
             end = run_len - (0.4 * a if ph.last else 0.0) + slack
             return max(0.0, (end - done) / self.v[N])
 
-        for _ in range(20):
-            if self.steer(M, target, n - 1, n - 2, lower, guard=room):
-                return
-            # D_n's run is used up: it loops back to the start of its run while D_{n-1} orbits back
-            # to where it stopped (the seed's re-planning of sigma_1 when one robot is late).
-            self.log("resync", N, "straight run used up before its partner arrived; looping back (sigma_1 re-planned)")
-            entry = run_start
-            if ph.last:
-                # re-enter the corridor where D_n reaches its slot as D_{n-1} reaches its own
-                left_m = pathlib.shortest_path(self.est[M], target, self.r[M]).length / self.v[M]
-                need = min(run_len, self.v[N] * left_m + a)
-                entry = run_start + (run_len - need) * np.array([hN[0], hN[1], 0.0])
-            self.orbit_sync(N, M, entry, float(self.est[M, 2]), lower)
-        raise _Budget()
+        return self.steer(M, target, n - 1, n - 2, lower, guard=room)
 
     def close_pair(self, N: int, M: int, lower) -> None:
         """Fine motion of the pair: S_3f arcs through both docking points, or both straight."""
@@ -675,6 +774,7 @@ class _Runner:
         c_nom = 0.5 * (g[M, :2] + g[N, :2])
         c_meas = 0.5 * (self.est[M, :2] + self.est[N, :2])
         cph, sph = math.cos(phi), math.sin(phi)
+        self._motion = (phi, c_nom, c_meas)
         rest = [i for i in range(self.n) if not self.docked[i]]
         for i in rest:
             d = g[i, :2] - c_nom

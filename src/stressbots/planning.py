@@ -109,6 +109,8 @@ class Phase:
     run: tuple[tuple[float, float, float], float] | None = None
     last: bool = False
     partner_end: tuple[float, float, float] | None = None
+    path: tuple[tuple[str, float], ...] = ()
+    path_start: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -620,7 +622,10 @@ class _Planner:
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])
         t0 = self.tl.t
         self.tl.apply_path(i, path, k, k - 1)
-        self.tl.phase("route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints))
+        self.tl.phase(
+            "route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints),
+            path=path.then(("S", a)).segments, path_start=tuple(float(v) for v in path.start),
+        )
         t0 = self.tl.t
         self.tl.apply_path(i, approach, k, k - 1)
         self.tl.phase("approach", i, k, k - 1, t0, goal)
@@ -908,7 +913,7 @@ class _Planner:
         # A_0: D_n drives to the start of its first run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
         t0 = self.tl.t
         self.tl.apply_path(N, a_paths[0], n, n - 1)
-        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]))
+        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[0].segments, path_start=tuple(float(v) for v in a_paths[0].start))
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
             piece = _sub_path(fullM, bounds[j], bounds[j + 1])
@@ -917,13 +922,14 @@ class _Planner:
             self.tl.apply_path(M, piece, n - 1, n - 2)
             self.tl.phase(
                 "pair-B", M, n - 1, n - 2, t0, piece.end, partner=N,
-                run=(tuple(float(v) for v in runs[j].start), float(runs[j].length)), last=j + 1 == pieces,
+                run=(tuple(float(v) for v in runs[j].start), float(runs[j].length)), last=j + 1 == pieces, path=piece.segments,
+                path_start=tuple(float(v) for v in piece.start),
             )
             self.tl.travel[N] = before + vN * durs[j]
             if j + 1 < pieces:
                 t0 = self.tl.t
                 self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
-                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]))
+                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[j + 1].segments, path_start=tuple(float(v) for v in a_paths[j + 1].start))
         self.route_lengths[M] = fullM.length
         self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
