@@ -561,6 +561,232 @@ def simulate(
     out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
 
 
+# ----------------------------------------------------------------------------------------------------
+# bounds, montecarlo
+
+
+def _finite_nonneg(value: float, option: str) -> float:
+    import math
+
+    if not (math.isfinite(value) and value >= 0):
+        raise StressbotsError(f"must be a finite number >= 0, got {value:g}", source=option)
+    return float(value)
+
+
+@app.command()
+def bounds(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.", show_default=False),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print only the bounds.json object on stdout."),
+    k: float = typer.Option(3.0, "--k", help="Standard deviations of each noise factor the bounds cover (k-sigma box)."),
+    critical: bool = typer.Option(
+        False, "--critical", help="Also find, per robot, the largest multiple of [noise] at which it is still guaranteed (a few s)."
+    ),
+    coverage_trials: int = typer.Option(
+        0, "--coverage-trials", min=0, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
+    ),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the coverage runs."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
+) -> None:
+    """Error bounds of the EDR strategy (seed App. 3.4): delta(t), C_alpha,i, A_i* and a verdict per robot.
+
+    delta(t) integrates the kinematic error model in closed form (SPEC 3 arcs with speed v + v_e and
+    turn rate omega + omega_e, SPEC 8) over a k-sigma box of the scenario's [noise]: speed and radius
+    factors (plus the simulator's per-Drive jitter) and heading drift; the worst case over the box and
+    over time. C_alpha,i has radius delta_xy(t_2pi) and half-height delta_theta(t_2pi) (t_theta =
+    theta / omega_hat, slowest turn), plus the camera's error. D_n's timed forward projection covers its
+    uncorrected straight run for the t_4pi D_{n-1} may need. A_i* is the set of poses from which fine
+    motion plus compliance (+-45 deg sticking cone; |alpha| < 60 deg, |w_y| < 80 um for G_1) reaches the
+    slot with the whole cylinder, outside C_O; a robot is "guaranteed" when A_i* is not empty. Writes
+    DIR/bounds.json and DIR/bounds.png (delta curves, A_i*, the reachable cones of S_2f and S_3f).
+
+    Examples: `stressbots bounds examples/four-robots.toml --out out/bounds`;
+    `stressbots bounds SCENARIO --k 2 --critical --coverage-trials 200 --json`.
+    """
+    import math
+
+    from .bounds import analyse_bounds, critical_noise_scales, empirical_coverage
+    from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
+    from .viz import plot_bounds
+
+    k = _finite_nonneg(k, "--k")
+    scn = scenario_arg(scenario)
+    folder = None
+    if out_dir is not None:
+        folder = prepare_dir(out_dir, inputs=[scenario])
+        for name in ("bounds.json", "bounds.png"):
+            check_not_input(folder / name, [scenario])
+    show = not (quiet or as_json)
+    with err.status("computing bounds...", spinner="dots") if show else _nullcontext() as status:
+        say = (lambda m: status.update(f"{m}...")) if show else None
+        report = analyse_bounds(scn, k=k, progress=say)
+        scales = critical_noise_scales(scn, k=k, structure=report.structure, progress=say) if critical else None
+    if coverage_trials:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        with Progress(TextColumn("coverage"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
+                      disable=not show, transient=True) as bar:
+            task = bar.add_task("coverage", total=coverage_trials * scn.n)
+            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, t: bar.update(task, completed=d))
+        report = report.with_coverage(cov)
+    doc = report.to_dict()
+    if scales is not None:
+        doc["critical_noise_scale"] = scales
+    if folder is not None:
+        write_json(folder / "bounds.json", doc)
+        save_figure(plot_bounds(scn, report), folder / "bounds.png")
+    if as_json:
+        sys.stdout.write(to_json(doc))
+        return
+    if quiet:
+        return
+    from rich.table import Table
+
+    m = report.model
+    out.print(
+        f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
+        f"drift +-{math.degrees(m.drift_rad_per_um) * 1000:.3g} deg/mm; camera {m.camera_position_um:.3g} um / "
+        f"{math.degrees(m.camera_heading_rad):.3g} deg",
+        highlight=False,
+        soft_wrap=True,
+    )
+    t = Table(caption="r_a, h_a: C_alpha,i; pair: G_1; critical: largest multiple of \\[noise] still guaranteed" if scales else
+              "r_a, h_a: the cylinder C_alpha,i; pair: the G_1 robots")
+    for col in ("robot", "role", "t_2pi s", "r_a um", "h_a deg", "A* mm2", "guaranteed"):
+        t.add_column(col, justify="left" if col in ("robot", "role", "guaranteed") else "right", no_wrap=True)
+    if scales is not None:
+        t.add_column("critical", justify="right", no_wrap=True)
+    for rb in report.robots:
+        area = "-" if rb.region is None else f"{rb.region.area_um2 / 1e6:.3g}"
+        row = [rb.label, rb.role, f"{rb.t_2pi_s:.1f}", f"{rb.cylinder.radius_um:.0f}",
+               f"{math.degrees(rb.cylinder.height_rad):.1f}", area, "yes" if rb.guaranteed else "no"]
+        if scales is not None:
+            row.append(f"{scales[rb.name]:.3g}")
+        t.add_row(*row)
+    out.print(t)
+    for rb in report.robots:
+        out.print(f"{rb.label}: {rb.reason}", highlight=False, soft_wrap=True)
+    p = report.projection
+    out.print(
+        f"timed forward projection of D_n ({p.robot}) over t_4pi = {p.t_4pi_s:.1f} s of {p.partner} ({p.straight_um:.0f} um straight): "
+        f"radius {p.radius_um:.0f} um (across {p.across_um:.0f} um), heading +-{math.degrees(p.heading_rad):.1f} deg "
+        f"(self-alignment needs |w_y| < 80 um, |alpha| < 60 deg)",
+        highlight=False,
+        soft_wrap=True,
+    )
+    if report.coverage is not None:
+        c = report.coverage
+        out.print(
+            f"empirical coverage: {100 * c.fraction:.2f} % of {c.checkpoints} simulated checkpoints inside delta(t) "
+            f"({100 * c.end_fraction:.2f} % of sequence ends; error/bound median {c.ratio_p50:.2f}, max {c.ratio_max:.2f})",
+            highlight=False,
+            soft_wrap=True,
+        )
+    for note in report.notes:
+        out.print(f"note: {note}", highlight=False, soft_wrap=True)
+    if folder is not None:
+        out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}", highlight=False, soft_wrap=True)
+
+
+@app.command()
+def montecarlo(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, target and [noise].", show_default=False),
+    trials: int = typer.Option(100, "--trials", min=1, help="Closed-loop trials (at each noise scale)."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    sweep: Optional[str] = typer.Option(
+        None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
+    ),
+    time_budget_s: Optional[float] = typer.Option(
+        None, "--time-budget-s", help="Simulated time budget per trial (s); default the controller's.", show_default=False
+    ),
+    as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
+) -> None:
+    """Run N independent closed-loop assemblies on the simulated plant and summarise them.
+
+    Every trial builds a SimulatedPlant with its own seed and lets the controller assemble the
+    structure, following one nominal plan computed once. The same seed gives the same numbers whatever
+    the number of workers. Writes DIR/summary.json (trials, successes, success_rate, its 95 % Wilson
+    interval, percentiles of the shape error, placement error and duration, failure reasons with the
+    failed trials' seeds, seeds and provenance) and DIR/montecarlo.png; with --sweep also the success
+    rate against the noise scale (summary "sweep" and DIR/sweep.png).
+
+    Examples: `stressbots montecarlo examples/four-robots.toml --trials 100 --seed 1 --out out/mc`;
+    `stressbots montecarlo SCENARIO --trials 50 --seed 0 --out out/sweep --sweep 0,0.5,1,1.5,2`.
+    """
+    from . import montecarlo as mc
+    from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
+    from .viz import plot_montecarlo, plot_sweep
+
+    factors = mc.parse_sweep(sweep) if sweep is not None else None
+    if time_budget_s is not None and not (time_budget_s > 0 and time_budget_s < float("inf")):
+        raise StressbotsError(f"must be a finite number > 0 s, got {time_budget_s:g}", source="--time-budget-s")
+    scn = scenario_arg(scenario)
+    folder = prepare_dir(out_dir, inputs=[scenario])
+    for name in ("summary.json", "montecarlo.png", "sweep.png"):
+        check_not_input(folder / name, [scenario])
+    assemble = mc.default_assemble()
+    show = not (quiet or as_json)
+    with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext():
+        plan = mc.default_planner()(scn)
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    total = trials * (1 + len([f for f in (factors or ()) if f != 1.0]))
+    # No refresh thread: worker processes may be forked while the bar runs.
+    with Progress(TextColumn("trials"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                  console=err, disable=not show, auto_refresh=False, transient=False) as bar:
+        task = bar.add_task("trials", total=total)
+        bar.refresh()
+        study = mc.run_study(
+            scn, trials, seed, workers=workers, sweep=factors, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
+            progress=lambda d, t: bar.update(task, completed=d, refresh=True), source=str(scenario),
+        )
+    s = study.summary
+    write_json(folder / "summary.json", s)
+    save_figure(plot_montecarlo(s, study.main), folder / "montecarlo.png")
+    if factors:
+        save_figure(plot_sweep(s["sweep"], title=f"{scn.name}: success rate vs noise ({trials} trials per point, seed {seed})"),
+                    folder / "sweep.png")
+    if as_json:
+        sys.stdout.write(to_json(s))
+        return
+    if quiet:
+        return
+    lo, hi = s["success_rate_ci95"]
+
+    def pct(block: dict, unit: str) -> str:
+        if block["n"] == 0:
+            return "-"
+        return f"p50 {block['p50']:.3g}, p90 {block['p90']:.3g}, p95 {block['p95']:.3g}, max {block['max']:.3g} {unit}"
+
+    line = lambda text: out.print(text, highlight=False, soft_wrap=True)  # noqa: E731
+    line(f"[bold]{scn.name}[/bold]: {s['successes']}/{s['trials']} successes, rate {s['success_rate']:.3f} (95 % CI {lo:.3f}-{hi:.3f}), "
+         f"seed {seed}, {s['run']['workers']} workers, {s['run']['wall_s']:.1f} s")
+    line(f"shape error RMS: {pct(s['shape_error_rms_um'], 'um')}")
+    line(f"placement error (largest per trial): {pct(s['placement_error_um'], 'um')}")
+    line(f"duration (simulated): {pct(s['duration_s'], 's')}")
+    for kind, count in s["failures"].items():
+        line(f"failure x{count}: {kind}")
+    if s["failed_trials"]:
+        seeds = ", ".join(str(f["seed"]) for f in s["failed_trials"][:5])
+        line(f"failed trials' seeds (rerun with `stressbots simulate --seed`): {seeds}{', ...' if len(s['failed_trials']) > 5 else ''}")
+    if factors:
+        from rich.table import Table
+
+        t = Table(title="noise sweep")
+        for col in ("noise scale", "successes", "rate", "95 % CI", "shape error p50 (um)"):
+            t.add_column(col, justify="right")
+        for row in s["sweep"]:
+            p50 = row["shape_error_rms_um"]["p50"]
+            t.add_row(f"{row['noise_scale']:g}", f"{row['successes']}/{row['trials']}", f"{row['success_rate']:.3f}",
+                      f"{row['success_rate_ci95'][0]:.3f}-{row['success_rate_ci95'][1]:.3f}", "-" if p50 is None else f"{p50:.3g}")
+        out.print(t)
+    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else [])
+    line("wrote " + ", ".join(str(folder / f) for f in files))
+
+
 def _click_base(name: str) -> type[BaseException]:
     """The click exception class ``name`` as used by this Typer (newer Typers vendor their own click)."""
     for cls in typer.BadParameter.__mro__:

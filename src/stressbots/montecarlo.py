@@ -1,0 +1,496 @@
+"""Monte Carlo studies of closed-loop assembly (``stressbots montecarlo``).
+
+A study runs N independent closed-loop trials of one scenario: trial ``i`` builds a fresh
+:class:`stressbots.sim.SimulatedPlant` and lets the controller (:func:`stressbots.control.assemble`)
+assemble the structure through it, following one nominal plan computed once for the whole study.
+
+Determinism
+-----------
+Trial ``i``'s seed is ``np.random.SeedSequence(seed).spawn(N)[i]``, turned into an integer (the top 53 bits
+of its first 64-bit word, so JSON readers keep it exact; :func:`trial_seeds`); the plant and the
+controller both receive that integer. A trial depends on nothing else, so the results are the same
+whatever the number of worker processes and in whatever order they finish: outcomes are collected by
+trial index. Only the ``"run"`` block of the summary (workers, wall time) differs between runs.
+
+``--sweep`` repeats the study with the scenario's ``[noise]`` multiplied by each factor
+(:meth:`stressbots.scenario.Noise.scaled`), with the *same* trial seeds (common random numbers: the
+differences between noise levels are not blurred by different draws).
+
+Statistics
+----------
+The success rate comes with a 95 % Wilson score interval (:func:`wilson_interval`), which stays inside
+[0, 1] and keeps its coverage for rates near 0 or 1 and small N (unlike the normal approximation).
+Error figures are percentiles (50/90/95/max, linear interpolation) over the trials where they are
+defined: the RMS shape error after the best rigid alignment, the largest placement error over the robots,
+the largest heading error, the simulated duration and the replans. Failure reasons are counted with their
+numbers replaced by ``#`` so that like failures group together; the failed trials' seeds are listed for
+reproduction with ``stressbots simulate --seed``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import time
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .errors import StressbotsError
+
+__all__ = [
+    "TrialOutcome",
+    "Study",
+    "trial_seeds",
+    "wilson_interval",
+    "percentiles",
+    "failure_kind",
+    "run_trial",
+    "run_trials",
+    "summarise",
+    "run_study",
+    "default_assemble",
+    "default_planner",
+    "parse_sweep",
+    "MAX_LISTED_FAILURES",
+]
+
+MAX_LISTED_FAILURES = 100
+"""At most this many failed trials are listed (with their seeds) in a summary."""
+
+_Z95 = 1.959963984540054  # standard normal quantile 0.975
+
+
+# ----------------------------------------------------------------------------------------------------
+# Pure pieces
+
+
+def trial_seeds(seed: int, trials: int) -> list[int]:
+    """Integer seeds of trials ``0..trials-1``: ``SeedSequence(seed).spawn(trials)[i]``, 53 bits each.
+
+    Spawned children are independent streams; trial ``i``'s seed does not depend on ``trials`` beyond
+    ``i < trials`` (spawning is sequential), so a longer study extends a shorter one.
+    """
+    if int(seed) < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    children = np.random.SeedSequence(int(seed)).spawn(int(trials))
+    return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(11)) for c in children]
+
+
+def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion.
+
+    ``p = s / n``, ``z`` the normal quantile of ``(1 + confidence) / 2``::
+
+        centre = (p + z^2 / (2 n)) / (1 + z^2 / n)
+        half   = z / (1 + z^2 / n) * sqrt(p (1 - p) / n + z^2 / (4 n^2))
+
+    ``(0, 1)`` for ``n = 0``. E.g. 8 of 10 gives (0.490, 0.943); 0 of 10 gives (0, 0.278).
+    """
+    n = int(trials)
+    s = int(successes)
+    if n < 0 or s < 0 or s > n:
+        raise ValueError(f"need 0 <= successes <= trials, got {s} of {n}")
+    if n == 0:
+        return 0.0, 1.0
+    if confidence == 0.95:
+        z = _Z95
+    else:
+        from scipy.stats import norm
+
+        z = float(norm.ppf(0.5 * (1.0 + confidence)))
+    p = s / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n))
+    lo, hi = max(0.0, centre - half), min(1.0, centre + half)
+    if s == 0:
+        lo = 0.0
+    if s == n:
+        hi = 1.0
+    return lo, hi
+
+
+def percentiles(values, qs: Sequence[float] = (50, 90, 95)) -> dict[str, float | int | None]:
+    """``{"p50": .., "p90": .., "p95": .., "max": .., "mean": .., "n": ..}`` over the finite values
+    (``None`` when there are none)."""
+    v = np.asarray([x for x in values if x is not None], dtype=np.float64)
+    v = v[np.isfinite(v)]
+    out: dict[str, float | int | None] = {}
+    for q in qs:
+        out[f"p{q:g}"] = float(np.percentile(v, q)) if v.size else None
+    out["max"] = float(v.max()) if v.size else None
+    out["mean"] = float(v.mean()) if v.size else None
+    out["n"] = int(v.size)
+    return out
+
+
+_NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+
+
+def failure_kind(failure: str | None) -> str | None:
+    """A failure message with its numbers replaced by ``#`` (so that like failures count together)."""
+    if failure is None:
+        return None
+    return _NUMBER.sub("#", str(failure)).strip()
+
+
+def parse_sweep(text: str, *, option: str = "--sweep") -> tuple[float, ...]:
+    """Parse ``"0,0.5,1,1.5,2"`` into noise scale factors (finite, >= 0, distinct, in the given order)."""
+    items = [t.strip() for t in str(text).split(",")]
+    if not str(text).strip() or any(not t for t in items):
+        raise StressbotsError("expected comma-separated noise scale factors, e.g. '0,0.5,1,1.5,2'", source=option)
+    out: list[float] = []
+    for t in items:
+        try:
+            f = float(t)
+        except ValueError:
+            raise StressbotsError(f"{t!r} is not a number", source=option) from None
+        if not math.isfinite(f) or f < 0:
+            raise StressbotsError(f"noise scale factors must be finite and >= 0, got {t}", source=option)
+        if f not in out:
+            out.append(f)
+    return tuple(out)
+
+
+# ----------------------------------------------------------------------------------------------------
+# One trial
+
+
+@dataclass(frozen=True)
+class TrialOutcome:
+    """What one closed-loop trial produced (reduced from the controller's ``AssemblyResult``).
+
+    ``placement_error_um`` and ``heading_error_deg`` are the largest over the robots; ``error`` holds
+    the exception when the trial raised instead of returning (then ``success`` is False). ``wall_s``
+    is the only field that varies between identical runs.
+    """
+
+    index: int
+    seed: int
+    noise_scale: float
+    success: bool
+    failure: str | None
+    shape_error_rms_um: float
+    placement_error_um: float
+    heading_error_deg: float
+    duration_s: float
+    replans: int
+    docked: int
+    robots: int
+    error: str | None = None
+    wall_s: float = field(default=0.0, compare=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _maxf(x) -> float:
+    a = np.asarray(x, dtype=np.float64).reshape(-1)
+    a = a[np.isfinite(a)]
+    return float(a.max()) if a.size else math.nan
+
+
+def run_trial(scenario, plan, index: int, seed: int, assemble: Callable, *, noise_scale: float = 1.0, time_budget_s: float | None = None) -> TrialOutcome:
+    """Run one closed-loop trial: ``assemble(scenario, SimulatedPlant(scenario, seed=seed), seed=seed, plan=plan)``.
+
+    An exception inside the trial becomes a failed outcome naming it (one bad trial does not end the
+    study); the study reports how many trials raised.
+    """
+    from .sim import SimulatedPlant
+
+    t0 = time.perf_counter()
+    n = scenario.n
+    try:
+        plant = SimulatedPlant(scenario, seed=seed)
+        kwargs: dict[str, Any] = {"seed": seed, "plan": plan}
+        if time_budget_s is not None:
+            kwargs["time_budget_s"] = time_budget_s
+        res = assemble(scenario, plant, **kwargs)
+    except Exception as exc:  # noqa: BLE001 - a trial's crash is data, reported in the summary
+        msg = f"{type(exc).__name__}: {exc}"
+        return TrialOutcome(index, seed, noise_scale, False, f"exception: {msg}", math.nan, math.nan, math.nan, math.nan, 0, 0, n, msg,
+                            time.perf_counter() - t0)
+    docked = np.asarray(res.docked, dtype=bool)
+    return TrialOutcome(
+        index=int(index),
+        seed=int(seed),
+        noise_scale=float(noise_scale),
+        success=bool(res.success),
+        failure=None if res.failure is None else str(res.failure),
+        shape_error_rms_um=float(res.shape_error_rms_um),
+        placement_error_um=_maxf(res.placement_error_um),
+        heading_error_deg=_maxf(res.heading_error_deg),
+        duration_s=float(res.duration_s),
+        replans=int(res.replans),
+        docked=int(docked.sum()),
+        robots=n,
+        error=None,
+        wall_s=time.perf_counter() - t0,
+    )
+
+
+# ----------------------------------------------------------------------------------------------------
+# Many trials, in parallel
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(scenario, plan, assemble, time_budget_s) -> None:
+    _WORKER.update(scenario=scenario, plan=plan, assemble=assemble, time_budget_s=time_budget_s, scaled={})
+
+
+def _scaled(scenario, factor: float, cache: dict):
+    if factor == 1.0:
+        return scenario
+    if factor not in cache:
+        cache[factor] = scenario.with_noise(scenario.noise.scaled(factor))
+    return cache[factor]
+
+
+def _worker_trial(task: tuple[float, int, int]) -> TrialOutcome:
+    factor, index, seed = task
+    w = _WORKER
+    scn = _scaled(w["scenario"], factor, w["scaled"])
+    return run_trial(scn, w["plan"], index, seed, w["assemble"], noise_scale=factor, time_budget_s=w["time_budget_s"])
+
+
+def default_assemble() -> Callable:
+    """The controller: :func:`stressbots.control.assemble`."""
+    try:
+        from .control import assemble
+    except ImportError:
+        raise StressbotsError("the closed-loop controller (stressbots.control.assemble) is not available in this installation") from None
+    return assemble
+
+
+def default_planner() -> Callable:
+    """The nominal planner a study shares between its trials: the controller's own choice
+    (``stressbots.control.nominal_plan``) when it offers one, else :func:`stressbots.planning.plan_assembly`."""
+    try:
+        from .control import nominal_plan  # type: ignore[attr-defined]
+
+        return nominal_plan
+    except ImportError:
+        from .planning import plan_assembly
+
+        return plan_assembly
+
+
+def run_trials(
+    scenario,
+    trials: int,
+    seed: int,
+    *,
+    workers: int | None = None,
+    assemble: Callable | None = None,
+    plan=None,
+    noise_scales: Sequence[float] = (1.0,),
+    time_budget_s: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+) -> dict[float, list[TrialOutcome]]:
+    """Run ``trials`` closed-loop trials at each noise scale; outcomes by scale, in trial order.
+
+    Parameters
+    ----------
+    scenario:
+        The scenario; its ``[noise]`` is scale 1.
+    trials, seed:
+        Number of trials per scale and the study's seed (:func:`trial_seeds`, the same at every scale).
+    workers:
+        Processes (default ``os.cpu_count()``, at most the number of tasks). ``1`` runs in this process.
+    assemble:
+        The controller, ``assemble(scenario, plant, *, seed, plan[, time_budget_s]) -> AssemblyResult``
+        (default :func:`default_assemble`). With several workers it must be picklable (a module-level
+        function).
+    plan:
+        The nominal plan passed to every trial (default :func:`default_planner` on the scenario, once).
+    noise_scales:
+        Factors on the scenario's noise.
+    progress:
+        Called as ``progress(done, total)`` after every finished trial (in this process).
+    """
+    if trials < 1:
+        raise StressbotsError(f"must be at least 1, got {trials}", source="--trials")
+    if workers is not None and workers < 1:
+        raise StressbotsError(f"must be at least 1, got {workers}", source="--workers")
+    assemble = assemble or default_assemble()
+    if plan is None:
+        plan = default_planner()(scenario)
+    seeds = trial_seeds(seed, trials)
+    scales = tuple(dict.fromkeys(float(f) for f in noise_scales))
+    tasks = [(f, i, s) for f in scales for i, s in enumerate(seeds)]
+    total = len(tasks)
+    results: dict[tuple[float, int], TrialOutcome] = {}
+    k = min(int(workers or os.cpu_count() or 1), total)
+    if k <= 1:
+        _init_worker(scenario, plan, assemble, time_budget_s)
+        try:
+            for done, task in enumerate(tasks, start=1):
+                out = _worker_trial(task)
+                results[(task[0], task[1])] = out
+                if progress is not None:
+                    progress(done, total)
+        finally:
+            _WORKER.clear()
+    else:
+        import multiprocessing
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+        # fork where the platform has it: workers inherit the loaded modules (fast start, works from any
+        # __main__, even a notebook or stdin); elsewhere the platform's default (spawn). The results do
+        # not depend on the start method.
+        methods = multiprocessing.get_all_start_methods()
+        ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
+        with ProcessPoolExecutor(max_workers=k, mp_context=ctx, initializer=_init_worker,
+                                 initargs=(scenario, plan, assemble, time_budget_s)) as pool:
+            pending = {pool.submit(_worker_trial, t): t for t in tasks}
+            done_count = 0
+            try:
+                while pending:
+                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        task = pending.pop(fut)
+                        results[(task[0], task[1])] = fut.result()
+                        done_count += 1
+                        if progress is not None:
+                            progress(done_count, total)
+            except BaseException:
+                for fut in pending:
+                    fut.cancel()
+                raise
+    return {f: [results[(f, i)] for i in range(trials)] for f in scales}
+
+
+# ----------------------------------------------------------------------------------------------------
+# Summaries
+
+
+def _noise_dict(noise) -> dict[str, float]:
+    return {
+        "speed_rel_sd": noise.speed_rel_sd,
+        "turn_radius_rel_sd": noise.turn_radius_rel_sd,
+        "heading_drift_deg_per_mm": math.degrees(noise.heading_drift_rad_per_um) * 1000.0,
+        "camera_position_sd_um": noise.camera_position_sd_um,
+        "camera_heading_sd_deg": math.degrees(noise.camera_heading_sd_rad),
+        "camera_dropout": noise.camera_dropout,
+    }
+
+
+def summarise(outcomes: Sequence[TrialOutcome]) -> dict[str, Any]:
+    """Statistics of one set of trials (deterministic: no wall times)."""
+    n = len(outcomes)
+    s = sum(1 for o in outcomes if o.success)
+    lo, hi = wilson_interval(s, n)
+    failed = [o for o in outcomes if not o.success]
+    kinds = Counter(failure_kind(o.failure) or "unknown" for o in failed)
+    return {
+        "trials": n,
+        "successes": s,
+        "success_rate": s / n if n else 0.0,
+        "success_rate_ci95": [lo, hi],
+        "shape_error_rms_um": percentiles(o.shape_error_rms_um for o in outcomes),
+        "shape_error_rms_um_successes": percentiles(o.shape_error_rms_um for o in outcomes if o.success),
+        "placement_error_um": percentiles(o.placement_error_um for o in outcomes),
+        "heading_error_deg": percentiles(o.heading_error_deg for o in outcomes),
+        "duration_s": percentiles(o.duration_s for o in outcomes),
+        "replans": percentiles(o.replans for o in outcomes),
+        "failures": dict(sorted(kinds.items(), key=lambda kv: (-kv[1], kv[0]))),
+        "exceptions": sum(1 for o in outcomes if o.error is not None),
+        "failed_trials": [
+            {"trial": o.index, "seed": o.seed, "failure": o.failure} for o in failed[:MAX_LISTED_FAILURES]
+        ],
+    }
+
+
+@dataclass(frozen=True, eq=False)
+class Study:
+    """A finished Monte Carlo study: the summary (``summary.json``) and every outcome by noise scale."""
+
+    summary: dict
+    outcomes: dict  # noise scale -> list[TrialOutcome]
+
+    @property
+    def main(self) -> list[TrialOutcome]:
+        return self.outcomes[1.0]
+
+    @property
+    def sweep(self) -> list[dict] | None:
+        return self.summary.get("sweep")
+
+
+def run_study(
+    scenario,
+    trials: int,
+    seed: int,
+    *,
+    workers: int | None = None,
+    sweep: Sequence[float] | None = None,
+    assemble: Callable | None = None,
+    plan=None,
+    time_budget_s: float | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    source: str | None = None,
+) -> Study:
+    """The whole study: trials at the scenario's noise (and at every ``sweep`` factor), summarised.
+
+    The summary holds the SPEC 7 keys (``trials``, ``successes``, ``success_rate``), the Wilson 95 %
+    interval, percentiles, failure counts, seeds and provenance, a ``"sweep"`` list when asked, and a
+    ``"run"`` block (workers, wall time: the only part that depends on the machine).
+    """
+    from .outputs import provenance
+
+    if trials < 1:
+        raise StressbotsError(f"must be at least 1, got {trials}", source="--trials")
+    if workers is not None and workers < 1:
+        raise StressbotsError(f"must be at least 1, got {workers}", source="--workers")
+    t0 = time.perf_counter()
+    if plan is None:
+        plan = default_planner()(scenario)
+    scales = (1.0,) + tuple(f for f in (sweep or ()) if f != 1.0)
+    k = min(int(workers or os.cpu_count() or 1), trials * len(scales))
+    outcomes = run_trials(
+        scenario, trials, seed, workers=k, assemble=assemble, plan=plan, noise_scales=scales,
+        time_budget_s=time_budget_s, progress=progress,
+    )
+    wall = time.perf_counter() - t0
+    summary: dict[str, Any] = {"format": "stressbots.montecarlo/1", "scenario": scenario.name, "source": source}
+    summary.update(summarise(outcomes[1.0]))
+    summary["ci_method"] = "Wilson score interval, 95 %"
+    summary["seed"] = int(seed)
+    summary["trial_seeds"] = "trial i: int(SeedSequence(seed).spawn(trials)[i].generate_state(1, uint64)[0] >> 11), for plant and controller"
+    summary["noise"] = _noise_dict(scenario.noise)
+    pl = getattr(plan, "plan", plan)
+    summary["nominal_plan"] = {
+        "duration_s": float(getattr(pl, "duration_s", math.nan)),
+        "steps": len(getattr(pl, "steps", ())),
+    }
+    if sweep:
+        rows = []
+        for f in sweep:
+            st = summarise(outcomes[1.0 if f == 1.0 else f])
+            rows.append(
+                {
+                    "noise_scale": float(f),
+                    "trials": st["trials"],
+                    "successes": st["successes"],
+                    "success_rate": st["success_rate"],
+                    "success_rate_ci95": st["success_rate_ci95"],
+                    "shape_error_rms_um": st["shape_error_rms_um"],
+                    "duration_s": st["duration_s"],
+                    "failures": st["failures"],
+                }
+            )
+        summary["sweep"] = rows
+    n_tasks = sum(len(v) for v in outcomes.values())
+    summary["run"] = {
+        "workers": k,
+        "wall_s": wall,
+        "trials_run": n_tasks,
+        "trial_wall_s": percentiles(o.wall_s for v in outcomes.values() for o in v),
+    }
+    summary["provenance"] = provenance(seed, scenario=source or scenario.name)
+    return Study(summary, outcomes)
