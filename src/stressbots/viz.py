@@ -309,7 +309,8 @@ def plot_bounds(scenario, report):
 
 def plot_montecarlo(summary: dict, outcomes, *, title: str = ""):
     """Histograms of a Monte Carlo study: RMS shape error (successes and failures stacked, tolerance
-    line if known) and simulated duration. ``outcomes`` are :class:`stressbots.montecarlo.TrialOutcome`."""
+    line if known; log-scaled when failures lie orders of magnitude off) and simulated duration.
+    ``outcomes`` are :class:`stressbots.montecarlo.TrialOutcome`; trials that raised have no values."""
     plt = _plt()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     ok = np.array([o.success for o in outcomes], dtype=bool)
@@ -319,7 +320,11 @@ def plot_montecarlo(summary: dict, outcomes, *, title: str = ""):
         good = np.isfinite(data)
         if good.any():
             lo, hi = float(np.min(data[good])), float(np.max(data[good]))
-            bins = np.linspace(lo, hi if hi > lo else lo + 1.0, 31)
+            if lo > 0 and hi / lo > 100:  # failures far off (mm) would squash the successes: log bins
+                bins = np.geomspace(lo, hi, 31)
+                ax.set_xscale("log")
+            else:
+                bins = np.linspace(lo, hi if hi > lo else lo + 1.0, 31)
             ax.hist([data[good & ok], data[good & ~ok]], bins=bins, stacked=True, color=["tab:green", "tab:red"],
                     label=[f"success ({int((good & ok).sum())})", f"failure ({int((good & ~ok).sum())})"])
         ax.set_xlabel(label)
