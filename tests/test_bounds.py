@@ -354,10 +354,13 @@ def test_bounds_command_writes_json_and_picture(run_cli, tmp_path):
     r = run_cli("bounds", EXAMPLES / "four-robots.toml", "--out", out, "--coverage-trials", "1")
     assert r.code == 0, r.err
     assert "guaranteed" in r.out and "timed forward projection" in r.out and "empirical coverage" in r.out
+    assert "between two measurements" in r.out
     doc = json.loads((out / "bounds.json").read_text())
     assert doc["format"] == "stressbots.bounds/1" and doc["error_model"]["k_sigma"] == 3.0
     assert [rb["verdict"] for rb in doc["robots"]] == ["not guaranteed"] * 4
     assert doc["coverage"]["fraction"] == 1.0
+    tx = doc["robots"][0]["delta_replan_interval"]
+    assert tx["t_x_s"] == 1.0 and 0 < tx["xy_um"] < doc["robots"][0]["cylinder"]["radius_um"]
     assert (out / "bounds.png").stat().st_size > 10_000
     j = run_cli("bounds", EXAMPLES / "four-robots.toml", "--json", "--k", "1")
     assert j.code == 0

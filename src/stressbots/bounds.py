@@ -1256,6 +1256,10 @@ class RobotBounds:
     region: Region | None
     guaranteed: bool
     reason: str
+    replan_interval_s: float = math.nan
+    delta_replan: tuple[float, float] = (math.nan, math.nan)
+    """``(delta_xy, delta_theta)`` over one replanning interval t_x (worst of turning and straight): the
+    error that accumulates between two measurements of the closed-loop controller."""
 
     @property
     def label(self) -> str:
@@ -1274,6 +1278,11 @@ class RobotBounds:
             "t_4pi_s": self.t_4pi_s,
             "delta": {"turning": self.delta_turning.to_dict(), "straight": self.delta_straight.to_dict()},
             "cylinder": self.cylinder.to_dict(),
+            "delta_replan_interval": {
+                "t_x_s": self.replan_interval_s,
+                "xy_um": self.delta_replan[0],
+                "theta_deg": math.degrees(self.delta_replan[1]),
+            },
             "region": None if self.region is None else self.region.to_dict(),
             "verdict": "guaranteed" if self.guaranteed else "not guaranteed",
             "reason": self.reason,
@@ -1471,6 +1480,9 @@ def analyse_bounds(
         horizon = t4 if math.isfinite(t4) else 4 * TWO_PI / r.turn_rate_rad_s
         d_turn = deviation_envelope(turning_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
         d_str = deviation_envelope(straight_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
+        tx = float(scenario.control.replan_interval_s)
+        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence, straight_sequence)]
+        d_tx = (max(a for a, _ in short), max(b for _, b in short))
         say(f"sampling A_{idx}* ({nm})")
         region, ok, reason = _verdict(
             scenario, structure, model, order, nm, cyl[nm], proj, spacing_um=spacing_um, heading_step_deg=heading_step_deg
@@ -1478,7 +1490,7 @@ def analyse_bounds(
         robots_out.append(
             RobotBounds(
                 nm, idx, slot.role, slot.pose.as_array(), r.speed_um_s, r.turn_radius_um, float(w_lo), float(w_hi), float(t2),
-                float(t4), d_turn, d_str, cyl[nm], region, ok, reason,
+                float(t4), d_turn, d_str, cyl[nm], region, ok, reason, tx, d_tx,
             )
         )
     name_n, name_m = order[-1], order[-2]

@@ -674,6 +674,13 @@ def bounds(
         highlight=False,
         soft_wrap=True,
     )
+    worst = max(report.robots, key=lambda rb: rb.delta_replan[0])
+    out.print(
+        f"between two measurements (t_x = {worst.replan_interval_s:g} s) the error grows by at most {worst.delta_replan[0]:.3g} um "
+        f"and {math.degrees(worst.delta_replan[1]):.3g} deg ({worst.label}): what the closed loop corrects at each measurement",
+        highlight=False,
+        soft_wrap=True,
+    )
     if report.coverage is not None:
         c = report.coverage
         out.print(
