@@ -269,9 +269,17 @@ def default_assemble() -> Callable:
 
 def default_planner() -> Callable:
     """The nominal planner a study shares between its trials: the controller's own choice
-    (``stressbots.control.nominal_plan``) when it offers one, else :func:`stressbots.planning.plan_assembly`."""
+    (``nominal_plan`` of :mod:`stressbots.control`, or of :mod:`stressbots.edr` where the controller lives)
+    when it offers one, else :func:`stressbots.planning.plan_assembly`. A trial then follows exactly the
+    plan ``assemble(..., plan=None)`` would have made."""
     try:
         from .control import nominal_plan  # type: ignore[attr-defined]
+
+        return nominal_plan
+    except ImportError:
+        pass
+    try:  # the controller's module, where control.assemble comes from
+        from .edr import nominal_plan  # type: ignore[no-redef]
 
         return nominal_plan
     except ImportError:
