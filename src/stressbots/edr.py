@@ -232,7 +232,11 @@ class _Runner:
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
         self.omega_nom = self.v / self.r
-        self.omega_hat = self.omega_nom.copy()  # measured turn rates (rad/s), learnt while orbiting
+        # Online identification (every robot's true speed and turn rate differ from nominal by a few %):
+        # straight chunks measure the speed, turning chunks the turn rate; planning then uses
+        # r_hat = v_hat / omega_hat for geometry and v_hat for timing.
+        self.v_hat = self.v.astype(float).copy()
+        self.omega_hat = self.omega_nom.copy()
         self._helper = None
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
@@ -251,8 +255,12 @@ class _Runner:
             self.log("lost", int(i), "not seen for 3 frames; dead-reckoning")
         return self.est
 
+    @property
+    def r_hat(self) -> np.ndarray:
+        return self.v_hat / self.omega_hat
+
     def drive(self, steps: Sequence[tuple[int, float]]) -> None:
-        """Apply primitive steps ``(k, duration_s)`` and dead-reckon the estimate meanwhile."""
+        """Apply primitive steps ``(k, duration_s)``, dead-reckon, observe, and identify speeds/turn rates."""
         steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]
         if not steps:
             return
@@ -260,13 +268,29 @@ class _Runner:
             raise _Budget()
         wf = synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state)
         self.plant.apply(wf)
+        before = self.est.copy()
+        seen_before = self.unseen == 0
+        turn_time = np.zeros(self.n)
+        total = 0.0
         for k, d in steps:
             turning = self.rank <= k
             moving = ~self.docked
-            self.est[moving] = advance(self.est, turning, self.v, self.r, d)[moving]
+            self.est[moving] = advance(self.est, turning, self.v_hat, self.r_hat, d)[moving]
+            turn_time += np.where(turning, d, 0.0)
+            total += d
             self.t += d
         self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
         self.observe()
+        ok = seen_before & (self.unseen == 0) & ~self.docked & (total >= 0.3)
+        for i in np.flatnonzero(ok):
+            if turn_time[i] >= total - 1e-9:  # turned the whole time
+                rate = float(np.mod(self.est[i, 2] - before[i, 2], TWO_PI)) / total
+                if 0.7 * self.omega_nom[i] < rate < 1.3 * self.omega_nom[i]:
+                    self.omega_hat[i] += 0.2 * (rate - self.omega_hat[i])
+            elif turn_time[i] <= 1e-9:  # straight the whole time
+                speed = float(np.hypot(*(self.est[i, :2] - before[i, :2]))) / total
+                if 0.7 * self.v[i] < speed < 1.3 * self.v[i]:
+                    self.v_hat[i] += 0.2 * (speed - self.v_hat[i])
         self.trace_t.append(self.t)
         self.trace_p.append(self.est.copy())
 
@@ -315,8 +339,8 @@ class _Runner:
 
         ``guard()`` may return False to stop early (e.g. D_n's straight run is used up).
         """
-        v, r = self.v[i], self.r[i]
         for _ in range(max_cycles):
+            v, r = self.v_hat[i], self.r_hat[i]
             p = self.est[i]
             if self.arrived(p, target):
                 return True
@@ -345,92 +369,6 @@ class _Runner:
         """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
         return bool(np.hypot(*(pose[:2] - target[:2])) <= 25.0 and abs(angle_difference(pose[2], target[2])) <= math.radians(6.0))
 
-    def steer_timed(self, i: int, target: np.ndarray, t_end: float, turn_k: int, straight_k: int, orbiting, *, extra_discs=()) -> None:
-        """Gross motion that arrives at ``t_end`` (s): a path of exactly the remaining time, replanned.
-
-        Used for D_n while D_{n-1} orbits: the phase must last a whole number of D_{n-1}'s periods so
-        that D_{n-1} is back where its next piece starts.
-        """
-        v, r = self.v[i], self.r[i]
-        for _ in range(400):
-            left = t_end - self.t
-            p = self.est[i]
-            try:
-                path = pathlib.path_of_length(p, target, r, v * max(left, 0.0))
-            except pathlib.InfeasibleLengthError:
-                path = pathlib.shortest_path(p, target, r)
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs):
-                alt = pathlib.shortest_path(p, target, r)
-                if not self.obstacles_hit(alt.sample(10.0), i, orbiting, extra_discs=extra_discs):
-                    path = alt
-            self.replans += 1
-            whole = path.length / v <= self.tx + 1e-9
-            self.drive(self.path_steps(path, v, turn_k, straight_k, None if whole else self.tx))
-            if whole:
-                return
-
-    def orbit_sync(self, N: int, M: int, n_target: np.ndarray, m_heading: float, lower, *, margin_deg: float = 25.0) -> None:
-        """An A phase: D_n drives to ``n_target`` while D_{n-1} orbits until just before ``m_heading``.
-
-        The phase is timed to end ``margin_deg`` before D_{n-1} is back at its departure heading (its
-        next route then simply finishes the turn; an overshoot would cost a whole loop), using D_{n-1}'s
-        turn rate as measured so far. D_n drives one path of that duration open loop (re-solving it every
-        cycle would change its shape every cycle), then steers to its run start by replanning.
-        """
-        n = self.n
-        vN, rN = self.v[N], self.r[N]
-        n_target = np.asarray(n_target, float)
-        want = float(np.mod(m_heading - math.radians(margin_deg) - self.est[M, 2], TWO_PI))
-        need = pathlib.shortest_path(self.est[N], n_target, rN).length / vN
-        while want / self.omega_hat[M] < need + 2.0 * self.tx:
-            want += TWO_PI
-        disc = [(turning_centres(self.est[M], self.r[M])[0], self.rstar[M])]
-        path = None
-        for _extra in range(4):
-            # some lengths are impossible (a gap between paths with and without a loop): then D_{n-1}
-            # orbits one more time rather than the phase ending early
-            duration = want / self.omega_hat[M]
-            try:
-                cand = pathlib.path_of_length(self.est[N], n_target, rN, vN * duration)
-            except pathlib.InfeasibleLengthError:
-                want += TWO_PI
-                continue
-            if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
-                cand = self.timed_detour(N, n_target, duration, lower, disc)
-                if cand is None or cand.length < vN * duration - 1.0:
-                    want += TWO_PI
-                    continue
-            path = cand
-            break
-        if path is None:
-            path = pathlib.shortest_path(self.est[N], n_target, rN)
-            self.log("desync", N, "no path of the right duration; D_{n-1} will not be back at its departure")
-        self.replans += 1
-        # along the timed path until about 3 s remain, measuring D_{n-1}'s turn rate; when the measured
-        # rate predicts an end more than half a cycle off, D_n's remaining path is re-timed
-        done = 0.0
-        turned = 0.0
-        while path.length - done > 3.0 * vN:
-            th0, t0 = self.est[M, 2], self.t
-            sub = _sub_path(path, done, done + vN * self.tx)
-            self.drive(self.path_steps(sub, vN, n, n - 1))
-            done += vN * self.tx
-            d_th = float(np.mod(self.est[M, 2] - th0, TWO_PI))
-            turned += d_th
-            rate = d_th / max(self.t - t0, 1e-9)
-            if 0.5 * self.omega_nom[M] < rate < 1.5 * self.omega_nom[M]:
-                self.omega_hat[M] = 0.8 * self.omega_hat[M] + 0.2 * rate
-            left_t = (want - turned) / self.omega_hat[M]
-            if abs((path.length - done) / vN - left_t) > 0.5 * self.tx and left_t > 3.0:
-                try:
-                    new = pathlib.path_of_length(self.est[N], n_target, rN, vN * left_t)
-                except pathlib.InfeasibleLengthError:
-                    continue
-                if not self.obstacles_hit(new.sample(10.0), N, lower, extra_discs=disc):
-                    path, done = new, 0.0
-                    self.replans += 1
-        self.steer(N, n_target, n, n - 1, lower, extra_discs=disc, max_cycles=60)
-
     def _obstacles(self, i: int, orbiting, extra_discs):
         from .planning import _Obstacles
 
@@ -455,10 +393,10 @@ class _Runner:
         obst = self._obstacles(i, orbiting, extra_discs)
         rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i]))
         try:
-            _, routed, _ = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r[i], self.L[i], self.W[i], obst, self._helper.opts, rng, "")
+            _, routed, _ = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, self._helper.opts, rng, "")
         except _NoRoute:
             return None
-        want = self.v[i] * max(duration_s, 0.0)
+        want = self.v_hat[i] * max(duration_s, 0.0)
         if routed.length >= want:
             return routed
         return self._helper._stretch(routed, want, obst, self.L[i], self.W[i]) or routed
@@ -534,7 +472,7 @@ class _Runner:
         if not ph.path or ph.path_start is None:
             return self.fine_start(i, self.goals[i])
         path = pathlib.Path(ph.path_start, self.r[i], ph.path)
-        s_f = min(2.5 * self.opts.fine_distance_um * 0.5, 0.8 * path.length)
+        s_f = ph.approach_um if ph.approach_um > 0 else min(self.opts.fine_distance_um, 0.8 * path.length)
         return np.asarray(path.pose_at(path.length - s_f), dtype=np.float64)
 
     # -- docking of single robots -------------------------------------------------------------------
@@ -580,8 +518,8 @@ class _Runner:
 
     def fine_dock(self, i: int, k: int, orbiting) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""
-        v, r = self.v[i], self.r[i]
         for _ in range(60):
+            v, r = self.v_hat[i], self.r_hat[i]
             goal = self.goals[i]
             fr = _turn_fraction(self.est[i], goal, r)
             if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
@@ -645,46 +583,58 @@ class _Runner:
 
         The phase lasts as long as D_{n-1}, at its measured turn rate, needs to come back to the planned
         departure heading (the planned number of turns); D_n's path of exactly that duration is computed
-        once from its measured pose and driven open loop, then D_n steers into its region if it is not
-        there. Returns False when D_{n-1} ends out of step (the caller re-plans).
+        from its measured pose and driven open loop, re-timed once half way with the turn rate measured
+        meanwhile; then D_n steers into its region if it is not there. Returns False when D_{n-1} ends
+        out of step (the caller re-plans).
         """
         n = self.n
-        vN, rN = self.v[N], self.r[N]
         target = np.array(ph.target)
-        disc = [(turning_centres(self.est[M], self.r[M])[0], self.rstar[M])]
+        disc = [(turning_centres(self.est[M], self.r_hat[M])[0], self.rstar[M])]
         turns_planned = self.omega_nom[M] * ph.duration_s
         delta = float(np.mod(ph.partner_end[2] - self.est[M, 2], TWO_PI)) if ph.partner_end is not None else 0.0
         k = max(0, round((turns_planned - delta) / TWO_PI))
-        path = None
-        for extra in range(3):
-            duration = (delta + TWO_PI * (k + extra)) / self.omega_hat[M]
-            try:
-                cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration)
-            except pathlib.InfeasibleLengthError:
-                continue
-            if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
-                cand = self.timed_detour(N, target, duration, lower, disc)
-                if cand is None or cand.length < vN * duration - 1.0:
-                    continue
-            path = cand
-            break
+        # D_{n-1} aims to stop a little before its departure heading: past it, its route would need a loop
+        want = max(delta + TWO_PI * k - math.radians(20.0), 0.0)
+        turned = 0.0
+        retimed = False
+        path = self.timed_a_path(N, target, want / self.omega_hat[M], lower, disc)
         if path is None:
             return False
         self.replans += 1
         done = 0.0
+        vN = self.v_hat[N]
         while path.length - done > 1e-6:
-            th0, t0 = self.est[M, 2], self.t
+            th0 = self.est[M, 2]
             self.drive(self.path_steps(_sub_path(path, done, done + vN * self.tx), vN, n, n - 1))
             done += vN * self.tx
-            rate = float(np.mod(self.est[M, 2] - th0, TWO_PI)) / max(self.t - t0, 1e-9)
-            if 0.5 * self.omega_nom[M] < rate < 1.5 * self.omega_nom[M]:
-                self.omega_hat[M] = 0.8 * self.omega_hat[M] + 0.2 * rate
-        if not self.arrived(self.est[N], target):
+            turned += float(np.mod(self.est[M, 2] - th0, TWO_PI))
+            left = (want - turned) / self.omega_hat[M]
+            if not retimed and done > 0.4 * path.length and left > 4.0 * self.tx:
+                retimed = True
+                new = self.timed_a_path(N, target, left, lower, disc)
+                if new is not None:
+                    path, done = new, 0.0
+        # D_n's straight run tolerates a heading error (self-alignment absorbs up to 60 deg at the end);
+        # correcting it would cost a loop. Only a position error makes it steer again.
+        if np.hypot(*(self.est[N, :2] - target[:2])) > 40.0:
             self.steer(N, target, n, n - 1, lower, extra_discs=disc, max_cycles=60)
         if ph.partner_end is None:
             return True
-        still = angle_difference(ph.partner_end[2], self.est[M, 2])  # > 0: D_{n-1} still has to turn
-        return -math.radians(3.0) <= still <= math.radians(40.0)
+        still = float(np.mod(ph.partner_end[2] - self.est[M, 2] + 0.5, TWO_PI)) - 0.5  # > 0: still to turn
+        return math.radians(3.0) <= still <= math.radians(55.0)
+
+    def timed_a_path(self, N: int, target, duration: float, lower, disc) -> pathlib.Path | None:
+        """D_n's collision-free path to ``target`` lasting ``duration`` s (at its identified speed)."""
+        vN, rN = self.v_hat[N], self.r_hat[N]
+        try:
+            cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration)
+        except pathlib.InfeasibleLengthError:
+            return None
+        if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
+            cand = self.timed_detour(N, target, duration, lower, disc)
+            if cand is None or cand.length < vN * duration - 1.0:
+                return None
+        return cand
 
     def replan_pair(self, N: int, M: int) -> list:
         """Plan the pair's remaining phases from the measured poses (using D_{n-1}'s measured turn rate)."""
@@ -695,8 +645,7 @@ class _Runner:
 
         robots = []
         for i, rb in enumerate(self.scn.robots):
-            speed = rb.speed_um_s * (self.omega_hat[i] / self.omega_nom[i]) if i == M else rb.speed_um_s
-            robots.append(dc_replace(rb, start=Pose(*self.est[i]), speed_um_s=float(speed)))
+            robots.append(dc_replace(rb, start=Pose(*self.est[i]), speed_um_s=float(self.v_hat[i]), turn_radius_um=float(self.r_hat[i])))
         scn2 = self.scn.with_robots(robots)
         for clearance in (PLAN_CLEARANCE_UM, 10.0):
             planner = _Planner(scn2, self.analysis, self.pr.structure, PlannerOptions(clearance_um=clearance, seed=len(self.events)))
@@ -717,14 +666,14 @@ class _Runner:
         a = 0.0
         if ph.last:
             target = self.fine_start_on(ph, M)
-            a = float(pathlib.shortest_path(target, self.goals[M], self.r[M]).length) * self.v[N] / self.v[M]
-        slack = 40.0 + self.v[N] * math.radians(40.0) / self.omega_hat[M]
+            a = float(pathlib.shortest_path(target, self.goals[M], self.r_hat[M]).length) * self.v_hat[N] / self.v_hat[M]
+        slack = 40.0 + self.v_hat[N] * math.radians(40.0) / self.omega_hat[M]
 
         def room() -> float:
             # D_n may run on until 0.4 a from its slot in the last piece (its partner is then a away)
             done = float((self.est[N, :2] - run_start[:2]) @ hN)
             end = run_len - (0.4 * a if ph.last else 0.0) + slack
-            return max(0.0, (end - done) / self.v[N])
+            return max(0.0, (end - done) / self.v_hat[N])
 
         return self.steer(M, target, n - 1, n - 2, lower, guard=room)
 
@@ -733,8 +682,8 @@ class _Runner:
         n = self.n
         for _ in range(80):
             gN, gM = self.goals[N], self.goals[M]
-            fN = _turn_fraction(self.est[N], gN, self.r[N])
-            fM = _turn_fraction(self.est[M], gM, self.r[M])
+            fN = _turn_fraction(self.est[N], gN, self.r_hat[N])
+            fM = _turn_fraction(self.est[M], gM, self.r_hat[M])
             ends = front_midpoints(self.est[[N, M]], self.L[[N, M]])
             gap = float(np.hypot(*(ends[0] - ends[1])))
             # S_3f: D_n turns under P_n only (rho_a), D_{n-1} under P_n and P_{n-1} (rho_a + rho_b).

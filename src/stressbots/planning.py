@@ -60,7 +60,9 @@ class PlannerOptions:
     clearance_um:
         Distance kept from orbit discs, the structure and the arena edge (room for control error).
     approach_um:
-        Length of the straight final approach into every slot (capped by the slot's clear corridor).
+        Length of the final approach into every slot (capped by the slot's clear corridor): a gentle
+        interpolated clockwise arc that arrives at the slot's heading, then a short straight push. The
+        closed-loop controller flies the same arc as its fine motion, correcting its radius.
     sample_um:
         Spacing of the collision-check samples along routes.
     departure_phases:
@@ -76,7 +78,7 @@ class PlannerOptions:
     """
 
     clearance_um: float = 10.0
-    approach_um: float = 100.0
+    approach_um: float = 160.0
     sample_um: float = 5.0
     departure_phases: int = 12
     roadmap_nodes: tuple[int, ...] = (80, 250, 700)
@@ -111,6 +113,7 @@ class Phase:
     partner_end: tuple[float, float, float] | None = None
     path: tuple[tuple[str, float], ...] = ()
     path_start: tuple[float, float, float] | None = None
+    approach_um: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -596,6 +599,35 @@ class _Planner:
             self.scn.arena_um,
         )
 
+    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: _Obstacles, who: str) -> pathlib.Path:
+        """The final approach of robot ``i`` into its slot, ``a`` um long.
+
+        A clockwise arc of radius ``s / phi`` (flown as an interpolated turn, seed App. 3.1) that arrives
+        at the slot's heading a short straight push before the slot. Only points to a robot's right are
+        reachable on one clockwise arc (seed Fig. 4): ending the nominal approach on such an arc leaves
+        the fine-motion controller room to correct errors either way by changing r'. ``phi`` is the
+        largest of 20, 12, 6 deg whose swept bodies clear the obstacles (touching the structure at the
+        end is docking); a straight approach when none does (tight gaps).
+        """
+        r, L, W = self.r[i], self.L[i], self.W[i]
+        tail = min(20.0, 0.25 * a)
+        s_f = a - tail
+        p_pre = _pre_approach(goal, tail)
+        hit = None
+        for phi_deg in (20.0, 12.0, 6.0, 0.0):
+            if phi_deg == 0.0:
+                path = pathlib.Path(tuple(_pre_approach(goal, a)), r, (("S", a),))
+            else:
+                radius = s_f / math.radians(phi_deg)
+                if radius < 1.05 * r:
+                    continue
+                start = move(p_pre, -s_f, 1.0 / radius)
+                path = pathlib.interpolated_arc(start, math.radians(phi_deg), radius, r, 25.0).then(("S", tail))
+            hit = obst.first_hit(path.sample(self.opts.sample_um), L, W, self.opts.clearance_um, box_tol=0.5)
+            if hit is None:
+                return path
+        raise _NoRoute(f"{who}: the approach into its slot is blocked by {hit}")
+
     # -- docking of single robots (steps 2..n-1) -------------------------------------------------
 
     def dock_single(self, k: int) -> None:
@@ -603,14 +635,11 @@ class _Planner:
         who = self.lab(i)
         goal = self.goals[i]
         a = _approach(self.struct, self.scn.names[i], self.opts)
-        pre = _pre_approach(goal, a)
         orbiting = [self.by_rank[j] for j in range(1, k)]
         docked = [self.by_rank[j] for j in range(k + 1, self.n + 1)]
         obst = self.obstacles(orbiting, docked)
-        approach = pathlib.Path(tuple(pre), self.r[i], (("S", a),))
-        hit = obst.first_hit(approach.sample(self.opts.sample_um), self.L[i], self.W[i], self.opts.clearance_um, box_tol=0.5)
-        if hit is not None:
-            raise _NoRoute(f"{who}: the straight approach into its slot is blocked by {hit}")
+        approach = self.approach_path(i, goal, a, obst, who)
+        pre = np.array(approach.start, dtype=np.float64)
         m = self.opts.departure_phases
         period = TWO_PI * self.r[i] / self.v[i]
         waits = np.arange(m) * period / m
@@ -624,12 +653,12 @@ class _Planner:
         self.tl.apply_path(i, path, k, k - 1)
         self.tl.phase(
             "route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints),
-            path=path.then(("S", a)).segments, path_start=tuple(float(v) for v in path.start),
+            path=path.then(*approach.segments).segments, path_start=tuple(float(v) for v in path.start), approach_um=approach.length,
         )
         t0 = self.tl.t
         self.tl.apply_path(i, approach, k, k - 1)
         self.tl.phase("approach", i, k, k - 1, t0, goal)
-        self.route_lengths[i] = path.length + a
+        self.route_lengths[i] = path.length + approach.length
         self.tl.dock(i, goal, who)
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
@@ -653,18 +682,15 @@ class _Planner:
         obst_low = self.obstacles(lower, [])
         aM = _approach(self.struct, self.scn.names[M], self.opts)
         aN = _approach(self.struct, self.scn.names[N], self.opts)
-        preM = _pre_approach(gM, aM)
         whoN, whoM = self.lab(N), self.lab(M)
         opts = self.opts
+        approachM = self.approach_path(M, gM, aM, obst_low, whoM)
+        preM = np.array(approachM.start, dtype=np.float64)
 
         # D_{n-1}'s route: it may leave its orbit at any phase (D_n's first stage lasts that long).
         m = opts.departure_phases
         waits = np.arange(m) * TM / m
         sourcesM = advance(np.repeat(self.tl.poses[M][None, :], m, axis=0), np.ones(m, bool), vM, rM, waits)
-        approachM = pathlib.Path(tuple(preM), rM, (("S", aM),))
-        hit = obst_low.first_hit(approachM.sample(opts.sample_um), self.L[M], self.W[M], opts.clearance_um)
-        if hit is not None:
-            raise _NoRoute(f"{whoM}: the straight approach into its slot is blocked by {hit}")
 
         # The final corridor: how far behind its slot D_n can run straight into it.
         span = 2.0 * max(self.scn.arena_um or (5000.0, 5000.0))
@@ -686,7 +712,7 @@ class _Planner:
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
-            fullM = routeM.then(("S", aM))
+            fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
             for park in parks:
                 for durs in self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM):
@@ -700,6 +726,7 @@ class _Planner:
             return attempts[-1] if attempts else f"{whoM}'s route is too long for {whoN}'s free corridor ({d_free:.0f} um)"
 
         self._pair_schedule = None
+        self._approach_len = approachM.length
         try:
             _route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except _NoRoute as exc:
