@@ -35,3 +35,11 @@ class Plant(Protocol):
     def observe(self) -> np.ndarray: ...
 
     def apply(self, waveform: Sequence[Segment]) -> None: ...
+
+
+# The closed-loop EDR controller (seed Appendix 3) lives in :mod:`stressbots.edr`; SPEC 7 names it here.
+# Work in progress (issue 6): it assembles the example without control error; with the literature's
+# error levels the G_1 pair does not yet form reliably.
+from .edr import AssemblyResult, ControllerOptions, assemble, nominal_plan  # noqa: E402
+
+__all__ += ["AssemblyResult", "ControllerOptions", "assemble", "nominal_plan"]
