@@ -173,8 +173,17 @@ def _deg(p) -> list[float]:
     return [float(p[0]), float(p[1]), float(math.degrees(p[2]) % 360.0)]
 
 
-class _Budget(Exception):
-    pass
+class _Abort(Exception):
+    """The run cannot go on; ``reason`` says why (reported as the result's ``failure``)."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+class _Budget(_Abort):
+    def __init__(self, budget_s: float):
+        super().__init__(f"not assembled within the time budget of {budget_s:g} s (simulated)")
 
 
 def _turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um: float = 3.0):
@@ -265,7 +274,7 @@ class _Runner:
         if not steps:
             return
         if self.t + sum(d for _, d in steps) > self.opts.time_budget_s:
-            raise _Budget()
+            raise _Budget(self.opts.time_budget_s)
         wf = synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state)
         self.plant.apply(wf)
         before = self.est.copy()
@@ -494,7 +503,7 @@ class _Runner:
                 return
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
             self.back_off(i, k)
-        raise _Budget()
+        raise _Abort(f"{self.scn.names[i]} did not dock in 4 attempts (stuck in the failure region H)")
 
     def _before(self, w, a_pose, route_phase, i) -> bool:
         """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route."""
@@ -573,7 +582,7 @@ class _Runner:
             if not ok:
                 replans += 1
                 if replans > 8:
-                    raise _Budget()
+                    raise _Abort("G_1 could not be synchronised: 8 re-plans of sigma_1 did not bring the pair into step")
                 self.log("replan", N, f"G_1 out of step after a {ph.kind} phase: sigma_1 re-planned from the measured poses")
                 queue = self.replan_pair(N, M)
         self.close_pair(N, M, lower)
@@ -654,7 +663,7 @@ class _Runner:
             except (_NoRoute, PlanningError):
                 continue
             return [p for p in planner.tl.phases if p.kind.startswith("pair")]
-        raise _Budget()
+        raise _Abort("sigma_1 could not be re-planned from the measured poses")
 
     def pair_piece(self, N: int, M: int, ph, lower) -> bool:
         """D_{n-1} drives to the end of its piece while D_n runs straight; False if D_n's run runs out."""
@@ -711,8 +720,8 @@ class _Runner:
                 return
             if (moved < 0.2 * self.v[[N, M]] * self.tx).all() and gap >= 20.0:
                 self.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H)")
-                raise _Budget()
-        raise _Budget()
+                raise _Abort(f"the G_1 pair stopped {gap:.0f} um apart (failure region H)")
+        raise _Abort("G_1 did not form during its fine motion")
 
     def retarget(self, N: int, M: int) -> None:
         """Move the remaining slots with the rigid motion the pair actually took (SPEC 6)."""
@@ -746,8 +755,8 @@ class _Runner:
                 i = self.by_rank[k]
                 route = next((p for p in phases if p.kind == "route" and p.mover == i), None)
                 self.dock_single(k, route)
-        except _Budget:
-            return f"not assembled within the time budget of {self.opts.time_budget_s:g} s (simulated)"
+        except _Abort as exc:
+            return exc.reason
         return None
 
 
