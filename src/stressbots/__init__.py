@@ -4,17 +4,27 @@ Modules, by concept (see ``docs/design.md``):
 
 - :mod:`stressbots.robots` - poses, robot parameters, body geometry
 - :mod:`stressbots.scenario` - scenario files (TOML) and their validation
+- :mod:`stressbots.errors` - the user-facing errors (one ``error:`` line, exit 2)
+- :mod:`stressbots.outputs` - atomic output files and provenance (seed, versions)
 - :mod:`stressbots.electrostatics` - arm hysteresis, accessible control states, STRING, primitives
 - :mod:`stressbots.waveform` - Hold/Drive segments, synthesis, decoding, sampling
 - :mod:`stressbots.design` - STRING voltage design and its fabrication yield
 - :mod:`stressbots.kinematics` - closed-form motion along straight segments and clockwise arcs
 - :mod:`stressbots.paths` - exact shortest paths for a robot that turns one way only
 - :mod:`stressbots.structures` - target structures: slots, contact geometry, named shapes
+- :mod:`stressbots.collision` - body/body, body/disc and arena tests shared by planner, replay and controller
+- :mod:`stressbots.plans` - plans and the plan.json format
 - :mod:`stressbots.planning` - the nominal n-robot assembly planner (seed Appendix 2)
+- :mod:`stressbots.replay` - independent replay verification of plans
+- :mod:`stressbots.generate` - random feasible scenarios for tests and benchmarks
 - :mod:`stressbots.sim` - the simulated plant: control error, contact, compliance, camera
-- :mod:`stressbots.control` - the Plant protocol and closed-loop EDR assembly (seed Appendix 3)
-- :mod:`stressbots.bounds` - error bounds and forward projections
-- :mod:`stressbots.viz` - pictures and animations
+- :mod:`stressbots.assessment` - placement and shape errors after a best rigid alignment
+- :mod:`stressbots.control` - the Plant protocol and closed-loop assembly (seed Appendix 3)
+- :mod:`stressbots.edr` - the closed-loop EDR controller (work in progress)
+- :mod:`stressbots.bounds` - error bounds, forward projections, regions A_i*
+- :mod:`stressbots.montecarlo` - Monte Carlo studies of closed-loop assembly
+- :mod:`stressbots.viz` - pictures
+- :mod:`stressbots.demo` - the main job on the built-in scenario
 - :mod:`stressbots.cli` - the command line
 """
 

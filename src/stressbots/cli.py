@@ -69,8 +69,9 @@ def demo(
 ) -> None:
     """Run the main job end to end on the built-in 4-robot scenario.
 
-    Today: analyse the built-in voltage design (accessible control states, control matrix, primitives)
-    and synthesise the waveform of every primitive.
+    Analyses the built-in voltage design (accessible control states, control matrix, primitives),
+    synthesises the waveform of every primitive, plans the assembly of a tee and plays the plan open loop
+    on the simulated plant without and with control error. Closed-loop control joins when it is ready.
     """
     from . import demo as demo_mod
 
@@ -366,7 +367,7 @@ def plan(
     out_dir: Path = typer.Option(..., "--out", help="Folder for plan.json, plan.png and summary.json.", show_default=False),
     seed: int = typer.Option(0, "--seed", help="Seed of the route search's random waypoints (recorded in plan.json)."),
     clearance_um: float = typer.Option(10.0, "--clearance-um", min=0.0, help="Distance kept from orbits, the structure and the arena edge (um)."),
-    approach_um: float = typer.Option(100.0, "--approach-um", min=1.0, help="Straight final approach into every slot (um)."),
+    approach_um: float = typer.Option(160.0, "--approach-um", min=1.0, help="Final approach into every slot (um): a gentle clockwise arc, then a short straight push."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Plan the assembly: one sequence of primitives that docks every robot in its slot.
@@ -517,7 +518,7 @@ def simulate(
     result = {
         "success": a.success,
         "seed": plant.seed,
-        "mode": "open loop",
+        "mode": "open-loop",
         "scenario": str(scenario),
         "plan": str(plan),
         "noise": _noise_dict(scn.noise),

@@ -18,7 +18,7 @@ Outputs in the chosen folder:
 - ``waveform.npy``: the tour sampled at 100 kS/s, columns time (s) and level (V);
 - ``waveform.png``: a picture of the tour with the robots' thresholds;
 - ``plan/``: ``plan.json``, ``plan.png``, ``summary.json`` (as ``stressbots plan``);
-- ``open-loop/``: ``result.json`` and ``trajectory.png`` for the nominal and the noisy run.
+- ``open-loop/``: ``result-nominal.json``, ``result-noisy.json`` and their ``trajectory-*.png``.
 """
 
 from __future__ import annotations

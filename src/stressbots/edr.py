@@ -100,7 +100,7 @@ class ControllerOptions:
     dock_tol_um: float = 30.0
     dock_tol_deg: float = 15.0
     clearance_um: float = 5.0
-    shape_tol_um: float = 2.0 * SHAPE_TOL_UM
+    shape_tol_um: float = SHAPE_TOL_UM
 
 
 @dataclass(frozen=True, eq=False)
@@ -472,11 +472,11 @@ class _Runner:
         return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
 
     def fine_start_on(self, ph, i: int) -> np.ndarray:
-        """The intermediate pose a_i on the nominal path, about 250 um before the slot.
+        """The intermediate pose a_i on the nominal path: where its final approach arc begins.
 
-        There the route is still in its last clockwise turn or on its final straight: the slot lies ahead
-        and to the right, within reach of one interpolated arc, and the gross motion to a_i follows the
-        nominal route instead of looping to a pose off it.
+        The planner ends every route with an interpolated clockwise arc into the slot, so from a_i the
+        slot lies ahead and to the right, within reach of one arc of adjustable radius r', and the gross
+        motion to a_i follows the nominal route instead of looping to a pose off it.
         """
         if not ph.path or ph.path_start is None:
             return self.fine_start(i, self.goals[i])

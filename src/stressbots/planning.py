@@ -96,7 +96,8 @@ class Phase:
     ``pair-B``) drive straight. Kinds: ``pair-A`` (D_n moves, D_{n-1} orbits), ``pair-B`` (D_{n-1} moves,
     D_n runs straight: ``run`` is D_n's run start and length), ``wait`` (a docking robot orbits before
     leaving), ``route`` (it drives to the start of its approach through ``waypoints``) and ``approach``
-    (its straight final approach into the slot).
+    (its final approach into the slot: an interpolated clockwise arc, then a short straight push).
+    ``path``/``path_start`` give the mover's planned path; ``approach_um`` the length of its final approach.
     """
 
     kind: str
