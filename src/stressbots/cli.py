@@ -434,18 +434,9 @@ class NoiseChoice(str, Enum):
     literature = "literature"
 
 
-def _noise_dict(noise) -> dict:
-    """A :class:`~stressbots.scenario.Noise` in the file's units (deg, deg/mm)."""
-    import math
-
-    return {
-        "speed_rel_sd": noise.speed_rel_sd,
-        "turn_radius_rel_sd": noise.turn_radius_rel_sd,
-        "heading_drift_deg_per_mm": math.degrees(noise.heading_drift_rad_per_um) * 1000.0,
-        "camera_position_sd_um": noise.camera_position_sd_um,
-        "camera_heading_sd_deg": math.degrees(noise.camera_heading_sd_rad),
-        "camera_dropout": noise.camera_dropout,
-    }
+def _noise_dict(noise) -> dict[str, float]:
+    """The noise levels in the file's units (deg, deg/mm)."""
+    return noise.to_file_units()
 
 
 @app.command()

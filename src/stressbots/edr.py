@@ -158,17 +158,6 @@ class AssemblyResult:
         }
 
 
-def _sub_path(path: pathlib.Path, s0: float, s1: float) -> pathlib.Path:
-    """The part of ``path`` between arc lengths ``s0`` and ``s1`` (um)."""
-    segs, acc = [], 0.0
-    for kind, ell in path.segments:
-        a, b = max(s0, acc), min(s1, acc + ell)
-        if b > a:
-            segs.append((kind, b - a))
-        acc += ell
-    return pathlib.Path(tuple(path.pose_at(s0)), path.radius, tuple(segs))
-
-
 def _deg(p) -> list[float]:
     return [float(p[0]), float(p[1]), float(math.degrees(p[2]) % 360.0)]
 
@@ -412,26 +401,9 @@ class _Runner:
 
     def detour(self, i: int, target, orbiting, extra_discs) -> pathlib.Path | None:
         """A roadmap route around the obstacles from the measured pose (rarely needed)."""
-        from .planning import PlannerOptions, _Obstacles, _NoRoute, _route
-
-        orbiting = [j for j in orbiting if j != i]
-        centres = list(turning_centres(self.est[orbiting], self.r[orbiting])) if orbiting else []
-        radii = list(self.rstar[orbiting]) if orbiting else []
-        for c, rr in extra_discs:
-            centres.append(c)
-            radii.append(rr)
-        docked = np.flatnonzero(self.docked)
-        obst = _Obstacles(
-            np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("orbit" for _ in radii),
-            self.est[docked], self.L[docked], self.W[docked], tuple("docked" for _ in docked), self.scn.arena_um,
-        )
-        opts = PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200))
-        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i]))
-        try:
-            _, path, _ = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r[i], self.L[i], self.W[i], obst, opts, rng, "")
-        except _NoRoute:
-            return None
-        self.log("detour", i, f"route around obstacles ({path.length:.0f} um)")
+        path = self.timed_detour(i, target, 0.0, orbiting, extra_discs)
+        if path is not None:
+            self.log("detour", i, f"route around obstacles ({path.length:.0f} um)")
         return path
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
@@ -614,7 +586,7 @@ class _Runner:
         vN = self.v_hat[N]
         while path.length - done > 1e-6:
             th0 = self.est[M, 2]
-            self.drive(self.path_steps(_sub_path(path, done, done + vN * self.tx), vN, n, n - 1))
+            self.drive(self.path_steps(pathlib.sub_path(path, done, done + vN * self.tx), vN, n, n - 1))
             done += vN * self.tx
             turned += float(np.mod(self.est[M, 2] - th0, TWO_PI))
             left = (want - turned) / self.omega_hat[M]

@@ -378,14 +378,8 @@ def run_trials(
 
 
 def _noise_dict(noise) -> dict[str, float]:
-    return {
-        "speed_rel_sd": noise.speed_rel_sd,
-        "turn_radius_rel_sd": noise.turn_radius_rel_sd,
-        "heading_drift_deg_per_mm": math.degrees(noise.heading_drift_rad_per_um) * 1000.0,
-        "camera_position_sd_um": noise.camera_position_sd_um,
-        "camera_heading_sd_deg": math.degrees(noise.camera_heading_sd_rad),
-        "camera_dropout": noise.camera_dropout,
-    }
+    """The noise levels in the file's units (deg, deg/mm)."""
+    return noise.to_file_units()
 
 
 def summarise(outcomes: Sequence[TrialOutcome]) -> dict[str, Any]:

@@ -89,6 +89,7 @@ from .kinematics import TWO_PI, follow, poses_along, sample_arclengths, wrap
 from .robots import Pose
 
 __all__ = [
+    "sub_path",
     "Path",
     "InfeasibleLengthError",
     "shortest_path",
@@ -235,6 +236,21 @@ class Path:
     def then(self, *segments) -> "Path":
         """This path followed by more ``(kind, length_um)`` segments."""
         return Path(self.start, self.radius, self.segments + tuple(segments))
+
+
+def sub_path(path: "Path", s0_um: float, s1_um: float) -> "Path":
+    """The part of ``path`` between arc lengths ``s0_um`` and ``s1_um`` (um), as a path of its own.
+
+    Used to cut a planned route into the pieces a robot drives between two measurements or phases.
+    """
+    segs = []
+    acc = 0.0
+    for kind, ell in path.segments:
+        a, b = max(s0_um, acc), min(s1_um, acc + ell)
+        if b > a:
+            segs.append((kind, b - a))
+        acc += ell
+    return Path(tuple(path.pose_at(s0_um)), path.radius, tuple(segs))
 
 
 class InfeasibleLengthError(ValueError):

@@ -944,7 +944,7 @@ class _Planner:
         self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[0].segments, path_start=tuple(float(v) for v in a_paths[0].start))
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
-            piece = _sub_path(fullM, bounds[j], bounds[j + 1])
+            piece = pathlib.sub_path(fullM, bounds[j], bounds[j + 1])
             before = self.tl.travel[N]
             t0 = self.tl.t
             self.tl.apply_path(M, piece, n - 1, n - 2)
@@ -969,18 +969,6 @@ class _Planner:
             )
         self.tl.dock(N, self.goals[N], self.lab(N))
         self.tl.dock(M, self.goals[M], self.lab(M))
-
-
-def _sub_path(path: pathlib.Path, s0: float, s1: float) -> pathlib.Path:
-    """The part of ``path`` between arc lengths ``s0`` and ``s1`` (um), as a path of its own."""
-    segs = []
-    acc = 0.0
-    for kind, ell in path.segments:
-        a, b = max(s0, acc), min(s1, acc + ell)
-        if b > a:
-            segs.append((kind, b - a))
-        acc += ell
-    return pathlib.Path(tuple(path.pose_at(s0)), path.radius, tuple(segs))
 
 
 def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:

@@ -66,6 +66,17 @@ class Noise:
     def is_nominal(self) -> bool:
         return all(v == 0.0 for v in self.__dict__.values())
 
+    def to_file_units(self) -> dict[str, float]:
+        """The ``[noise]`` table as the file writes it (deg, deg/mm)."""
+        return {
+            "speed_rel_sd": self.speed_rel_sd,
+            "turn_radius_rel_sd": self.turn_radius_rel_sd,
+            "heading_drift_deg_per_mm": math.degrees(self.heading_drift_rad_per_um) * 1000.0,
+            "camera_position_sd_um": self.camera_position_sd_um,
+            "camera_heading_sd_deg": math.degrees(self.camera_heading_sd_rad),
+            "camera_dropout": self.camera_dropout,
+        }
+
     def scaled(self, factor: float) -> "Noise":
         """Every error level multiplied by ``factor`` (dropout capped below 1)."""
         return Noise(
@@ -498,16 +509,8 @@ def to_toml(scenario: Scenario) -> str:
             lines.append(f"goal = {pose(r.goal)}")
     if scenario.structure is not None:
         lines += ["", "[structure]", f"shape = {_toml_str(scenario.structure.shape)}", f"at = {pose(scenario.structure.at)}"]
-    nz = scenario.noise
+    lines += ["", "[noise]"] + [f"{key} = {num(value)}" for key, value in scenario.noise.to_file_units().items()]
     lines += [
-        "",
-        "[noise]",
-        f"speed_rel_sd = {num(nz.speed_rel_sd)}",
-        f"turn_radius_rel_sd = {num(nz.turn_radius_rel_sd)}",
-        f"heading_drift_deg_per_mm = {num(math.degrees(nz.heading_drift_rad_per_um) * 1000.0)}",
-        f"camera_position_sd_um = {num(nz.camera_position_sd_um)}",
-        f"camera_heading_sd_deg = {num(math.degrees(nz.camera_heading_sd_rad))}",
-        f"camera_dropout = {num(nz.camera_dropout)}",
         "",
         "[control]",
         f"replan_interval_s = {num(scenario.control.replan_interval_s)}",
