@@ -241,3 +241,52 @@ def test_replay_catches_inaccessible_primitives_and_overlaps():
     goals["A"] = Pose(*goals["B"])
     rep = replay(plans.Plan(plan.robots, plan.primitives, plan.steps, goals), scn)
     assert not rep.ok
+
+
+GAP = """
+arena_um = [3600.0, 3600.0]
+[electrodes]
+margin_V = 2.0
+[[robots]]
+name = "D1"
+snap_down_V = 109.0
+release_V = 3.0
+start = [600.0, 600.0, 0.0]
+goal = [1800.0, 1540.0, 0.0]
+[[robots]]
+name = "D2"
+snap_down_V = 125.0
+release_V = 20.0
+start = [3000.0, 600.0, 0.0]
+goal = [1740.0, 1540.0, 0.0]
+[[robots]]
+name = "D3"
+snap_down_V = 145.0
+release_V = 38.0
+start = [600.0, 3000.0, 90.0]
+goal = [1860.0, 1540.0, 0.0]
+[[robots]]
+name = "D4"
+snap_down_V = 165.0
+release_V = 55.0
+start = [3000.0, 3000.0, 180.0]
+goal = [1670.0, 1700.0, 90.0]
+[[robots]]
+name = "D5"
+snap_down_V = 185.0
+release_V = 70.0
+start = [1800.0, 2800.0, 270.0]
+goal = [1930.0, 1700.0, 270.0]
+"""
+
+
+def test_docking_into_a_gap_between_docked_neighbours():
+    """D1's slot is exactly one body wide between D2 and D3: its approach must start outside the gap."""
+    scn = loads(GAP)
+    result = plan_assembly(scn)
+    _independent_checks(scn, result)
+    goals = result.plan.goal_array()
+    i1, i2, i3 = scn.index("D1"), scn.index("D2"), scn.index("D3")
+    # the neighbours touch D1's slot on both sides (zero clearance): a real gap
+    gaps = [abs(goals[i1, 0] - goals[j, 0]) - 0.5 * (scn.widths_um[i1] + scn.widths_um[j]) for j in (i2, i3)]
+    assert np.allclose(gaps, 0.0, atol=1e-9)

@@ -600,7 +600,7 @@ class _Planner:
             self.scn.arena_um,
         )
 
-    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: _Obstacles, who: str) -> pathlib.Path:
+    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: _Obstacles, who: str, a_max: float | None = None) -> pathlib.Path:
         """The final approach of robot ``i`` into its slot, ``a`` um long.
 
         A clockwise arc of radius ``s / phi`` (flown as an interpolated turn, seed App. 3.1) that arrives
@@ -608,16 +608,23 @@ class _Planner:
         reachable on one clockwise arc (seed Fig. 4): ending the nominal approach on such an arc leaves
         the fine-motion controller room to correct errors either way by changing r'. ``phi`` is the
         largest of 20, 12, 6 deg whose swept bodies clear the obstacles (touching the structure at the
-        end is docking); a straight approach when none does (tight gaps).
+        end is docking); else a straight approach, as long as the slot's clear corridor (``a_max``) if
+        need be, so that it starts outside a gap between docked neighbours.
         """
         r, L, W = self.r[i], self.L[i], self.W[i]
         tail = min(20.0, 0.25 * a)
         s_f = a - tail
         p_pre = _pre_approach(goal, tail)
         hit = None
-        for phi_deg in (20.0, 12.0, 6.0, 0.0):
+        options = [(20.0, a), (12.0, a), (6.0, a), (0.0, a)]
+        if a_max is not None and a_max > a:
+            options.append((0.0, a_max))
+        for phi_deg, length in options:
             if phi_deg == 0.0:
-                path = pathlib.Path(tuple(_pre_approach(goal, a)), r, (("S", a),))
+                path = pathlib.Path(tuple(_pre_approach(goal, length)), r, (("S", length),))
+                if obst.first_hit(path.sample(self.opts.sample_um)[:1], L, W, self.opts.clearance_um) is not None:
+                    hit = "a docked neighbour at its start"
+                    continue
             else:
                 radius = s_f / math.radians(phi_deg)
                 if radius < 1.05 * r:
@@ -639,7 +646,7 @@ class _Planner:
         orbiting = [self.by_rank[j] for j in range(1, k)]
         docked = [self.by_rank[j] for j in range(k + 1, self.n + 1)]
         obst = self.obstacles(orbiting, docked)
-        approach = self.approach_path(i, goal, a, obst, who)
+        approach = self.approach_path(i, goal, a, obst, who, a_max=float(self.struct.slot(self.scn.names[i]).approach_um))
         pre = np.array(approach.start, dtype=np.float64)
         m = self.opts.departure_phases
         period = TWO_PI * self.r[i] / self.v[i]
@@ -826,6 +833,16 @@ class _Planner:
         LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
         TM = TWO_PI * rM / vM
         pieces = len(durs)
+        straight_first = 0.0
+        here = self.tl.poses[N]
+        if park is not None and wait0 > 0 and np.allclose(np.asarray(park[0]), here):
+            # Parked at its own start: D_n passes D_{n-1}'s wait for its departure driving straight along
+            # its track (P_{n-1}: D_{n-1} orbits) instead of killing time on a loop.
+            straight_first = vN * wait0
+            if straight_first >= park[1] - 2.0 * rN:
+                return f"{self.lab(N)}'s parking track is too short to wait {wait0:.1f} s on it"
+            hN = np.array([math.sin(here[2]), math.cos(here[2]), 0.0])
+            park = (np.asarray(park[0]) + straight_first * hN, park[1] - straight_first)
         starts = self._run_starts(N, durs, park)
         runs = [pathlib.Path(tuple(s0), rN, (("S", vN * t),)) for s0, t in zip(starts, durs)]
         whoN, whoM = self.lab(N), self.lab(M)
@@ -851,7 +868,12 @@ class _Planner:
                 return f"{whoN}'s straight run meets {whoM} (piece {j + 1} of {pieces})"
         # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods; D_{n-1} orbits meanwhile.
         obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {whoM}")
-        first = self._timed_path(self.tl.poses[N], starts[0], vN, rN, LN, WN, wait0, TM, obst0)
+        if straight_first > 0.0:
+            first = pathlib.Path(tuple(here), rN, (("S", straight_first),))
+            hit = obst0.first_hit(first.sample(opts.sample_um), LN, WN, opts.clearance_um)
+            first = first if hit is None else f"blocked by {hit}"
+        else:
+            first = self._timed_path(self.tl.poses[N], starts[0], vN, rN, LN, WN, wait0, TM, obst0)
         if isinstance(first, str):
             return f"{whoN} cannot reach the start of its first run ({first})"
         a_paths = [first]
