@@ -127,3 +127,13 @@ def test_arbitrary_bytes_never_crash(data):
             load(p)
         except ScenarioError as exc:
             assert "\n" not in exc.message
+
+
+def test_builtin_demo_scenario_is_the_example():
+    """The packaged demo scenario is a copy of examples/four-robots.toml (examples/ is not installed)."""
+    from dataclasses import replace
+
+    from stressbots.demo import load_builtin
+
+    builtin, example = load_builtin(), load(EXAMPLES / "four-robots.toml")
+    assert replace(builtin, source=None) == replace(example, source=None)
