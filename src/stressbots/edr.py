@@ -197,6 +197,12 @@ def _turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um
     return float(r / arc.radius_um), float(arc.length_um), th + float(arc.turn_rad)
 
 
+def pose_on_orbit(centre, radius_um: float, theta: float) -> np.ndarray:
+    """The pose with heading ``theta`` on the clockwise orbit about ``centre`` (inverse of the turning centre)."""
+    c = np.asarray(centre, dtype=np.float64)
+    return np.array([c[0] - radius_um * math.cos(theta), c[1] + radius_um * math.sin(theta), float(np.mod(theta, TWO_PI))])
+
+
 class _Runner:
     def __init__(self, scenario, plant, plan_result, opts: ControllerOptions, seed):
         self.scn = scenario
@@ -502,6 +508,10 @@ class _Runner:
         for _ in range(60):
             v, r = self.v_hat[i], self.r_hat[i]
             goal = self.goals[i]
+            if self.near_slot(i):
+                # already at the structure (e.g. it met it while turning): push, and let compliance act
+                self.drive([(k - 1, self.opts.push_s)])
+                return self.check_docked(i, k)
             fr = _turn_fraction(self.est[i], goal, r)
             if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
                 return False  # not reachable on one interpolated arc: gross motion again
@@ -512,6 +522,14 @@ class _Runner:
                 return self.check_docked(i, k)
             self.drive(self.interpolated_steps(rho, self.tx, k, k - 1))
         return False
+
+    def near_slot(self, i: int) -> bool:
+        """Whether robot ``i`` (measured) is at its slot within the docking tolerances."""
+        goal = self.goals[i]
+        return bool(
+            np.hypot(*(self.est[i, :2] - goal[:2])) <= self.opts.dock_tol_um
+            and abs(angle_difference(self.est[i, 2], goal[2])) <= math.radians(self.opts.dock_tol_deg)
+        )
 
     def check_docked(self, i: int, k: int) -> bool:
         """Push until the robot stops; docked if it stopped at its slot, stuck (H) if elsewhere."""
@@ -535,165 +553,380 @@ class _Runner:
         """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
         self.drive([(k, 0.5 * math.pi * self.r[i] / self.v[i]), (k - 1, 150.0 / self.v[i])])
 
-    # -- G_1 --------------------------------------------------------------------------------------------
+    # -- G_1 (App. 3.3) as an orbit rendezvous ---------------------------------------------------------
+    #
+    # Under P_n and P_{n-1} D_{n-1} orbits in place (its pose is a function of time only) while D_n is a
+    # free one-way car (P_n turns it, P_{n-1} drives it straight). Under P_{n-2} both drive straight. So:
+    #
+    # 1. transfer: D_{n-1} turns until it heads for its station orbit, then drives straight onto it
+    #    (P_{n-2}); D_n turns with it for a chosen fraction of the turn, then runs straight on a track
+    #    checked to be clear. D_{n-1}'s heading is corrected clockwise on the way (a left bias at
+    #    departure makes every correction clockwise, so none costs a loop);
+    # 2. rendezvous: D_n drives to a pose on the tangent of D_{n-1}'s orbit that leads to D_{n-1}'s slot,
+    #    timed to arrive a little before D_{n-1} passes the tangent point, and runs straight on; D_{n-1}
+    #    leaves its orbit at the heading that best lines it up with D_n as measured (the departure is
+    #    timed from D_{n-1}'s measured heading and identified turn rate);
+    # 3. both drive straight into each other: self-aligning compliance forms G_1.
+    #
+    # No step needs an exact pose: D_n's arrival may be early or late by a second (its straight run
+    # absorbs it), D_{n-1}'s station may be tens of um off (the rendezvous is computed from the measured
+    # orbit), and the meeting tolerates |alpha| < 60 deg and |w_y| < 80 um. The pair may form a little
+    # away from its nominal place: the later slots follow it (``retarget``).
 
-    def form_pair(self, phases) -> None:
-        """Step 1: follow the pair's phases; re-plan sigma_1 from the measured poses when out of step."""
+    def centre(self, i: int) -> np.ndarray:
+        """Measured turning centre of robot ``i`` (with its identified radius)."""
+        return turning_centres(self.est[i], self.r_hat[i])[0]
+
+    def meet_distance(self, N: int, M: int) -> float:
+        """Centre distance of D_n from D_{n-1}'s tangent point at departure: D_n clear of the orbit disc, plus 80 um."""
+        rs = self.rstar[M] + 30.0
+        lateral = self.r[M] - 0.5 * self.W[N]
+        return 0.5 * self.L[N] + math.sqrt(max(rs * rs - lateral * lateral, 0.0)) + 80.0
+
+    def station(self, N: int, M: int, D: float) -> np.ndarray:
+        """Centre of the orbit D_{n-1} leaves from so that, meeting D_n from ``D`` away, it ends in its slot."""
+        g = self.goals[M]
+        th = float(g[2])
+        h = np.array([math.sin(th), math.cos(th)])
+        right = np.array([math.cos(th), -math.sin(th)])
+        vM, vN = self.v_hat[M], self.v_hat[N]
+        s_M = max(D - 0.5 * (self.L[M] + self.L[N]), 0.0) * vM / (vM + vN)
+        tangent = g[:2] - s_M * h
+        return tangent + self.r_hat[M] * right
+
+    def form_pair(self) -> None:
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         lower = self.orbiting_below(n - 1)
-        queue = list(phases)
-        replans = 0
-        while queue:
-            ph = queue.pop(0)
-            ok = True
-            if ph.kind == "pair-A":
-                ok = self.follow_a_phase(N, M, ph, lower)
-            elif ph.kind == "pair-B":
-                ok = self.pair_piece(N, M, ph, lower)
-            if not ok:
-                replans += 1
-                if replans > 8:
-                    raise _Abort("G_1 could not be synchronised: 8 re-plans of sigma_1 did not bring the pair into step")
-                self.log("replan", N, f"G_1 out of step after a {ph.kind} phase: sigma_1 re-planned from the measured poses")
-                queue = self.replan_pair(N, M)
-        self.close_pair(N, M, lower)
+        D = self.meet_distance(N, M)
+        c_star = self.station(N, M, D)
+        self.transfer(N, M, c_star, D, lower)
+        for attempt in range(4):
+            if self.rendezvous(N, M, D, lower):
+                return
+            self.log("retry", N, f"rendezvous attempt {attempt + 1} missed; D_n re-plans its approach")
+        raise _Abort("G_1 did not form in 4 rendezvous attempts")
 
-    def follow_a_phase(self, N: int, M: int, ph, lower) -> bool:
-        """D_n drives to the start of its next run while D_{n-1} orbits back to its departure heading.
+    # stage 1: D_{n-1} onto its station orbit ---------------------------------------------------------
 
-        The phase lasts as long as D_{n-1}, at its measured turn rate, needs to come back to the planned
-        departure heading (the planned number of turns); D_n's path of exactly that duration is computed
-        from its measured pose and driven open loop, re-timed once half way with the turn rate measured
-        meanwhile; then D_n steers into its region if it is not there. Returns False when D_{n-1} ends
-        out of step (the caller re-plans).
-        """
+    def transfer(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
         n = self.n
-        target = np.array(ph.target)
-        disc = [(turning_centres(self.est[M], self.r_hat[M])[0], self.rstar[M])]
-        turns_planned = self.omega_nom[M] * ph.duration_s
-        delta = float(np.mod(ph.partner_end[2] - self.est[M, 2], TWO_PI)) if ph.partner_end is not None else 0.0
-        k = max(0, round((turns_planned - delta) / TWO_PI))
-        # D_{n-1} aims to stop a little before its departure heading: past it, its route would need a loop
-        want = max(delta + TWO_PI * k - math.radians(20.0), 0.0)
-        turned = 0.0
-        retimed = False
-        path = self.timed_a_path(N, target, want / self.omega_hat[M], lower, disc)
-        if path is None:
-            return False
-        self.replans += 1
-        done = 0.0
-        vN = self.v_hat[N]
-        while path.length - done > 1e-6:
-            th0 = self.est[M, 2]
-            self.drive(self.path_steps(pathlib.sub_path(path, done, done + vN * self.tx), vN, n, n - 1))
-            done += vN * self.tx
-            turned += float(np.mod(self.est[M, 2] - th0, TWO_PI))
-            left = (want - turned) / self.omega_hat[M]
-            if not retimed and done > 0.4 * path.length and left > 4.0 * self.tx:
-                retimed = True
-                new = self.timed_a_path(N, target, left, lower, disc)
-                if new is not None:
-                    path, done = new, 0.0
-        # D_n's straight run tolerates a heading error (self-alignment absorbs up to 60 deg at the end);
-        # correcting it would cost a loop. Only a position error makes it steer again.
-        if np.hypot(*(self.est[N, :2] - target[:2])) > 40.0:
-            self.steer(N, target, n, n - 1, lower, extra_discs=disc, max_cycles=60)
-        if ph.partner_end is None:
+        for attempt in range(3):
+            d_vec = c_star - self.centre(M)
+            d = float(np.hypot(*d_vec))
+            if d <= 60.0:
+                break
+            th_dep = float(np.mod(math.atan2(d_vec[0], d_vec[1]) - math.radians(3.0), TWO_PI))
+            turn = float(np.mod(th_dep - self.est[M, 2], TWO_PI))
+            t_turn = turn / self.omega_hat[M]
+            f = self.transfer_option(N, M, t_turn, d, th_dep, lower, c_star, self.approach_pose(N, M, c_star, D))
+            if f is None:
+                raise _Abort(
+                    f"D_n ({self.scn.names[N]}) has no clear straight track while D_(n-1) ({self.scn.names[M]}) "
+                    f"moves {d:.0f} um to its station orbit"
+                )
+            self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {d:.0f} um; {self.scn.names[N]} turns {f:.0%} of the wait, then runs straight")
+            self.replans += 1
+            # the turn: D_{n-1} orbits to th_dep; D_n turns first (P_n) for f of it, then straight (P_{n-1})
+            turned = 0.0
+            n_turn = f * t_turn
+            while True:
+                left = (turn - turned) / self.omega_hat[M]
+                if left <= 1e-3:
+                    break
+                dt = left if left <= 1.6 * self.tx else self.tx
+                a = min(dt, max(n_turn, 0.0))
+                th0 = self.est[M, 2]
+                self.drive([(n, a), (n - 1, dt - a)])
+                n_turn -= a
+                turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+                if dt == left:
+                    break
+            # the straight: P_{n-2}, with clockwise corrections of D_{n-1}'s bearing (P_{n-1} bursts)
+            for _ in range(200):
+                c = self.centre(M)
+                to = c_star - c
+                h = np.array([math.sin(self.est[M, 2]), math.cos(self.est[M, 2])])
+                rem = float(to @ h)
+                if rem <= 5.0:
+                    break
+                bearing = float(angle_difference(math.atan2(to[0], to[1]), self.est[M, 2]))
+                steps = []
+                if rem > 60.0 and math.radians(0.7) < bearing < math.radians(30.0):
+                    steps.append((n - 1, bearing / self.omega_hat[M]))
+                dt = rem / self.v_hat[M]
+                if dt > 1.6 * self.tx:
+                    dt = self.tx
+                steps.append((n - 2, dt))
+                if not self.track_clear(N, sum(d for k, d in steps if k <= n - 1) * self.v_hat[N] + 40.0, lower, M):
+                    self.log("transfer", N, "D_n's track runs out; D_(n-1) stops short and moves on from there")
+                    break
+                self.drive(steps)
+        miss = float(np.hypot(*(c_star - self.centre(M))))
+        self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
+
+    def transfer_option(self, N: int, M: int, t_turn: float, d: float, th_dep: float, lower, c_star, q_next) -> float | None:
+        """Fraction of D_{n-1}'s turn during which D_n turns with it (then runs straight), or None.
+
+        Every fraction whose motion keeps D_n clear of the orbits, the arena edge and D_{n-1} (its orbit
+        while it turns, its body while both drive straight, its new orbit afterwards) is a candidate; the
+        one leaving D_n the shortest path to its next target ``q_next`` wins.
+        """
+        vN, rN, vM = self.v_hat[N], self.r_hat[N], self.v_hat[M]
+        c = self.opts.clearance_um + 10.0
+        t_straight = d / vM + 1.0
+        mdep = pose_on_orbit(self.centre(M), self.r_hat[M], th_dep)
+        s_m = np.linspace(0.0, vM * t_straight, 60)
+        m_track = move(mdep, s_m, 0.0)
+        if self._blocked(m_track, M, lower, c):
+            raise _Abort(f"D_(n-1) ({self.scn.names[M]})'s straight move to its station orbit is blocked")
+        m_disc = [(self.centre(M), self.rstar[M] + c)]
+        new_disc = [(np.asarray(c_star, float), self.rstar[M] + 40.0)]
+        best, best_len = None, math.inf
+        for f in np.linspace(0.0, 1.0, 17):
+            a = vN * f * t_turn
+            b = vN * (1.0 - f) * t_turn
+            arc = move(self.est[N], np.linspace(0.0, a, max(2, int(a / 10.0) + 2)), 1.0 / rN)
+            run = move(arc[-1], np.linspace(0.0, b, max(2, int(b / 10.0) + 2)), 0.0)
+            if self._blocked(np.vstack([arc, run]), N, lower, c, discs=m_disc):
+                continue
+            # synchronous with D_{n-1}'s straight: same times, bodies apart; then clear of its new orbit
+            n_track = move(run[-1], s_m * vN / vM * 1.15, 0.0)
+            if self._blocked(n_track, N, lower, c):
+                continue
+            if (penetration_depth(n_track, self.L[N], self.W[N], m_track, self.L[M], self.W[M]) > -c).any():
+                continue
+            end = move(run[-1], vN * d / vM, 0.0)
+            if self._blocked(end[None, :], N, lower, c, discs=new_disc):
+                continue
+            nxt = pathlib.shortest_path(end, np.asarray(q_next, float), rN, approach_um=60.0)
+            ell = nxt.length
+            # prefer a clear way on, and room to wait on D_n's own orbit there (its timing reserve)
+            if self._blocked(nxt.sample(10.0), N, lower, 0.0, discs=new_disc):
+                ell += 1e5
+            loop = move(end, np.linspace(0.0, TWO_PI * rN, 40), 1.0 / rN)
+            if self._blocked(loop, N, lower, 0.0, discs=new_disc):
+                ell += 1e4
+            if ell < best_len:
+                best, best_len = float(f), ell
+        return best
+
+    def _blocked(self, samples: np.ndarray, i: int, lower, clearance: float, discs=()) -> bool:
+        """Whether robot ``i``'s body along ``samples`` meets a lower robot's orbit, ``discs`` or the arena edge."""
+        centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
+        radii = [float(x) + clearance for x in self.rstar[lower]] if lower else []
+        for cc, rr in discs:
+            centres.append(cc)
+            radii.append(rr)
+        if centres and bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii)).any():
             return True
-        still = float(np.mod(ph.partner_end[2] - self.est[M, 2] + 0.5, TWO_PI)) - 0.5  # > 0: still to turn
-        return math.radians(3.0) <= still <= math.radians(55.0)
+        docked = np.flatnonzero(self.docked)
+        for j in docked:
+            if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -clearance).any():
+                return True
+        if self.scn.arena_um is not None:
+            w, hh = self.scn.arena_um
+            inner = (max(w - 2 * clearance, 1.0), max(hh - 2 * clearance, 1.0))
+            shifted = samples.copy()
+            shifted[:, :2] -= clearance
+            if (outside_arena(shifted, self.L[i], self.W[i], inner) > 0).any():
+                return True
+        return False
+
+    def track_clear(self, N: int, length: float, lower, M: int) -> bool:
+        track = move(self.est[N], np.linspace(0.0, max(length, 1.0), 30), 0.0)
+        return not self._blocked(track, N, lower, 0.0)
+
+    # stage 2: the rendezvous -------------------------------------------------------------------------
 
     def timed_a_path(self, N: int, target, duration: float, lower, disc) -> pathlib.Path | None:
         """D_n's collision-free path to ``target`` lasting ``duration`` s (at its identified speed)."""
         vN, rN = self.v_hat[N], self.r_hat[N]
         try:
-            cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration)
+            cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration, approach_um=min(60.0, 0.3 * vN * duration))
         except pathlib.InfeasibleLengthError:
             return None
         if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
             cand = self.timed_detour(N, target, duration, lower, disc)
-            if cand is None or cand.length < vN * duration - 1.0:
+            if cand is None or abs(cand.length - vN * duration) > 5.0:
                 return None
         return cand
 
-    def replan_pair(self, N: int, M: int) -> list:
-        """Plan the pair's remaining phases from the measured poses (using D_{n-1}'s measured turn rate)."""
-        from dataclasses import replace as dc_replace
+    def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3) -> pathlib.Path | None:
+        """D_n waits on its own orbit, then takes its shortest path into the region around ``target``.
 
-        from .planning import PlannerOptions, _NoRoute, _Planner
-        from .robots import Pose
+        Waiting on its own orbit (P_n: D_{n-1} orbits too) is the compact way for a one-way robot to
+        arrive later: every arrival time from the shortest path's on to a period later is (almost always)
+        available, and the path stays near where the robot is. The goal is a region, not a pose: any
+        pose up to 100 um along D_n's approach line (timed accordingly), up to 40 um right or 20 um left
+        of it and 6 deg either way will do, because D_{n-1}'s departure is fitted to the line D_n really
+        ends on. A pose target would turn a small error to the left into a full loop. The first of
+        ``arrivals`` (s from now, for ``target`` itself) that some wait meets within ``tol_s`` with a
+        clear path wins; of those, the one nearest ``target``.
+        """
+        vN, rN = self.v_hat[N], self.r_hat[N]
+        q = np.asarray(target, float)
+        hq = np.array([math.sin(q[2]), math.cos(q[2])])
+        rq = np.array([math.cos(q[2]), -math.sin(q[2])])
+        s, e, d = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]), indexing="ij")
+        s, e, d = s.ravel(), e.ravel(), d.ravel()
+        goals = np.stack([q[0] + s * hq[0] + e * rq[0], q[1] + s * hq[1] + e * rq[1], np.mod(q[2] + d, TWO_PI)], axis=1)
+        offset = s / vN  # further along the line: arrive correspondingly later
+        penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)
+        period = TWO_PI * rN / vN
+        tw = np.arange(0.0, period, 0.05)
+        waits = move(self.est[N], vN * tw, 1.0 / rN)
+        W, K = len(tw), len(goals)
+        ell = pathlib.shortest_path_lengths(np.repeat(waits, K, axis=0), np.tile(goals, (W, 1)), rN, approach_um=60.0).reshape(W, K)
+        arr = tw[:, None] + ell / vN - offset[None, :]
+        for want in arrivals:
+            err = np.abs(arr - want)
+            score = np.where(err <= tol_s, err + 0.1 * penalty[None, :], np.inf).ravel()
+            for flat in np.argsort(score)[:10]:
+                if not np.isfinite(score[flat]):
+                    break
+                j, kk = divmod(int(flat), K)
+                tail = pathlib.shortest_path(waits[j], goals[kk], rN, approach_um=60.0)
+                segs = tuple(tail.segments)
+                if tw[j] > 0:
+                    if segs and segs[0][0] == "R":
+                        segs = (("R", segs[0][1] + vN * tw[j]),) + segs[1:]
+                    else:
+                        segs = (("R", vN * tw[j]),) + segs
+                path = pathlib.Path(self.est[N], rN, segs)
+                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
+                    return path
+        return None
 
-        robots = []
-        for i, rb in enumerate(self.scn.robots):
-            robots.append(dc_replace(rb, start=Pose(*self.est[i]), speed_um_s=float(self.v_hat[i]), turn_radius_um=float(self.r_hat[i])))
-        scn2 = self.scn.with_robots(robots)
-        for clearance in (PLAN_CLEARANCE_UM, 10.0):
-            planner = _Planner(scn2, self.analysis, self.pr.structure, PlannerOptions(clearance_um=clearance, seed=len(self.events)))
-            try:
-                planner.form_pair()
-            except (_NoRoute, PlanningError):
+    def approach_pose(self, N: int, M: int, centre, D: float, early: float = 1.2) -> np.ndarray:
+        """Where D_n aims: on the tangent of D_{n-1}'s orbit (about ``centre``) leading to D_{n-1}'s slot,
+        facing it, ``D`` plus ``early`` seconds of driving from the tangent point."""
+        th_dep = float(self.goals[M, 2])
+        tangent = pose_on_orbit(centre, self.r_hat[M], th_dep)
+        h = np.array([math.sin(th_dep), math.cos(th_dep)])
+        return np.array([*(tangent[:2] + (D + self.v_hat[N] * early) * h), np.mod(th_dep + math.pi, TWO_PI)])
+
+    def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
+        n = self.n
+        vN = self.v_hat[N]
+        early = 1.2  # s: D_n plans to reach its line this long before D_{n-1} leaves its orbit
+        th_dep = float(self.goals[M, 2])
+        k_min = 0
+        for _ in range(600):
+            cM = self.centre(M)
+            q = self.approach_pose(N, M, cM, D, early)
+            disc = [(cM, self.rstar[M])]
+            t_dep = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
+            period = TWO_PI / self.omega_hat[M]
+            arrivals = [t_dep + k * period - early for k in range(k_min, k_min + 4)]
+            arrivals = [a for a in arrivals if a > 0.3]
+            path = self.loiter_path(N, q, arrivals, lower, disc)
+            if path is None:
+                for t_arr in arrivals:
+                    path = self.timed_a_path(N, q, t_arr, lower, disc)
+                    if path is not None:
+                        break
+            if path is None:
+                # no timed way from here: head for a holding pose further out on the approach line
+                path = self.to_holding(N, M, q, lower, disc)
+                if path is None:
+                    raise _Abort(f"D_n ({self.scn.names[N]}) finds no timed path to its approach line")
+                self.replans += 1
+                self.drive(self.path_steps(path, vN, n, n - 1, self.tx))
                 continue
-            return [p for p in planner.tl.phases if p.kind.startswith("pair")]
-        raise _Abort("sigma_1 could not be re-planned from the measured poses")
+            self.replans += 1
+            whole = path.length / vN <= 1.6 * self.tx
+            self.drive(self.path_steps(path, vN, n, n - 1, None if whole else self.tx))
+            if whole:
+                break
+        return self.depart_and_meet(N, M, lower)
 
-    def pair_piece(self, N: int, M: int, ph, lower) -> bool:
-        """D_{n-1} drives to the end of its piece while D_n runs straight; False if D_n's run runs out."""
+    def to_holding(self, N: int, M: int, q, lower, disc) -> pathlib.Path | None:
+        """An untimed route to a pose further out on D_n's approach line, from which waiting works."""
+        h = np.array([math.sin(q[2]), math.cos(q[2])])
+        for back in (600.0, 400.0, 900.0, 250.0):
+            hold = np.array([q[0] - back * h[0], q[1] - back * h[1], q[2]])
+            loop = move(hold, np.linspace(0.0, TWO_PI * self.r_hat[N], 40), 1.0 / self.r_hat[N])
+            if self._blocked(np.vstack([hold[None, :], loop]), N, self.orbiting_below(self.n - 1), 10.0, discs=[(disc[0][0], disc[0][1] + 10.0)]):
+                continue
+            path = pathlib.shortest_path(self.est[N], hold, self.r_hat[N])
+            if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
+                path = self.detour(N, hold, lower, disc)
+            if path is not None:
+                self.log("hold", N, f"{self.scn.names[N]} heads for a holding pose {back:.0f} um out on its approach line")
+                return path
+        return None
+
+    def depart_and_meet(self, N: int, M: int, lower) -> bool:
+        """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
         n = self.n
-        run_start = np.array(ph.run[0])
-        run_len = float(ph.run[1])
-        hN = np.array([math.sin(run_start[2]), math.cos(run_start[2])])
-        target = np.array(ph.target)
-        a = 0.0
-        if ph.last:
-            target = self.fine_start_on(ph, M)
-            a = float(pathlib.shortest_path(target, self.goals[M], self.r_hat[M]).length) * self.v_hat[N] / self.v_hat[M]
-        slack = 40.0 + self.v_hat[N] * math.radians(40.0) / self.omega_hat[M]
-
-        def room() -> float:
-            # D_n may run on until 0.4 a from its slot in the last piece (its partner is then a away)
-            done = float((self.est[N, :2] - run_start[:2]) @ hN)
-            end = run_len - (0.4 * a if ph.last else 0.0) + slack
-            return max(0.0, (end - done) / self.v_hat[N])
-
-        return self.steer(M, target, n - 1, n - 2, lower, guard=room)
-
-    def close_pair(self, N: int, M: int, lower) -> None:
-        """Fine motion of the pair: S_3f arcs through both docking points, or both straight."""
-        n = self.n
-        for _ in range(80):
-            gN, gM = self.goals[N], self.goals[M]
-            fN = _turn_fraction(self.est[N], gN, self.r_hat[N])
-            fM = _turn_fraction(self.est[M], gM, self.r_hat[M])
-            ends = front_midpoints(self.est[[N, M]], self.L[[N, M]])
-            gap = float(np.hypot(*(ends[0] - ends[1])))
-            # S_3f: D_n turns under P_n only (rho_a), D_{n-1} under P_n and P_{n-1} (rho_a + rho_b).
-            # When an arc is out of reach the robot drives straight and compliance takes the rest.
-            rho_a = fN[0] if fN is not None else 0.0
-            rho_ab = fM[0] if fM is not None else 0.0
-            rho_a = min(rho_a, rho_ab)
-            steps = [(n - 2, self.tx)]
-            if rho_ab > 0.005 and gap > 30.0:
-                cycles = max(1, math.ceil(self.tx / self.opts.switch_period_s))
-                T = self.tx / cycles
-                steps = []
-                for _c in range(cycles):
-                    steps += [(n, rho_a * T), (n - 1, (rho_ab - rho_a) * T), (n - 2, (1.0 - rho_ab) * T)]
+        for _ in range(40):
+            best = self.best_departure(N, M)
+            if best is None:
+                self.log("miss", N, "D_n is not on a line D_(n-1) can leave its orbit along")
+                self.drive([(n, 0.5 * math.pi / self.omega_hat[N])])  # turn away from the orbit
+                return False
+            t_wait, cost = best
+            if t_wait <= 1.6 * self.tx:
+                self.drive([(n - 1, t_wait)])
+                break
+            self.drive([(n - 1, self.tx)])
+        self.log("depart", M, f"{self.scn.names[M]} leaves its orbit toward {self.scn.names[N]}")
+        for _ in range(60):
             before = self.est[[N, M]].copy()
-            self.drive(steps)
+            self.drive([(n - 2, self.tx)])
             moved = np.hypot(*(self.est[[N, M], :2] - before[:, :2]).T)
-            ends = front_midpoints(self.est[[N, M]], self.L[[N, M]])
-            gap = float(np.hypot(*(ends[0] - ends[1])))
-            if gap < 20.0 and (moved < 0.2 * self.v[[N, M]] * self.tx).all():
-                self.drive([(n - 2, self.opts.push_s)])  # let self-alignment finish
-                self.docked[[N, M]] = True
-                self.log("G_1", N, f"formed with {self.scn.names[M]} (front edges {gap:.1f} um apart)")
-                self.retarget(N, M)
-                return
-            if (moved < 0.2 * self.v[[N, M]] * self.tx).all() and gap >= 20.0:
+            if (moved < 0.2 * self.v[[N, M]] * self.tx).all():
+                ends = front_midpoints(self.est[[N, M]], self.L[[N, M]])
+                gap = float(np.hypot(*(ends[0] - ends[1])))
+                if gap < 25.0:
+                    self.drive([(n - 2, self.opts.push_s)])
+                    self.docked[[N, M]] = True
+                    self.log("G_1", N, f"formed with {self.scn.names[M]} (front edges {gap:.1f} um apart)")
+                    self.retarget(N, M)
+                    return True
                 self.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H)")
                 raise _Abort(f"the G_1 pair stopped {gap:.0f} um apart (failure region H)")
-        raise _Abort("G_1 did not form during its fine motion")
+        raise _Abort("G_1 did not form: the pair drove past each other")
+
+    def best_departure(self, N: int, M: int):
+        """``(wait_s, cost)`` of D_{n-1}'s best departure heading, given D_n's measured line; None if none fits.
+
+        For each candidate heading within 20 deg of facing D_n, D_{n-1} leaves its orbit at the tangent
+        point; both then drive straight. The cost is the larger of |w_y| / 80 um and |alpha| / 60 deg at the
+        moment the front edges meet (the self-alignment limits); only departures within the next period
+        before D_n reaches D_{n-1}'s orbit count.
+        """
+        vN, vM = self.v_hat[N], self.v_hat[M]
+        wM = self.omega_hat[M]
+        cM = self.centre(M)
+        pN = self.est[N]
+        th = np.mod(pN[2] + math.pi + np.radians(np.arange(-20.0, 20.01, 0.5)), TWO_PI)
+        wait = np.mod(th - self.est[M, 2], TWO_PI) / wM
+        # D_n after the wait (straight), D_{n-1} at its tangent point
+        hN = np.array([math.sin(pN[2]), math.cos(pN[2])])
+        fN = pN[:2] + (0.5 * self.L[N] + vN * wait)[:, None] * hN  # D_n's front midpoint at departure
+        pM = cM[None, :] - self.r_hat[M] * np.stack([np.cos(th), -np.sin(th)], axis=1)
+        hM = np.stack([np.sin(th), np.cos(th)], axis=1)
+        fM = pM + 0.5 * self.L[M] * hM
+        rel = fN - fM
+        closing = vM + vN * (-(hN[None, :] * hM).sum(axis=1))
+        gap_along = (rel * hM).sum(axis=1)
+        t_meet = gap_along / np.maximum(closing, 1e-9)
+        fN_meet = fN + vN * t_meet[:, None] * hN
+        fM_meet = fM + vM * t_meet[:, None] * hM
+        right = np.stack([np.cos(th), -np.sin(th)], axis=1)
+        w_y = np.abs(((fN_meet - fM_meet) * right).sum(axis=1))
+        alpha = np.abs(np.degrees(angle_difference(th, pN[2] + math.pi)))
+        # D_n must still be outside the orbit disc when D_{n-1} leaves
+        clear = np.hypot(*(fN - cM).T) > self.rstar[M] + 10.0
+        ok = clear & (gap_along > 0) & (closing > 0)
+        cost = np.maximum(w_y / 80.0, alpha / 60.0)
+        cost = np.where(ok, cost, np.inf)
+        j = int(np.argmin(cost))
+        if not np.isfinite(cost[j]) or cost[j] > 0.6:
+            return None
+        return float(wait[j]), float(cost[j])
 
     def retarget(self, N: int, M: int) -> None:
         """Move the remaining slots with the rigid motion the pair actually took (SPEC 6)."""
@@ -722,7 +955,7 @@ class _Runner:
     def run(self) -> str | None:
         phases = self.pr.phases
         try:
-            self.form_pair([p for p in phases if p.kind.startswith("pair")])
+            self.form_pair()
             for k in range(self.n - 2, 0, -1):
                 i = self.by_rank[k]
                 route = next((p for p in phases if p.kind == "route" and p.mover == i), None)
