@@ -132,17 +132,23 @@ def write_json(path: Path | str, obj: Any) -> Path:
     return write_text(path, to_json(obj))
 
 
-def save_figure(fig, path: Path | str, **kwargs: Any) -> Path:
-    """Save a matplotlib figure atomically (format from the suffix) and close it."""
+def figure_bytes(fig, fmt: str = "png", **kwargs: Any) -> bytes:
+    """Render a matplotlib figure to bytes (default PNG, 120 dpi, tight) and close it."""
     import io
 
     import matplotlib.pyplot as plt
 
-    target = Path(path)
     buf = io.BytesIO()
-    fmt = target.suffix.lstrip(".") or "png"
     kwargs.setdefault("dpi", 120)
     kwargs.setdefault("bbox_inches", "tight")
-    fig.savefig(buf, format=fmt, **kwargs)
-    plt.close(fig)
-    return write_bytes(target, buf.getvalue())
+    try:
+        fig.savefig(buf, format=fmt, **kwargs)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def save_figure(fig, path: Path | str, **kwargs: Any) -> Path:
+    """Save a matplotlib figure atomically (format from the suffix) and close it."""
+    target = Path(path)
+    return write_bytes(target, figure_bytes(fig, target.suffix.lstrip(".") or "png", **kwargs))

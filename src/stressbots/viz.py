@@ -369,3 +369,130 @@ def plot_sweep(sweep: Sequence[dict], *, title: str = ""):
     trials = sweep[0]["trials"] if sweep else 0
     ax.set_title(title or f"success rate vs noise ({trials} trials per point)", fontsize=10)
     return fig
+
+
+# ----------------------------------------------------------------------------------------------------
+# The main job's report (stressbots run / demo): a plan's waveform and the final structure
+
+
+def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int = 6, label_limit: int = 40):
+    """A plan's voltage waveform, two panels.
+
+    Top: the whole waveform, each Hold as a spike to its level (the level that sets the arms), each
+    Drive as a band between its two levels, with the robots' snap-down (red) and release (green)
+    thresholds dotted and, when there are at most ``label_limit`` drives, the primitive of each drive.
+    Bottom: the real signal at the start, sampled: the first Holds and ``zoom_periods`` periods of the
+    first Drive's square wave.
+    """
+    from .waveform import Drive, Hold, decode, excerpt, sample
+
+    plt = _plt()
+    e = analysis.electrodes
+    fig, (ax, az) = plt.subplots(2, 1, figsize=(10, 6.2), gridspec_kw={"height_ratios": [3, 2], "hspace": 0.42})
+    t = 0.0
+    segs = list(waveform)
+    for seg in segs:
+        t1 = t + seg.duration_s
+        if isinstance(seg, Hold):
+            ax.plot([t, t], [0.5 * (e.drive_low_V + e.drive_high_V), seg.volts], color="tab:blue", lw=0.9)
+            ax.plot([t], [seg.volts], "o", color="tab:blue", ms=2.5)
+        else:
+            ax.fill_between([t, t1], seg.low_V, seg.high_V, color="tab:orange", alpha=0.35, lw=0)
+        t = t1
+    total = max(t, 1e-9)
+    drives = decode(segs, analysis.snap_down_V, analysis.release_V)
+    if len(drives) <= label_limit:
+        for d in drives:
+            prim = analysis.primitive_for_state(d.states)
+            if prim is not None and d.duration_s > 0.012 * total:
+                ax.text(d.t_start_s + 0.5 * d.duration_s, e.drive_high_V + 2, prim.name, ha="center", va="bottom", fontsize=6.5)
+    for i, nm in enumerate(analysis.names):
+        for v, col, lab in ((analysis.snap_down_V[i], "tab:red", "V_d"), (analysis.release_V[i], "tab:green", "V_u")):
+            ax.axhline(v, color=col, ls=":", lw=0.7)
+            ax.text(total * 1.005, v, f"{lab} {nm}", va="center", fontsize=6.5, color=col)
+    ax.set_xlim(0, total * 1.07)
+    ax.set_ylim(0, e.max_V * 1.03)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("level (V)")
+    ax.set_title(title or f"Plan waveform: {len(segs)} segments, {total:.1f} s (Holds blue, Drives orange)", fontsize=10)
+    # zoom: from 0 to a few periods into the first Drive, sampled finely
+    t0 = 0.0
+    end = None
+    for seg in segs:
+        if isinstance(seg, Drive):
+            end = t0 + zoom_periods / e.drive_frequency_hz
+            break
+        t0 += seg.duration_s
+    if end is None:
+        end = total
+    head = excerpt(segs, end)
+    rate = max(40.0 * e.drive_frequency_hz, 200.0 / max(end, 1e-9))
+    ts, vs = sample(head, rate_hz=rate, drive_frequency_hz=e.drive_frequency_hz, max_samples=200_000)
+    az.step(ts * 1e3, vs, where="post", color="tab:blue", lw=1.0)
+    az.axhspan(e.drive_low_V, e.drive_high_V, color="tab:orange", alpha=0.15, lw=0)
+    az.set_xlim(0, end * 1e3)
+    az.set_ylim(0, e.max_V * 1.03)
+    az.set_xlabel("time (ms)")
+    az.set_ylabel("level (V)")
+    az.set_title(
+        f"the first {end * 1e3:.2f} ms, sampled: Hold(s) of {e.hold_s * 1e3:g} ms set the arms, then the drive "
+        f"square wave at {e.drive_frequency_hz:g} Hz between {e.drive_low_V:g} and {e.drive_high_V:g} V",
+        fontsize=8.5,
+    )
+    for a in (ax, az):
+        a.grid(True, lw=0.3, alpha=0.5)
+    return fig
+
+
+def aligned_target(final, goals, lengths_um, widths_um) -> np.ndarray:
+    """The target poses moved by the proper rigid motion that best maps their bodies onto the final
+    bodies (the alignment behind :func:`stressbots.assessment.shape_error`, inverted)."""
+    from .assessment import kabsch_2d
+
+    final = np.asarray(final, dtype=np.float64).reshape(-1, 3)
+    goals = np.asarray(goals, dtype=np.float64).reshape(-1, 3)
+    g = body_corners(goals, lengths_um, widths_um).reshape(-1, 2)
+    f = body_corners(final, lengths_um, widths_um).reshape(-1, 2)
+    rot, t = kabsch_2d(g, f)
+    phi = math.atan2(rot[1, 0], rot[0, 0])  # counter-clockwise
+    out = goals.copy()
+    out[:, :2] = goals[:, :2] @ rot.T + t
+    out[:, 2] = np.mod(goals[:, 2] - phi, 2 * math.pi)  # headings are clockwise
+    return out
+
+
+def plot_final_structure(scenario, final, goals, docked=None, *, title: str = "", pad: float = 250.0):
+    """The final bodies (filled, coloured by robot) against the target structure best aligned onto them
+    (grey outlines, the shape that success is judged on) and the target where it was placed (dotted)."""
+    from matplotlib.patches import Polygon as MplPolygon
+
+    plt = _plt()
+    n = scenario.n
+    cols = robot_colours(n)
+    L, W = scenario.lengths_um, scenario.widths_um
+    final = np.asarray(final, dtype=np.float64)
+    goals = np.asarray(goals, dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    for c in body_corners(goals, L, W):
+        ax.add_patch(MplPolygon(c, closed=True, fill=False, ec="0.55", lw=0.8, ls=":", zorder=2))
+    aligned = aligned_target(final, goals, L, W)
+    draw_bodies(ax, aligned, L, W, [(0.25, 0.25, 0.25)] * n, fill_alpha=0.0, lw=1.2, front=False, zorder=4)
+    draw_bodies(ax, final, L, W, cols, fill_alpha=0.5)
+    for i, name in enumerate(scenario.names):
+        label = name if docked is None else f"{name} ({'docked' if docked[i] else 'not docked'})"
+        ax.annotate(label, final[i, :2], xytext=(5, 5), textcoords="offset points", fontsize=8, color=cols[i], zorder=6)
+    ax.plot([], [], color="0.25", lw=1.2, label="target, best rigid alignment")
+    ax.plot([], [], color="0.55", lw=0.8, ls=":", label="target as placed")
+    pts = np.vstack([final[:, :2], goals[:, :2], aligned[:, :2]])
+    lo, hi = np.nanmin(pts, axis=0) - pad, np.nanmax(pts, axis=0) + pad
+    side = max(hi - lo)
+    mid = 0.5 * (lo + hi)
+    ax.set_xlim(mid[0] - side / 2, mid[0] + side / 2)
+    ax.set_ylim(mid[1] - side / 2, mid[1] + side / 2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (um)")
+    ax.set_ylabel("y (um)")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(loc="upper right", fontsize=7.5)
+    ax.set_title(title, fontsize=9.5)
+    return fig

@@ -55,6 +55,7 @@ __all__ = [
     "replay",
     "decode",
     "duration",
+    "excerpt",
     "sample",
     "export",
     "summarize",
@@ -122,6 +123,24 @@ Segment = Union[Hold, Drive]
 def duration(waveform: Sequence[Segment]) -> float:
     """Total duration (s)."""
     return float(sum(seg.duration_s for seg in waveform))
+
+
+def excerpt(waveform: Sequence[Segment], duration_s: float) -> tuple[Segment, ...]:
+    """The first ``duration_s`` seconds of a waveform (the segment running at that time is cut short).
+
+    >>> excerpt([Hold(140.0, 0.001), Drive(75.0, 105.0, 2.0)], 0.5)
+    (Hold(volts=140.0, duration_s=0.001), Drive(low_V=75.0, high_V=105.0, duration_s=0.499))
+    """
+    end = _finite("duration_s", duration_s)
+    out: list[Segment] = []
+    t = 0.0
+    for seg in waveform:
+        if t >= end:
+            break
+        d = min(seg.duration_s, end - t)
+        out.append(Hold(seg.volts, d) if isinstance(seg, Hold) else Drive(seg.low_V, seg.high_V, d))
+        t += seg.duration_s
+    return tuple(out)
 
 
 # ----------------------------------------------------------------------------------------------------
