@@ -48,6 +48,7 @@ from .assessment import SHAPE_TOL_UM, shape_error
 from .collision import bodies_hit_discs, outside_arena, penetration_depth
 from .electrostatics import analyse_scenario
 from .errors import PlanningError
+from .estimation import Estimator
 from .kinematics import advance, move
 from .robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
 from .waveform import synthesize
@@ -230,17 +231,11 @@ class _Runner:
         self.t = 0.0
         self.replans = 0
         self.events: list[dict] = []
-        self.unseen = np.zeros(n, dtype=int)
         obs = np.asarray(plant.observe(), dtype=np.float64)
-        self.est = np.where(np.isnan(obs), scenario.starts, obs)
+        self.estimator = Estimator(obs, scenario.starts, self.v, self.r)
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
         self.omega_nom = self.v / self.r
-        # Online identification (every robot's true speed and turn rate differ from nominal by a few %):
-        # straight chunks measure the speed, turning chunks the turn rate; planning then uses
-        # r_hat = v_hat / omega_hat for geometry and v_hat for timing.
-        self.v_hat = self.v.astype(float).copy()
-        self.omega_hat = self.omega_nom.copy()
         self._helper = None
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
@@ -249,52 +244,38 @@ class _Runner:
     def log(self, kind: str, robot: int | None = None, detail: str = "") -> None:
         self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.scn.names[robot], "detail": detail})
 
-    def observe(self) -> np.ndarray:
-        obs = np.asarray(self.plant.observe(), dtype=np.float64)
-        seen = ~np.isnan(obs).any(axis=1)
-        self.est[seen] = obs[seen]
-        self.est[:, 2] = np.mod(self.est[:, 2], TWO_PI)
-        self.unseen = np.where(seen, 0, self.unseen + 1)
-        for i in np.flatnonzero(self.unseen == 3):
-            self.log("lost", int(i), "not seen for 3 frames; dead-reckoning")
-        return self.est
+    @property
+    def est(self) -> np.ndarray:
+        """Filtered pose estimates (n, 3) (:class:`stressbots.estimation.Estimator`)."""
+        return self.estimator.pose
+
+    @property
+    def v_hat(self) -> np.ndarray:
+        return self.estimator.speed
+
+    @property
+    def omega_hat(self) -> np.ndarray:
+        return self.estimator.turn_rate
 
     @property
     def r_hat(self) -> np.ndarray:
-        return self.v_hat / self.omega_hat
+        return self.estimator.radius
 
     def drive(self, steps: Sequence[tuple[int, float]]) -> None:
-        """Apply primitive steps ``(k, duration_s)``, dead-reckon, observe, and identify speeds/turn rates."""
+        """Apply primitive steps ``(k, duration_s)``, then update the estimates from the next frame."""
         steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]
         if not steps:
             return
-        if self.t + sum(d for _, d in steps) > self.opts.time_budget_s:
+        total = sum(d for _, d in steps)
+        if self.t + total > self.opts.time_budget_s:
             raise _Budget(self.opts.time_budget_s)
         wf = synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state)
         self.plant.apply(wf)
-        before = self.est.copy()
-        seen_before = self.unseen == 0
-        turn_time = np.zeros(self.n)
-        total = 0.0
-        for k, d in steps:
-            turning = self.rank <= k
-            moving = ~self.docked
-            self.est[moving] = advance(self.est, turning, self.v_hat, self.r_hat, d)[moving]
-            turn_time += np.where(turning, d, 0.0)
-            total += d
-            self.t += d
+        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), self.plant.observe())
+        self.t += total
         self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
-        self.observe()
-        ok = seen_before & (self.unseen == 0) & ~self.docked & (total >= 0.3)
-        for i in np.flatnonzero(ok):
-            if turn_time[i] >= total - 1e-9:  # turned the whole time
-                rate = float(np.mod(self.est[i, 2] - before[i, 2], TWO_PI)) / total
-                if 0.7 * self.omega_nom[i] < rate < 1.3 * self.omega_nom[i]:
-                    self.omega_hat[i] += 0.2 * (rate - self.omega_hat[i])
-            elif turn_time[i] <= 1e-9:  # straight the whole time
-                speed = float(np.hypot(*(self.est[i, :2] - before[i, :2]))) / total
-                if 0.7 * self.v[i] < speed < 1.3 * self.v[i]:
-                    self.v_hat[i] += 0.2 * (speed - self.v_hat[i])
+        for i in np.flatnonzero(self.estimator.unseen == 3):
+            self.log("lost", int(i), "not seen for 3 frames; dead-reckoning")
         self.trace_t.append(self.t)
         self.trace_p.append(self.est.copy())
 
