@@ -428,9 +428,7 @@ def test_cli_simulate_with_noise_reports_the_drift(run_cli, plan_file, tmp_path)
     assert res.out == ""
 
 
-def test_cli_simulate_without_a_plan_is_not_available_yet(run_cli, tmp_path):
-    res = run_cli("simulate", EXAMPLES / "four-robots.toml", "--seed", "1", "--out", tmp_path / "x")
-    assert_user_error(res, "closed-loop simulation is not available yet")
+# `stressbots simulate` without --plan (closed loop) is tested in test_report.py.
 
 
 def test_cli_simulate_errors(run_cli, plan_file, tmp_path):

@@ -38,6 +38,14 @@ out = Console()
 err = Console(stderr=True)
 
 
+class NoiseChoice(str, Enum):
+    """The --noise choices of simulate and run."""
+
+    scenario = "scenario"
+    none = "none"
+    literature = "literature"
+
+
 def scenario_arg(path: Path):
     """Load a scenario given on the command line (errors name the file and field)."""
     from .scenario import load
@@ -65,17 +73,68 @@ def _root(
 @app.command()
 def demo(
     out_dir: Path = typer.Option(Path("stressbots-demo"), "--out", help="Folder for the demo's outputs."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the final summary."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulated plant (same seed, same run)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; print only one summary line."),
 ) -> None:
-    """Run the main job end to end on the built-in 4-robot scenario.
+    """Run the main job end to end on the built-in 4-robot scenario and write its report.
 
-    Analyses the built-in voltage design (accessible control states, control matrix, primitives),
-    synthesises the waveform of every primitive, plans the assembly of a tee and plays the plan open loop
-    on the simulated plant without and with control error. Closed-loop control joins when it is ready.
+    Analyses the built-in voltage design (accessible control states, control matrix, primitives) and
+    tours the waveform of every primitive, plans the assembly of a tee, runs it in closed loop on the
+    simulated plant with the literature's error levels, and writes DIR/report.html (one self-contained
+    page that opens offline) with result.json, plan.json, the waveform and pictures beside it; for
+    comparison also the plan open loop with and without noise and closed loop without noise
+    (DIR/comparisons/). A run that does not assemble still gets its full report, with the reason.
+
+    Example: `stressbots demo --out demo-out`, then open demo-out/report.html.
     """
     from . import demo as demo_mod
 
-    demo_mod.run_demo(out_dir, console=out, quiet=quiet)
+    demo_mod.run_demo(out_dir, console=out, quiet=quiet, seed=seed, err_console=err)
+
+
+@app.command()
+def run(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.", show_default=False),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulated plant (same seed, same run)."),
+    noise: NoiseChoice = typer.Option(
+        NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
+    ),
+    time_budget_s: Optional[float] = typer.Option(
+        None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default the controller's.", show_default=False
+    ),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; print only one summary line."),
+) -> None:
+    """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
+
+    Validates the scenario, analyses its voltage design (accessible states, control matrix), plans the
+    assembly the controller follows, runs the closed-loop controller on the simulated plant (control
+    error, contact, compliance, noisy camera; re-planning every [control] replan_interval_s) and writes
+    DIR/report.html: one self-contained page (no network) with the design, a waveform excerpt, the
+    plan, the run as an animation, the final structure against the target, the metrics and the event
+    log. Beside it: result.json, plan.json, states.json, waveform.json, waveform.npy and the pictures.
+    A run that does not assemble is reported as "not assembled: <reason>" (exit status 0: the job ran).
+
+    Example: `stressbots run examples/four-robots.toml --out out/run --seed 1`
+    """
+    from .pipeline import finite_budget, run_job
+
+    budget = finite_budget(time_budget_s)
+    scn = _with_noise_choice(scenario_arg(scenario), noise)
+    run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget, console=out,
+            err_console=err, quiet=quiet)
+
+
+def _with_noise_choice(scn, choice):
+    from .generate import LITERATURE_NOISE
+    from .scenario import Noise
+
+    value = getattr(choice, "value", choice)
+    if value == "none":
+        return scn.with_noise(Noise())
+    if value == "literature":
+        return scn.with_noise(LITERATURE_NOISE)
+    return scn
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -428,12 +487,6 @@ def _print_plan_summary(scn, result) -> None:
 # simulate
 
 
-class NoiseChoice(str, Enum):
-    scenario = "scenario"
-    none = "none"
-    literature = "literature"
-
-
 def _noise_dict(noise) -> dict[str, float]:
     """The noise levels in the file's units (deg, deg/mm)."""
     return noise.to_file_units()
@@ -442,25 +495,34 @@ def _noise_dict(noise) -> dict[str, float]:
 @app.command()
 def simulate(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and trajectory.png.", show_default=False),
-    seed: int = typer.Option(0, "--seed", help="Seed of every random draw of the simulated plant (same seed, same run)."),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and the pictures.", show_default=False),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random draw of the simulated plant (same seed, same run)."),
     plan: Optional[Path] = typer.Option(
-        None, "--plan", help="Execute this plan.json open loop (required for now: closed loop comes later).", show_default=False
+        None, "--plan", help="Execute this plan.json open loop instead of the closed-loop controller.", show_default=False
     ),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
+    ),
+    time_budget_s: Optional[float] = typer.Option(
+        None, "--time-budget-s", help="Closed loop: simulated time budget (s); default the controller's.", show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Run the simulated plant: robots with control error, contact, compliance and a noisy camera.
 
+    Without `--plan` the closed-loop controller assembles the target structure: it follows the nominal
+    plan, measures the poses every [control] replan_interval_s and re-plans from where the robots
+    really are. Writes DIR/result.json (success, seed, per-robot true and observed final poses, goals,
+    errors and docked flags, the shape error after a best rigid alignment, the failure reason if any,
+    the controller's and the plant's events), DIR/trajectory.png, DIR/structure.png (final structure
+    against the target) and DIR/animation.html (the run as an animation; opens offline).
+
     With `--plan` the plan's waveform is played open loop (no feedback) from the start poses. With no
     noise the robots end exactly in their slots (planner, waveform and simulator agree); with noise you
-    see how far open loop drifts. Writes DIR/result.json (success, seed, per-robot true and observed
-    final poses, errors and docked flags, the shape error after a best rigid alignment, the event log)
-    and DIR/trajectory.png.
+    see how far open loop drifts. Writes DIR/result.json and DIR/trajectory.png.
 
-    Example: `stressbots simulate examples/four-robots.toml --plan out/plan/plan.json --seed 1 --out out/sim`
+    Examples: `stressbots simulate examples/four-robots.toml --seed 1 --out out/sim`;
+    `stressbots simulate examples/four-robots.toml --plan out/plan/plan.json --noise none --out out/open`
     """
     import time
 
@@ -473,12 +535,10 @@ def simulate(
     from .sim import SimulatedPlant, plan_waveform
     from .viz import plot_run
 
-    scn = scenario_arg(scenario)
     if plan is None:
-        raise StressbotsError(
-            "closed-loop simulation is not available yet; give --plan PLAN to execute a plan open loop",
-            source="stressbots simulate",
-        )
+        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet)
+        return
+    scn = scenario_arg(scenario)
     folder = prepare_dir(out_dir, inputs=[scenario, plan])
     for name in ("result.json", "trajectory.png"):
         check_not_input(folder / name, [scenario, plan])
@@ -551,6 +611,58 @@ def simulate(
         soft_wrap=True,
     )
     out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
+
+
+def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
+    """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
+    from .control import nominal_plan
+    from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
+    from .pipeline import closed_loop, finite_budget, merged_events, result_document, run_pictures, verdict_text
+    from .report import animation_page
+
+    budget = finite_budget(time_budget_s)
+    scn = _with_noise_choice(scenario_arg(scenario), noise)
+    folder = prepare_dir(out_dir, inputs=[scenario])
+    names = ("result.json", "trajectory.png", "structure.png", "animation.html")
+    for name in names:
+        check_not_input(folder / name, [scenario])
+    if not scn.has_starts:
+        raise StressbotsError("every robot needs a start pose to be simulated (robots[].start)", source=str(scenario), field="robots")
+    show = not quiet
+    with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext() as status:
+        plan_result = nominal_plan(scn)
+        on_time = (lambda t: status.update(f"closed loop: {t:.0f} s simulated...")) if show else None
+        if show:
+            status.update("closed loop...")
+        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
+        if show:
+            status.update("pictures...")
+        doc = result_document(scn, run, source=str(scenario))
+        write_json(folder / "result.json", doc)
+        figs, anim = run_pictures(scn, run)
+        write_bytes(folder / "trajectory.png", figs["run"])
+        write_bytes(folder / "structure.png", figs["structure"])
+        write_text(folder / "animation.html", animation_page(anim, title=anim["title"], subtitle=f"{verdict_text(doc)}"))
+    if quiet:
+        return
+    from rich.table import Table
+
+    res = run.result
+    t = Table(title=f"{scn.name}: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated in {run.wall_s:.1f} s, "
+                    f"{res.replans} re-plans")
+    for col, just in (("robot", "left"), ("docked", "left"), ("position error (um)", "right"), ("heading error (deg)", "right")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for k, name in enumerate(scn.names):
+        t.add_row(name, "yes" if res.docked[k] else "no", f"{res.placement_error_um[k]:.3g}", f"{res.heading_error_deg[k]:.3g}")
+    out.print(t)
+    style = "bold green" if res.success else "bold red"
+    out.print(f"[{style}]{verdict_text(doc)}[/{style}]", highlight=False, soft_wrap=True)
+    out.print(
+        f"{int(np.sum(res.docked))}/{scn.n} docked, shape error {res.shape_error_rms_um:.3g} um RMS after the best rigid alignment; "
+        f"{len(merged_events(res, run.plant))} events",
+        highlight=False, soft_wrap=True,
+    )
+    out.print("wrote " + ", ".join(str(folder / n) for n in names), highlight=False, soft_wrap=True)
 
 
 # ----------------------------------------------------------------------------------------------------

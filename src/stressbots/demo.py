@@ -1,24 +1,20 @@
 """``stressbots demo``: the main job, end to end, on the built-in 4-robot scenario.
 
-The main job so far, in three parts:
+The demo is :func:`stressbots.pipeline.run_job` (analyse, plan, closed loop on the simulated plant with
+the literature's error levels, report) on the built-in scenario (``data/demo.toml``, a copy of
+``examples/four-robots.toml``), plus two things that only make sense on a fixed example:
 
-1. the electrostatic control layer: analyse the built-in design (accessible control states, STRING
-   order, control matrix, primitives), synthesise the waveform of every primitive in a tour
-   ``P_0, P_1, ..., P_n, ..., P_0`` (each reached with the fewest Holds, then driven) and check it with
-   the decoder;
-2. the nominal assembly plan of the built-in tee (seed Appendix 2, verified by an independent replay);
-3. that plan played open loop on the simulated plant: without noise every robot ends in its slot
-   (planner, waveform and simulator agree); with the literature's error levels open loop drifts far,
-   which is why the closed-loop controller exists (a later issue adds it here).
+1. a tour of the electrostatic control layer: the waveform of every primitive ``P_0, P_1, ..., P_n, ...,
+   P_0`` (each reached with the fewest Holds, then driven), checked with the decoder;
+2. comparisons: the same nominal plan open loop without noise (every robot ends in its slot: planner,
+   waveform and simulator agree) and with noise (it drifts far, which is why the closed loop exists),
+   and the closed loop without noise.
 
-Outputs in the chosen folder:
-
-- ``states.json``: the analysis, exactly as ``stressbots states --json`` (SPEC 7);
-- ``waveform.json``: the tour's segments (:func:`stressbots.waveform.to_json`);
-- ``waveform.npy``: the tour sampled at 100 kS/s, columns time (s) and level (V);
-- ``waveform.png``: a picture of the tour with the robots' thresholds;
-- ``plan/``: ``plan.json``, ``plan.png``, ``summary.json`` (as ``stressbots plan``);
-- ``open-loop/``: ``result-nominal.json``, ``result-noisy.json`` and their ``trajectory-*.png``.
+Outputs in the chosen folder: everything :data:`stressbots.pipeline.OUTPUT_FILES` lists
+(``report.html``, ``result.json``, ``plan.json``, ``states.json``, ``waveform.json``/``.npy``/``.png``,
+``plan.png``, ``run.png``, ``structure.png``), ``tour/`` (``waveform.json``, ``waveform.npy`` at 100 kS/s,
+``waveform.png``) and ``comparisons/`` (``open-loop-nominal.json``/``.png``, ``open-loop-noisy.json``/``.png``,
+``closed-loop-nominal.json``).
 """
 
 from __future__ import annotations
@@ -86,14 +82,22 @@ def _figure(waveform, decoded, analysis, steps):
     return fig
 
 
-def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
+#: Simulated time budget of the demo's closed-loop run (s): the nominal plan takes about 124 s and a
+#: run without control error about 180 s; the budget keeps ``stressbots demo`` under a minute of wall time.
+DEMO_TIME_BUDGET_S = 600.0
+
+
+def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_console=None) -> dict:
     """Run the demo, print what it does (unless ``quiet``) and write its outputs into ``out_dir``.
 
-    Returns a small summary dict (paths and counts) for callers and tests.
+    The main job (:func:`stressbots.pipeline.run_job`) on the built-in scenario, with the literature's
+    error levels, plus the waveform tour (``tour/``) and, for comparison, the same plan open loop with and
+    without noise and closed loop without noise (``comparisons/``). Returns a small summary dict.
     """
     from .cli import render_analysis, render_waveform
     from .electrostatics import analyse_scenario
     from .outputs import prepare_dir, save_figure, write_json
+    from .pipeline import run_job
     from .waveform import export, replay, synthesize, synthesize_primitive, to_json
 
     out = prepare_dir(out_dir)
@@ -114,12 +118,10 @@ def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
     got = np.array([d.states for d in decoded.drives], dtype=np.uint8)
     if got.shape != intended.shape or not np.array_equal(got, intended) or not all(d.ok for d in decoded.drives):
         raise RuntimeError("internal error: the demo waveform does not decode to its primitives")
-
-    write_json(out / "states.json", analysis.to_json_dict())
-    write_json(out / "waveform.json", to_json(waveform))
-    summary = export(waveform, out / "waveform.npy", rate_hz=RATE_HZ, drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
-    save_figure(_figure(waveform, decoded, analysis, steps), out / "waveform.png")
-
+    tdir = prepare_dir(out / "tour")
+    write_json(tdir / "waveform.json", to_json(waveform))
+    summary = export(waveform, tdir / "waveform.npy", rate_hz=RATE_HZ, drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
+    save_figure(_figure(waveform, decoded, analysis, steps), tdir / "waveform.png")
     if not quiet:
         console.print()
         console.print("[bold]Tour[/bold] " + " -> ".join(name for name, _ in steps), highlight=False)
@@ -129,68 +131,79 @@ def run_demo(out_dir: Path, console, quiet: bool = False) -> dict:
                 f"  t = {d.t_start_s:7.3f} s  {name}: decoded turning {', '.join(turning) or 'none'} (as intended)",
                 highlight=False,
             )
-    planned = _plan_and_simulate(scenario, out, console, quiet)
-    verdict = f"STRING, order {', '.join(analysis.order)}" if analysis.is_string else "not STRING"
-    first = (
-        f"demo: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; "
-        f"tour of {len(steps)} primitives, {summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V "
-        f"within [0, {scenario.electrodes.max_V:g}] V; wrote states.json, waveform.json, waveform.npy, waveform.png to {out}"
-    )
-    if quiet:  # one summary line
-        console.print(f"{first}; {planned['line']}", soft_wrap=True, highlight=False)
-    else:
-        console.print(first, soft_wrap=True, highlight=False)
-        console.print(planned["line"], soft_wrap=True, highlight=False)
-    return {"out_dir": str(out), "count": analysis.count, "steps": len(steps), "samples": summary.samples, **planned["summary"]}
-
-
-def _plan_and_simulate(scenario, out: Path, console, quiet: bool) -> dict:
-    """Plan the built-in tee, then play the plan open loop without and with noise."""
-    from . import plans
-    from .assessment import assess
-    from .outputs import prepare_dir, provenance, save_figure, write_json
-    from .planning import plan_assembly
-    from .scenario import Noise
-    from .sim import run_plan
-    from .viz import plot_plan, plot_run
-
-    result = plan_assembly(scenario)
-    pdir = prepare_dir(out / "plan")
-    plans.save(result.plan, pdir / "plan.json")
-    write_json(pdir / "summary.json", {**result.summary, "provenance": dict(result.plan.provenance)})
-    save_figure(plot_plan(scenario, result), pdir / "plan.png")
-    s = result.summary
-    if not quiet:
-        console.print()
+        verdict = f"STRING, order {', '.join(analysis.order)}" if analysis.is_string else "not STRING"
         console.print(
-            f"[bold]Plan[/bold]: {s['structure']} in {s['duration_s']:.1f} s, {s['steps']} steps "
-            f"(lower bound {s['lower_bound_s']:.1f} s, efficiency {s['efficiency']:.2f}); replayed independently: ok",
-            highlight=False,
+            f"tour: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; {len(steps)} primitives, "
+            f"{summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V within "
+            f"[0, {scenario.electrodes.max_V:g}] V; wrote tour/waveform.json, tour/waveform.npy, tour/waveform.png",
+            soft_wrap=True, highlight=False,
         )
-        for note in result.notes:
-            console.print(f"  note: {note}", highlight=False)
-    odir = prepare_dir(out / "open-loop")
-    goals = result.plan.goal_array()
-    rows = {}
-    for label, scn, seed in (("nominal", scenario.with_noise(Noise()), 0), ("noisy", scenario, 1)):
-        plant = run_plan(scn, result.plan, seed=seed, record=True)
+        console.print()
+    job = run_job(
+        scenario, out, seed=seed, source="built-in demo scenario (stressbots/data/demo.toml)", time_budget_s=DEMO_TIME_BUDGET_S,
+        console=console, err_console=err_console, quiet=quiet, show_analysis=False, extra=_comparisons,
+        title=f"stressbots demo: {scenario.name}",
+    )
+    return {
+        "out_dir": str(out), "count": analysis.count, "steps": len(steps), "samples": summary.samples,
+        "report": str(job.report_path), "report_bytes": job.report_bytes, "success": job.success,
+        "failure": job.result.get("failure"), "wall_s": job.wall_s, **job.extra,
+    }
+
+
+def _comparisons(ctx):
+    """The demo's comparison runs: the same plan open loop (no noise, literature noise) and closed loop
+    without noise. Writes ``comparisons/`` and returns the rows for the report."""
+    from .assessment import assess
+    from .control import assemble
+    from .outputs import prepare_dir, provenance, save_figure, write_json
+    from .pipeline import Extra, run_summary
+    from .scenario import Noise
+    from .sim import SimulatedPlant, run_plan
+    from .viz import plot_run
+
+    scenario, plan = ctx.scenario, ctx.plan_result.plan
+    seed = ctx.run.result.seed
+    cdir = prepare_dir(ctx.out_dir / "comparisons")
+    goals = plan.goal_array()
+    extra = Extra()
+    nominal = scenario.with_noise(Noise())
+    for label, scn, s in (("open-loop-nominal", nominal, 0), ("open-loop-noisy", scenario, seed)):
+        plant = run_plan(scn, plan, seed=s, record=True)
         a = assess(scn.names, plant.true_poses(), goals, plant.docked, scn.lengths_um, scn.widths_um)
-        write_json(odir / f"result-{label}.json", {
-            "success": a.success, "seed": seed, "robots": a.robot_rows(plant.observe()), "mode": "open-loop",
-            **a.summary(), "events": [e.as_dict() for e in plant.events], "provenance": provenance(seed),
+        write_json(cdir / f"{label}.json", {
+            "success": a.success, "seed": s, "robots": a.robot_rows(plant.observe()), "mode": "open-loop",
+            "noise": scn.noise.to_file_units(), **{k: v for k, v in a.summary().items() if k != "success"},
+            "events": [e.as_dict() for e in plant.events], "provenance": provenance(s),
         })
         times, poses = plant.trace()
-        save_figure(plot_run(scn, times, poses, goals, plant.events), odir / f"trajectory-{label}.png")
-        rows[label] = a
-        if not quiet:
-            console.print(
-                f"[bold]Open loop, {label}[/bold]: {int(a.docked.sum())}/{scn.n} docked, worst position error "
-                f"{a.position_error_um.max():.3g} um, shape error {a.shape.rms_um:.3g} um RMS",
-                highlight=False,
-            )
-    line = (
-        f"plan: {s['duration_s']:.1f} s, efficiency {s['efficiency']:.2f}; open loop: nominal "
-        f"{'docks every robot' if rows['nominal'].success else 'FAILED'}, with literature noise the worst robot ends "
-        f"{rows['noisy'].position_error_um.max():.0f} um off; wrote plan/ and open-loop/ to {out}"
+        what = "no control error" if scn is nominal else "literature noise"
+        save_figure(plot_run(scn, times, poses, goals, plant.events,
+                             title=f"{scn.name}: the nominal plan open loop, {what}, seed {s}"), cdir / f"{label}.png")
+        extra.comparisons.append({
+            "label": f"open loop, {what}" + (f", seed {s}" if scn is not nominal else ""), "success": a.success,
+            "docked": f"{int(a.docked.sum())}/{scn.n}", "shape_error_rms_um": a.shape.rms_um,
+            "max_position_error_um": float(a.position_error_um.max()),
+            "note": "the plan played without feedback" + ("; every robot ends in its slot" if a.success and scn is nominal else ""),
+        })
+        extra.files += [(f"comparisons/{label}.json", f"result of the plan open loop, {what}"),
+                        (f"comparisons/{label}.png", f"picture of that run")]
+    plant = SimulatedPlant(nominal, seed=seed)
+    res = assemble(nominal, plant, seed=seed, plan=ctx.plan_result)
+    write_json(cdir / "closed-loop-nominal.json", {**res.to_dict(), "noise": nominal.noise.to_file_units(), "provenance": provenance(seed)})
+    rs = run_summary(res)
+    extra.comparisons.append({
+        "label": "closed loop, no control error", "success": rs["success"], "docked": rs["docked"],
+        "shape_error_rms_um": rs["shape_error_rms_um"], "max_position_error_um": rs["max_position_error_um"],
+        "note": ("assembled" if rs["success"] else f"not assembled: {rs['failure']}") + f" in {rs['duration_s']:.1f} s simulated",
+    })
+    extra.files.append(("comparisons/closed-loop-nominal.json", "result of the closed loop without control error"))
+    noisy = extra.comparisons[1]
+    extra.lines.append(
+        f"for comparison: open loop without noise {'docks every robot' if extra.comparisons[0]['success'] else 'FAILS'}; "
+        f"open loop with literature noise ends {noisy['max_position_error_um']:.0f} um off; closed loop without noise "
+        f"{'assembles' if rs['success'] else 'does not assemble: ' + str(rs['failure'])} (comparisons/)"
     )
-    return {"line": line, "summary": {"plan_duration_s": s["duration_s"], "open_loop_nominal_success": rows["nominal"].success}}
+    extra.summary.update({"open_loop_nominal_success": bool(extra.comparisons[0]["success"]),
+                          "closed_loop_nominal_success": rs["success"]})
+    return extra
