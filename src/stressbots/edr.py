@@ -198,6 +198,17 @@ def _turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um
     return float(r / arc.radius_um), float(arc.length_um), th + float(arc.turn_rad)
 
 
+def _trim(steps, total_s: float):
+    """The first ``total_s`` seconds of primitive steps ``(k, duration_s)``."""
+    out, left = [], total_s
+    for k, d in steps:
+        if left <= 1e-12:
+            break
+        out.append((k, min(d, left)))
+        left -= min(d, left)
+    return out
+
+
 def pose_on_orbit(centre, radius_um: float, theta: float) -> np.ndarray:
     """The pose with heading ``theta`` on the clockwise orbit about ``centre`` (inverse of the turning centre)."""
     c = np.asarray(centre, dtype=np.float64)
@@ -319,15 +330,22 @@ class _Runner:
                 break
         return out
 
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None) -> bool:
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
-        ``guard()`` may return False to stop early (e.g. D_n's straight run is used up).
+        ``guard()`` may return an allowance (s) to stop early; ``ready()`` True ends the gross motion
+        early (the robot is already in the region from which the next step works: the seed's regions
+        A_i instead of a point).
+
+        Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
+        points a little left of where it must. Clockwise is the only correction a one-way robot makes
+        cheaply: a turn overdone (speed or radius misidentified, drift) would cost a full loop at the
+        next replan, a turn cut short costs a slight turn.
         """
         for _ in range(max_cycles):
             v, r = self.v_hat[i], self.r_hat[i]
             p = self.est[i]
-            if self.arrived(p, target):
+            if self.arrived(p, target) or (ready is not None and ready()):
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs):
@@ -345,7 +363,15 @@ class _Runner:
                         return False
                     self.drive(self.path_steps(path, v, turn_k, straight_k, allowed))
                     return False
-            self.drive(self.path_steps(path, v, turn_k, straight_k, limit))
+            steps = self.path_steps(path, v, turn_k, straight_k, limit)
+            segs = path.segments
+            if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
+                cut = min(r * math.radians(3.0), 0.5 * segs[0][1]) / v
+                if steps[0][1] > cut:
+                    steps[0] = (steps[0][0], steps[0][1] - cut)
+                    steps.insert(1, (straight_k, cut))
+                    steps = _trim(steps, self.tx)
+            self.drive(steps)
             if whole:
                 return True
         return False
@@ -446,23 +472,132 @@ class _Runner:
     # -- docking of single robots -------------------------------------------------------------------
 
     def dock_single(self, k: int, route_phase) -> None:
+        """Dock D_k (k < n-1): gross motion into the approach funnel behind its slot, then the line approach.
+
+        The approach line runs back from the slot along its heading. The funnel is the region from which a
+        one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
+        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (15 um right,
+        3 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
+        is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
+        corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
+        """
         i = self.by_rank[k]
         orbiting = self.orbiting_below(k)
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
         for attempt in range(4):
-            # a_i on the nominal route (moved with the structure when it was re-targeted)
-            a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, self.goals[i])
-            a_pose = self.retargeted(a_pose)
-            # gross motion through the nominal route's waypoints before a_i, then to a_i
+            goal = self.goals[i]
+            back = self.approach_length(i)
+            if back is None:
+                a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
+                a_pose = self.retargeted(a_pose)
+                ready = None
+            else:
+                a_pose = self.line_pose(goal, back, 15.0, -math.radians(3.0))
+                ready = lambda: self.in_funnel(i, back)  # noqa: E731
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
-                self.steer(i, tgt, k, k - 1, orbiting)
+                self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
             waypoints = []
-            if self.fine_dock(i, k, orbiting):
+            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k, orbiting)
+            if ok:
                 return
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
             self.back_off(i, k)
         raise _Abort(f"{self.scn.names[i]} did not dock in 4 attempts (stuck in the failure region H)")
+
+    @staticmethod
+    def line_pose(goal, back: float, right: float, dtheta: float) -> np.ndarray:
+        """The pose ``back`` um behind ``goal`` on its approach line, ``right`` um to its right, turned by ``dtheta``."""
+        th = float(goal[2])
+        h = np.array([math.sin(th), math.cos(th)])
+        rt = np.array([math.cos(th), -math.sin(th)])
+        xy = np.asarray(goal[:2], float) - back * h + right * rt
+        return np.array([xy[0], xy[1], float(np.mod(th + dtheta, TWO_PI))])
+
+    def line_coords(self, i: int) -> tuple[float, float, float]:
+        """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""
+        goal = self.goals[i]
+        th = float(goal[2])
+        d = self.est[i, :2] - goal[:2]
+        h = np.array([math.sin(th), math.cos(th)])
+        rt = np.array([math.cos(th), -math.sin(th)])
+        return float(-(d @ h)), float(d @ rt), float(angle_difference(self.est[i, 2], th))
+
+    def approach_length(self, i: int) -> float | None:
+        """How far behind the slot the approach line is clear of the structure (350, 250 or 150 um), or None."""
+        goal = self.goals[i]
+        docked = np.flatnonzero(self.docked)
+        for back in (350.0, 250.0, 150.0):
+            ok = True
+            for right in (0.0, 60.0):
+                line = np.stack([self.line_pose(goal, b, right * b / back, 0.0) for b in np.linspace(8.0, back, 24)])
+                for j in docked:
+                    if (penetration_depth(line, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -3.0).any():
+                        ok = False
+                if self.scn.arena_um is not None and (outside_arena(line, self.L[i], self.W[i], self.scn.arena_um) > 0).any():
+                    ok = False
+            if ok:
+                return back
+        return None
+
+    def merge(self, i: int, behind: float, right: float, psi: float):
+        """The merge onto the approach line from ``(right, psi)``: ``(straight_um, radius_um)``, or None.
+
+        From the line's right, pointing left of it, the robot drives straight, then an interpolated
+        clockwise arc of radius >= r that ends on the line, parallel to it. Returns None when no such merge
+        ends at least 60 um before the slot (then the robot must loop).
+        """
+        r = float(self.r_hat[i])
+        if psi >= 0.0 or right <= 0.0:
+            return None
+        c = 1.0 - math.cos(psi)
+        R = min(1.5 * r, right / c) if c > 1e-12 else 1.5 * r
+        if R < r:
+            return None
+        s1 = max(0.0, (right - R * c) / math.sin(-psi))
+        used = s1 * math.cos(psi) + R * math.sin(-psi)
+        if used > behind - self.L[i] / 2.0 - 60.0:
+            return None
+        return s1, R
+
+    def in_funnel(self, i: int, back: float) -> bool:
+        """Whether robot ``i`` can merge onto its approach line (and it lies within ``back`` + 250 um)."""
+        behind, right, psi = self.line_coords(i)
+        if not (self.L[i] / 2.0 + 100.0 <= behind <= back + 250.0) or right > 80.0 or psi < -math.radians(30.0):
+            return False
+        if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0):
+            return True
+        return self.merge(i, behind, right, psi) is not None
+
+    def line_approach(self, i: int, k: int) -> bool:
+        """Fine motion along the approach line: merge (straight, interpolated arc), straight in, push."""
+        for _ in range(80):
+            v, r = float(self.v_hat[i]), float(self.r_hat[i])
+            behind, right, psi = self.line_coords(i)
+            to_face = behind - self.L[i] / 2.0  # front edge to the slot's front (um)
+            if self.near_slot(i) or to_face <= 1.6 * v * self.tx:
+                self.drive([(k - 1, max(to_face, 0.0) / v + self.opts.push_s)])
+                return self.check_docked(i, k)
+            drift_at_slot = right + behind * math.sin(psi)  # lateral miss if it went straight on
+            if abs(drift_at_slot) <= 3.0 and abs(psi) <= math.radians(1.0):
+                self.drive([(k - 1, self.tx)])
+                continue
+            m = self.merge(i, behind, right, psi)
+            if m is None:
+                if abs(drift_at_slot) <= 6.0:
+                    self.drive([(k - 1, self.tx)])
+                    continue
+                self.log("miss", i, f"off its approach line ({right:.0f} um, {math.degrees(psi):.1f} deg): loops back")
+                return False
+            s1, R = m
+            t1 = s1 / v
+            arc_t = R * (-psi) / v
+            steps = [(k - 1, min(t1, self.tx))]
+            left = self.tx - steps[0][1]
+            if left > 1e-9:
+                steps += self.interpolated_steps(r / R, min(arc_t, left), k, k - 1)
+            self.drive(steps)
+        return False
 
     def _before(self, w, a_pose, route_phase, i) -> bool:
         """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route."""
