@@ -1,0 +1,114 @@
+"""The report in a real browser: headless Chromium loads report.html from disk, without network.
+
+Checks that the page has its sections, that its script ran to the end (``data-js="ready"``) with no
+error (the page's own error hook counts them in ``data-js-errors``; Chromium's console log must be
+empty too), and takes a screenshot, which must be a non-empty PNG.
+
+Chromium comes from the Debian package ``chromium`` (``.ci/run`` installs it when missing). When it is
+missing here, the test tries ``apt-get install -y chromium`` once (as root, non-interactive; set
+``STRESSBOTS_NO_BROWSER_INSTALL=1`` to forbid that) and skips cleanly if it still cannot be found.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+
+import pytest
+
+from stressbots.report import SECTIONS
+
+from .conftest import EXAMPLES
+
+CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+
+
+def _find() -> str | None:
+    for name in CANDIDATES:
+        path = shutil.which(name)
+        if path:
+            return path
+    return "/usr/bin/chromium" if os.path.exists("/usr/bin/chromium") else None
+
+
+def _try_install() -> None:
+    if os.environ.get("STRESSBOTS_NO_BROWSER_INSTALL") or not shutil.which("apt-get"):
+        return
+    if hasattr(os, "geteuid") and os.geteuid() != 0:
+        return
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    for cmd in (["apt-get", "install", "-y", "-q", "chromium"], ["apt-get", "update", "-q"], ["apt-get", "install", "-y", "-q", "chromium"]):
+        try:
+            done = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=900, check=False)
+        except (OSError, subprocess.TimeoutExpired):
+            return
+        if cmd[1] == "install" and done.returncode == 0:
+            return
+
+
+@pytest.fixture(scope="module")
+def chromium():
+    path = _find()
+    if path is None:
+        _try_install()
+        path = _find()
+    if path is None:
+        pytest.skip("headless Chromium is not installed and could not be installed (apt-get install chromium)")
+    return path
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """A report of a closed-loop run of the example without noise (the main job, in-process)."""
+    from rich.console import Console
+
+    from stressbots.pipeline import run_job
+    from stressbots.scenario import Noise, load
+
+    out = tmp_path_factory.mktemp("report")
+    scn = load(EXAMPLES / "four-robots.toml").with_noise(Noise())
+    quiet = Console(file=open(os.devnull, "w"))
+    job = run_job(scn, out, seed=2, console=quiet, err_console=quiet, quiet=True)
+    return job.report_path
+
+
+def _chromium(binary: str, tmp_path, *args: str) -> subprocess.CompletedProcess:
+    flags = [
+        "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--disable-extensions", "--disable-default-apps", "--mute-audio",
+        f"--user-data-dir={tmp_path / 'profile'}", "--enable-logging=stderr", "--v=0",
+    ]
+    env = {k: v for k, v in os.environ.items() if not k.lower().endswith("_proxy")}
+    return subprocess.run([binary, *flags, *args], capture_output=True, text=True, timeout=180, env=env, check=False)
+
+
+def test_report_loads_in_headless_chromium_without_errors(chromium, report, tmp_path):
+    shot = tmp_path / "report.png"
+    url = report.resolve().as_uri()
+    done = _chromium(chromium, tmp_path, "--dump-dom", f"--screenshot={shot}", "--window-size=1280,2000", url)
+    dom = done.stdout
+    assert done.returncode == 0, done.stderr[-3000:]
+    # the page's sections, after the scripts ran
+    for sid, heading in SECTIONS:
+        assert re.search(rf'<section id="{sid}"', dom), sid
+        assert heading in dom, heading
+    html_tag = re.search(r"<html[^>]*>", dom).group(0)
+    assert 'data-js="ready"' in html_tag, html_tag  # the animation script ran to its end
+    assert 'data-js-errors="0"' in html_tag, (html_tag, re.search(r'<pre id="js-errors"[^>]*>(.*?)</pre>', dom, re.S))
+    # nothing on the browser console (the page logs nothing when all is well)
+    console = [ln for ln in done.stderr.splitlines() if ":CONSOLE" in ln or "Uncaught" in ln]
+    assert not console, console
+    assert "frame 1/" in dom  # the animation drew its first frame
+    if not shot.exists():  # some builds ignore --screenshot next to --dump-dom: take it on its own
+        again = _chromium(chromium, tmp_path, f"--screenshot={shot}", "--window-size=1280,2000", url)
+        assert again.returncode == 0, again.stderr[-3000:]
+    data = shot.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+    from PIL import Image
+
+    with Image.open(shot) as im:
+        assert im.size == (1280, 2000)
+        colours = im.convert("RGB").resize((64, 100)).getcolors(64 * 100)
+        assert colours is not None and len(colours) > 20  # not a blank page
