@@ -476,8 +476,8 @@ class _Runner:
 
         The approach line runs back from the slot along its heading. The funnel is the region from which a
         one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
-        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (15 um right,
-        3 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
+        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (10 um right,
+        6 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
         is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
         corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
         """
@@ -492,7 +492,7 @@ class _Runner:
                 a_pose = self.retargeted(a_pose)
                 ready = None
             else:
-                a_pose = self.line_pose(goal, back, 15.0, -math.radians(3.0))
+                a_pose = self.line_pose(goal, back, 10.0, -math.radians(6.0))
                 ready = lambda: self.in_funnel(i, back)  # noqa: E731
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
@@ -548,22 +548,26 @@ class _Runner:
         ends at least 60 um before the slot (then the robot must loop).
         """
         r = float(self.r_hat[i])
-        if psi >= 0.0 or right <= 0.0:
+        if psi >= -1e-6:
             return None
         c = 1.0 - math.cos(psi)
-        R = min(1.5 * r, right / c) if c > 1e-12 else 1.5 * r
-        if R < r:
-            return None
+        if right - r * c < -5.0:
+            return None  # even the tightest arc ends more than 5 um left of the line
+        if right - r * c <= 0.0:
+            R = r  # flatten now: the tightest arc, ending (slightly) left of the line
+        else:
+            R = min(1.5 * r, right / c) if c > 1e-12 else 1.5 * r
+            R = max(R, r)
         s1 = max(0.0, (right - R * c) / math.sin(-psi))
         used = s1 * math.cos(psi) + R * math.sin(-psi)
-        if used > behind - self.L[i] / 2.0 - 60.0:
+        if used > behind - 60.0:
             return None
         return s1, R
 
     def in_funnel(self, i: int, back: float) -> bool:
         """Whether robot ``i`` can merge onto its approach line (and it lies within ``back`` + 250 um)."""
         behind, right, psi = self.line_coords(i)
-        if not (self.L[i] / 2.0 + 100.0 <= behind <= back + 250.0) or right > 80.0 or psi < -math.radians(30.0):
+        if not (120.0 <= behind <= back + 250.0) or right > 60.0 or right < -2.0 or psi < -math.radians(12.0):
             return False
         if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0):
             return True
@@ -574,26 +578,29 @@ class _Runner:
         for _ in range(80):
             v, r = float(self.v_hat[i]), float(self.r_hat[i])
             behind, right, psi = self.line_coords(i)
-            to_face = behind - self.L[i] / 2.0  # front edge to the slot's front (um)
-            if self.near_slot(i) or to_face <= 1.6 * v * self.tx:
-                self.drive([(k - 1, max(to_face, 0.0) / v + self.opts.push_s)])
+            miss = right + behind * math.sin(psi)  # lateral miss at the slot if it went straight on
+            aligned = abs(miss) <= 3.0 and abs(psi) <= math.radians(1.0)
+            last = behind <= 1.6 * v * self.tx
+            if self.near_slot(i) or (aligned and last):
+                self.drive([(k - 1, max(behind, 0.0) / v + self.opts.push_s)])
                 return self.check_docked(i, k)
-            drift_at_slot = right + behind * math.sin(psi)  # lateral miss if it went straight on
-            if abs(drift_at_slot) <= 3.0 and abs(psi) <= math.radians(1.0):
+            if aligned:
                 self.drive([(k - 1, self.tx)])
                 continue
             m = self.merge(i, behind, right, psi)
             if m is None:
-                if abs(drift_at_slot) <= 6.0:
-                    self.drive([(k - 1, self.tx)])
+                if abs(miss) <= 6.0:  # cannot do better without a loop: a small miss it is
+                    self.drive([(k - 1, (max(behind, 0.0) / v + self.opts.push_s) if last else self.tx)])
+                    if last:
+                        return self.check_docked(i, k)
                     continue
                 self.log("miss", i, f"off its approach line ({right:.0f} um, {math.degrees(psi):.1f} deg): loops back")
                 return False
             s1, R = m
-            t1 = s1 / v
-            arc_t = R * (-psi) / v
-            steps = [(k - 1, min(t1, self.tx))]
-            left = self.tx - steps[0][1]
+            t1, arc_t = s1 / v, R * (-psi) / v
+            whole = t1 + arc_t <= 1.6 * self.tx
+            steps = [(k - 1, t1 if whole else min(t1, self.tx))]
+            left = (t1 + arc_t if whole else self.tx) - steps[0][1]
             if left > 1e-9:
                 steps += self.interpolated_steps(r / R, min(arc_t, left), k, k - 1)
             self.drive(steps)
