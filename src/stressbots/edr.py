@@ -38,7 +38,7 @@ the structure as it really is. Success is judged on the shape after a best rigid
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -330,7 +330,7 @@ class _Runner:
                 break
         return out
 
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None) -> bool:
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None, via: bool = True) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
         ``guard()`` may return an allowance (s) to stop early; ``ready()`` True ends the gross motion
@@ -349,6 +349,16 @@ class _Runner:
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs):
+                if via:
+                    # commit to one roadmap route: steer through its waypoints (replanning every t_x
+                    # between them), instead of a new random route every t_x
+                    points = self.detour_waypoints(i, target, orbiting, extra_discs)
+                    if points:
+                        for w in points[:-1]:
+                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False)
+                            if ready is not None and ready():
+                                return True
+                        continue
                 detour = self.detour(i, target, orbiting, extra_discs)
                 if detour is not None:
                     path = detour
@@ -411,6 +421,22 @@ class _Runner:
         if routed.length >= want:
             return routed
         return self._helper._stretch(routed, want, obst, self.L[i], self.W[i]) or routed
+
+    def detour_waypoints(self, i: int, target, orbiting, extra_discs) -> list[np.ndarray]:
+        """The roadmap poses of a route around the obstacles to ``target`` (ending with it), or []."""
+        from .planning import PlannerOptions, _NoRoute, _Planner, _route
+
+        if self._helper is None:
+            self._helper = _Planner(self.scn, self.analysis, self.pr.structure, PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200)))
+        obst = self._obstacles(i, orbiting, extra_discs)
+        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i, 7]))
+        opts = replace(self._helper.opts, clearance_um=max(self._helper.opts.clearance_um, 20.0))
+        try:
+            _, routed, points = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
+        except _NoRoute:
+            return []
+        self.log("detour", i, f"route around obstacles ({routed.length:.0f} um, {len(points)} waypoints)")
+        return [np.asarray(w, float) for w in points]
 
     def detour(self, i: int, target, orbiting, extra_discs) -> pathlib.Path | None:
         """A roadmap route around the obstacles from the measured pose (rarely needed)."""
