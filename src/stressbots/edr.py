@@ -248,6 +248,7 @@ class _Runner:
         self.trace_p = [self.est.copy()]
         self.omega_nom = self.v / self.r
         self._helper = None
+        self._missed = False
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
     # -- plant I/O ------------------------------------------------------------------------------------
@@ -345,7 +346,7 @@ class _Runner:
         for _ in range(max_cycles):
             v, r = self.v_hat[i], self.r_hat[i]
             p = self.est[i]
-            if self.arrived(p, target) or (ready is not None and ready()):
+            if (ready is None and self.arrived(p, target)) or (ready is not None and ready()):
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs):
@@ -502,7 +503,7 @@ class _Runner:
 
         The approach line runs back from the slot along its heading. The funnel is the region from which a
         one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
-        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (10 um right,
+        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (20 um right,
         6 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
         is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
         corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
@@ -510,7 +511,7 @@ class _Runner:
         i = self.by_rank[k]
         orbiting = self.orbiting_below(k)
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
-        for attempt in range(4):
+        for attempt in range(6):
             goal = self.goals[i]
             back = self.approach_length(i)
             if back is None:
@@ -518,18 +519,25 @@ class _Runner:
                 a_pose = self.retargeted(a_pose)
                 ready = None
             else:
-                a_pose = self.line_pose(goal, back, 10.0, -math.radians(6.0))
+                a_pose = self.line_pose(goal, back, 20.0, -math.radians(6.0))
                 ready = lambda: self.in_funnel(i, back)  # noqa: E731
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
                 self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
             waypoints = []
+            if back is not None and not self.in_funnel(i, back):
+                self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
+                continue
             ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k, orbiting)
             if ok:
                 return
+            if self._missed:
+                # no contact: the gross motion (obstacle-checked) loops back into the funnel
+                self.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
+                continue
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
             self.back_off(i, k)
-        raise _Abort(f"{self.scn.names[i]} did not dock in 4 attempts (stuck in the failure region H)")
+        raise _Abort(f"{self.scn.names[i]} did not dock in 6 attempts (last: {self.events[-1]['detail'] if self.events else ''})")
 
     @staticmethod
     def line_pose(goal, back: float, right: float, dtheta: float) -> np.ndarray:
@@ -550,10 +558,10 @@ class _Runner:
         return float(-(d @ h)), float(d @ rt), float(angle_difference(self.est[i, 2], th))
 
     def approach_length(self, i: int) -> float | None:
-        """How far behind the slot the approach line is clear of the structure (350, 250 or 150 um), or None."""
+        """How far behind the slot the approach line is clear of the structure (450 down to 150 um), or None."""
         goal = self.goals[i]
         docked = np.flatnonzero(self.docked)
-        for back in (350.0, 250.0, 150.0):
+        for back in (450.0, 350.0, 250.0, 150.0):
             ok = True
             for right in (0.0, 60.0):
                 line = np.stack([self.line_pose(goal, b, right * b / back, 0.0) for b in np.linspace(8.0, back, 24)])
@@ -600,7 +608,12 @@ class _Runner:
         return self.merge(i, behind, right, psi) is not None
 
     def line_approach(self, i: int, k: int) -> bool:
-        """Fine motion along the approach line: merge (straight, interpolated arc), straight in, push."""
+        """Fine motion along the approach line: merge (straight, interpolated arc), straight in, push.
+
+        False when it did not dock; ``self._missed`` then tells a miss (off the line, no contact: loop
+        back) from a robot stuck against the structure (back off first).
+        """
+        self._missed = False
         for _ in range(80):
             v, r = float(self.v_hat[i]), float(self.r_hat[i])
             behind, right, psi = self.line_coords(i)
@@ -615,12 +628,13 @@ class _Runner:
                 continue
             m = self.merge(i, behind, right, psi)
             if m is None:
-                if abs(miss) <= 6.0:  # cannot do better without a loop: a small miss it is
+                if abs(miss) <= 8.0:  # cannot do better without a loop: a small miss it is
                     self.drive([(k - 1, (max(behind, 0.0) / v + self.opts.push_s) if last else self.tx)])
                     if last:
                         return self.check_docked(i, k)
                     continue
                 self.log("miss", i, f"off its approach line ({right:.0f} um, {math.degrees(psi):.1f} deg): loops back")
+                self._missed = True
                 return False
             s1, R = m
             t1, arc_t = s1 / v, R * (-psi) / v
