@@ -1045,6 +1045,8 @@ class _Runner:
                 if gap < 25.0:
                     self.drive([(n - 2, self.opts.push_s)])
                     self.docked[[N, M]] = True
+                    for _ in range(4):  # frames of the still pair: its pose estimate is their mean
+                        self.drive([(n - 2, 0.5)])
                     self.log("G_1", N, f"formed with {self.scn.names[M]} (front edges {gap:.1f} um apart)")
                     self.retarget(N, M)
                     return True

@@ -7,12 +7,17 @@ cannot undo an error, so the controller needs better numbers than one frame give
 - **Poses** are dead-reckoned between frames with the identified model and blended with each
   measurement (a fixed-gain complementary filter: gain 0.5 on position, 0.35 on heading). A
   measurement far from the prediction (a contact stopped or turned the robot) replaces the estimate.
-  A robot not seen keeps its prediction.
-- **Speed and turn rate** are identified over *runs*: maximal stretches of consecutive Drives during
-  which a robot only drove straight (speed = distance / time) or only turned (turn rate = heading change /
-  time, unwrapped with the prediction), measured on raw frames at the run's two ends. The error of a run's
-  estimate falls as 1/T with its length T, so runs are pooled with weights T^2: a robot that orbited for a
-  minute knows its turn rate to ~0.1 %.
+  A robot not seen keeps its prediction. A robot the controller holds still (docked, pushing into the
+  structure) is placed at the mean of its frames since it stopped: the structure's pose sharpens with
+  every frame.
+- **Turn rate** is identified over *runs*: maximal stretches of consecutive Drives during which a robot
+  only turned (turn rate = heading change / time, unwrapped with the prediction), measured on raw frames
+  at the run's two ends. The error of a run's estimate falls as 1/T with its length T, so runs are pooled
+  with weights T^2: a robot that orbited for a minute knows its turn rate to ~0.1 %.
+- **Speed** is identified from every frame, whatever the robot did: with the turn rate fixed, a robot's
+  path between two frames is the predicted one scaled by v / v_hat about its start (arc angles depend on
+  the turn rate only, every length on the speed), so ``v = v_hat (dm . dp) / |dp|^2`` for measured and
+  predicted displacements dm and dp. Frames are pooled with weights |dp|^2 (their error falls as 1/|dp|).
 
 Everything is in um, s and rad; arrays are indexed like the scenario's robots.
 """
@@ -38,7 +43,7 @@ MIN_RUN_S = 0.8
 PRIOR_S = 0.5
 """The nominal values count as a run of this length (s)."""
 
-_NONE, _STRAIGHT, _TURN = 0, 1, 2
+_NONE, _TURN = 0, 2
 
 
 class Estimator:
@@ -74,7 +79,7 @@ class Estimator:
         self.turn_rate = self.omega_nom.copy()
         # pooled estimates (value, weight) of finished runs
         self._v_pool = self.v_nom.copy()
-        self._v_w = np.full(self.n, PRIOR_S**2)
+        self._v_w = np.full(self.n, PRIOR_S**2)  # in (um / (um/s))^2 = s^2: displacement^2 / v_nom^2
         self._w_pool = self.omega_nom.copy()
         self._w_w = np.full(self.n, PRIOR_S**2)
         # the current run of each robot
@@ -84,6 +89,9 @@ class Estimator:
         self._dth = np.zeros(self.n)
         self._last = np.where(seen[:, None], first, np.nan)
         self._run_est: dict[int, float] = {}
+        self._was_frozen = np.zeros(self.n, dtype=bool)
+        self._still_sum = np.zeros((self.n, 3))
+        self._still_n = np.zeros(self.n, dtype=int)
         self.unseen = np.where(seen, 0, 1)
 
     @property
@@ -114,6 +122,19 @@ class Estimator:
         new[blend, :2] += POSITION_GAIN * innov[blend, :2]
         new[blend, 2] += HEADING_GAIN * innov[blend, 2]
         new[seen & jump] = frame[seen & jump]
+        # a robot held still (docked) is where the mean of its frames since it stopped says
+        start = frozen & ~self._was_frozen
+        self._still_sum[start] = 0.0
+        self._still_n[start] = 0
+        self._was_frozen = frozen.copy()
+        hold = frozen & seen
+        if hold.any():
+            ref = self._still_sum[hold, 2] / np.maximum(self._still_n[hold], 1)
+            unwrapped = frame[hold].copy()
+            unwrapped[:, 2] = np.where(self._still_n[hold] > 0, ref + angle_difference(frame[hold, 2], ref), frame[hold, 2])
+            self._still_sum[hold] += unwrapped
+            self._still_n[hold] += 1
+            new[hold] = self._still_sum[hold] / self._still_n[hold][:, None]
         new[:, 2] = np.mod(new[:, 2], TWO_PI)
         self._identify(steps, frozen, frame, seen, jump)
         self.pose = new
@@ -124,36 +145,45 @@ class Estimator:
     def _identify(self, steps, frozen, frame, seen, jump) -> None:
         total = sum(d for _, d in steps)
         turn_time = sum(np.where(t, d, 0.0) for t, d in steps) if steps else np.zeros(self.n)
-        mode = np.where(turn_time >= total - 1e-9, _TURN, np.where(turn_time <= 1e-9, _STRAIGHT, _NONE))
+        mode = np.where(turn_time >= total - 1e-9, _TURN, _NONE)
+        valid = seen & ~jump & ~frozen & ~np.isnan(self._last[:, 0]) & (total > 0)
+        # speed: the measured displacement against the one predicted from the last raw frame
+        if valid.any():
+            start = np.where(valid[:, None], self._last, 0.0)
+            p = start.copy()
+            for turning, d in steps:
+                p = advance(p, turning, self.speed, self.radius, d)
+            dp = p[:, :2] - start[:, :2]
+            dm = frame[:, :2] - start[:, :2]
+            dp2 = (dp * dp).sum(axis=1)
+            for i in np.flatnonzero(valid & (dp2 >= 30.0**2)):
+                value = self.speed[i] * float(dm[i] @ dp[i]) / float(dp2[i])
+                if 0.6 * self.v_nom[i] < value < 1.4 * self.v_nom[i]:
+                    self._v_pool[i] = (self._v_w[i] * self._v_pool[i] + dp2[i] / self.v_nom[i] ** 2 * value) / (self._v_w[i] + dp2[i] / self.v_nom[i] ** 2)
+                    self._v_w[i] += dp2[i] / self.v_nom[i] ** 2
+                    self.speed[i] = self._v_pool[i]
+        # turn rate: runs of pure turning
         for i in range(self.n):
-            valid = seen[i] and not jump[i] and not frozen[i] and total > 0
-            if not valid or mode[i] == _NONE or mode[i] != self._mode[i] or np.isnan(self._ref[i, 0]):
+            ok = bool(valid[i])
+            if not ok or mode[i] == _NONE or self._mode[i] != _TURN or np.isnan(self._ref[i, 0]):
                 self._commit(i)
-                if valid and mode[i] != _NONE and not np.isnan(self._last[i, 0]):
-                    self._mode[i] = mode[i]
+                if ok and mode[i] == _TURN:
+                    self._mode[i] = _TURN
                     self._ref[i] = self._last[i]
                     self._T[i] = total
-                    self._dth[i] = self.turn_rate[i] * total if mode[i] == _TURN else 0.0
-                else:
-                    self._mode[i] = _NONE
-                    self._T[i] = 0.0
+                    self._dth[i] = self.turn_rate[i] * total
             else:
                 self._T[i] += total
-                if mode[i] == _TURN:
-                    self._dth[i] += self.turn_rate[i] * total
-            if self._mode[i] != _NONE and self._T[i] >= MIN_RUN_S:
+                self._dth[i] += self.turn_rate[i] * total
+            if self._mode[i] == _TURN and self._T[i] >= MIN_RUN_S:
                 self._provisional(i, frame[i])
         self._last = np.where(seen[:, None], frame, np.nan)
 
     def _run_value(self, i: int, end) -> float | None:
-        T = self._T[i]
-        if self._mode[i] == _STRAIGHT:
-            value, nominal = float(np.hypot(*(end[:2] - self._ref[i, :2]))) / T, self.v_nom[i]
-        else:
-            raw = float(end[2] - self._ref[i, 2])
-            dth = self._dth[i] + float(angle_difference(raw - self._dth[i], 0.0))
-            value, nominal = dth / T, self.omega_nom[i]
-        return value if 0.6 * nominal < value < 1.4 * nominal else None
+        raw = float(end[2] - self._ref[i, 2])
+        dth = self._dth[i] + float(angle_difference(raw - self._dth[i], 0.0))
+        value = dth / self._T[i]
+        return value if 0.6 * self.omega_nom[i] < value < 1.4 * self.omega_nom[i] else None
 
     def _provisional(self, i: int, end) -> None:
         value = self._run_value(i, end)
@@ -162,23 +192,15 @@ class Estimator:
             return
         self._run_est[i] = value
         w = self._T[i] ** 2
-        if self._mode[i] == _STRAIGHT:
-            self.speed[i] = (self._v_w[i] * self._v_pool[i] + w * value) / (self._v_w[i] + w)
-        else:
-            self.turn_rate[i] = (self._w_w[i] * self._w_pool[i] + w * value) / (self._w_w[i] + w)
+        self.turn_rate[i] = (self._w_w[i] * self._w_pool[i] + w * value) / (self._w_w[i] + w)
 
     def _commit(self, i: int) -> None:
         run = self._run_est
-        if i in run and self._mode[i] != _NONE and self._T[i] >= MIN_RUN_S:
+        if i in run and self._mode[i] == _TURN and self._T[i] >= MIN_RUN_S:
             w = self._T[i] ** 2
-            if self._mode[i] == _STRAIGHT:
-                self._v_pool[i] = (self._v_w[i] * self._v_pool[i] + w * run[i]) / (self._v_w[i] + w)
-                self._v_w[i] += w
-                self.speed[i] = self._v_pool[i]
-            else:
-                self._w_pool[i] = (self._w_w[i] * self._w_pool[i] + w * run[i]) / (self._w_w[i] + w)
-                self._w_w[i] += w
-                self.turn_rate[i] = self._w_pool[i]
+            self._w_pool[i] = (self._w_w[i] * self._w_pool[i] + w * run[i]) / (self._w_w[i] + w)
+            self._w_w[i] += w
+            self.turn_rate[i] = self._w_pool[i]
         run.pop(i, None)
         self._T[i] = 0.0
         self._mode[i] = _NONE
