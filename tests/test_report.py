@@ -167,6 +167,11 @@ def test_run_bad_input(run_cli, tmp_path):
     no_start = tmp_path / "nostart.toml"
     no_start.write_text(re.sub(r"^start = .*$", "", EXAMPLE.read_text(), count=1, flags=re.M))
     assert_user_error(run_cli("run", no_start, "--out", tmp_path / "o2"), "nostart.toml", "start")
+    text = EXAMPLE.read_text()
+    no_goal = tmp_path / "nogoal.toml"
+    no_goal.write_text(text[: text.index("[structure]")] + text[text.index("[noise]"):])
+    assert_user_error(run_cli("run", no_goal, "--out", tmp_path / "o3"), "nogoal.toml", "goal")
+    assert_user_error(run_cli("simulate", no_goal, "--out", tmp_path / "o4"), "nogoal.toml", "goal")
     # an input file inside the output folder is never overwritten
     folder = tmp_path / "inplace"
     folder.mkdir()

@@ -615,9 +615,8 @@ def simulate(
 
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
-    from .control import nominal_plan
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
-    from .pipeline import closed_loop, finite_budget, merged_events, result_document, run_pictures, verdict_text
+    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, run_pictures, verdict_text
     from .report import animation_page
 
     budget = finite_budget(time_budget_s)
@@ -628,9 +627,9 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         check_not_input(folder / name, [scenario])
     if not scn.has_starts:
         raise StressbotsError("every robot needs a start pose to be simulated (robots[].start)", source=str(scenario), field="robots")
-    show = not quiet
+    show = not quiet and err.is_terminal  # spinners only on a terminal (no stray lines in logs)
     with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext() as status:
-        plan_result = nominal_plan(scn)
+        plan_result = plan_for(scn, str(scenario))
         on_time = (lambda t: status.update(f"closed loop: {t:.0f} s simulated...")) if show else None
         if show:
             status.update("closed loop...")
@@ -648,8 +647,9 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     from rich.table import Table
 
     res = run.result
-    t = Table(title=f"{scn.name}: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated in {run.wall_s:.1f} s, "
-                    f"{res.replans} re-plans")
+    out.print(f"[bold]{scn.name}[/bold]: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated in "
+              f"{run.wall_s:.1f} s, {res.replans} re-plans", highlight=False, soft_wrap=True)
+    t = Table()
     for col, just in (("robot", "left"), ("docked", "left"), ("position error (um)", "right"), ("heading error (deg)", "right")):
         t.add_column(col, justify=just)  # type: ignore[arg-type]
     for k, name in enumerate(scn.names):

@@ -98,6 +98,19 @@ def default_time_budget_s() -> float | None:
         return None
 
 
+def plan_for(scenario, source: str | None = None):
+    """The nominal plan the controller follows (:func:`stressbots.control.nominal_plan`); a planning
+    error that names no file is attributed to ``source``."""
+    from .control import nominal_plan
+
+    try:
+        return nominal_plan(scenario)
+    except StressbotsError as exc:
+        if exc.source is None and source:
+            exc.source = source
+        raise
+
+
 def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None = None,
                 on_time: Callable[[float], None] | None = None) -> ClosedLoop:
     """Run :func:`stressbots.control.assemble` on a recording :class:`~stressbots.sim.SimulatedPlant`."""
@@ -231,7 +244,7 @@ def run_pictures(scenario, run: ClosedLoop, *, label: str = "closed loop") -> tu
         "run": figure_bytes(plot_run(scenario, times, poses, res.goals, plant.events, title=title)),
         "structure": figure_bytes(plot_final_structure(
             scenario, final, res.nominal_goals, res.docked,
-            title=f"{verdict}: shape error {res.shape_error_rms_um:.3g} um RMS, alignment rotation {res.shape_rotation_deg:.2g} deg")),
+            title=f"{verdict}: shape error {res.shape_error_rms_um:.3g} um RMS, alignment rotation {res.shape_rotation_deg:.1f} deg")),
     }
     anim = animation_data(scenario, times, poses, res.goals, merged_events(res, plant), title=title)
     return figs, anim
@@ -284,7 +297,7 @@ def _progress(err_console, quiet: bool):
 
     return Progress(
         SpinnerColumn(), TextColumn("{task.description:<22}"), BarColumn(), TextColumn("{task.fields[info]}"), TimeElapsedColumn(),
-        console=err_console, disable=quiet, transient=False,
+        console=err_console, disable=quiet or not err_console.is_terminal, transient=False,
     )
 
 
@@ -312,7 +325,6 @@ def run_job(
     from rich.console import Console
 
     from . import plans
-    from .control import nominal_plan
     from .electrostatics import analyse_scenario
     from .outputs import check_not_input, figure_bytes, prepare_dir, write_bytes, write_json, write_text
     from .report import build_report
@@ -343,7 +355,7 @@ def run_job(
         console.print()
     with _progress(err_console, quiet) as bar:
         t_plan = bar.add_task("planning", total=None, info="")
-        plan_result = nominal_plan(scenario)
+        plan_result = plan_for(scenario, source)
         s = plan_result.summary
         bar.update(t_plan, total=1, completed=1, info=f"{s['duration_s']:.1f} s plan, {s['steps']} steps")
         wf = plan_waveform(scenario, plan_result.plan)
@@ -434,7 +446,9 @@ def _print_summary(console, scenario, plan_summary, res, doc, out: Path, report_
         f"efficiency {s['efficiency']:.2f}); replayed independently: ok",
         highlight=False, soft_wrap=True,
     )
-    t = Table(title=f"closed loop on the simulated plant, seed {res.seed}: {res.duration_s:.1f} s simulated, {res.replans} re-plans")
+    console.print(f"[bold]Closed loop[/bold] on the simulated plant, seed {res.seed}: {res.duration_s:.1f} s simulated, "
+                  f"{res.replans} re-plans", highlight=False, soft_wrap=True)
+    t = Table()
     for col, just in (("robot", "left"), ("docked", "left"), ("placement error (um)", "right"), ("heading error (deg)", "right")):
         t.add_column(col, justify=just)  # type: ignore[arg-type]
     for i, name in enumerate(scenario.names):
@@ -444,7 +458,7 @@ def _print_summary(console, scenario, plan_summary, res, doc, out: Path, report_
     console.print(f"[{style}]{verdict}[/{style}]", highlight=False, soft_wrap=True)
     console.print(
         f"{docked}/{scenario.n} docked, shape error {res.shape_error_rms_um:.3g} um RMS after the best rigid alignment "
-        f"(rotation {res.shape_rotation_deg:.2g} deg); {len(doc.get('events', []))} controller events, "
+        f"(rotation {res.shape_rotation_deg:.1f} deg); {len(doc.get('events', []))} controller events, "
         f"{len(doc.get('plant_events', []))} plant events",
         highlight=False, soft_wrap=True,
     )
