@@ -45,7 +45,7 @@ import numpy as np
 
 from . import paths as pathlib
 from .assessment import SHAPE_TOL_UM, shape_error
-from .collision import bodies_hit_discs, outside_arena, penetration_depth
+from .collision import bodies_hit_discs, outside_arena, penetration_depth, point_rectangle_distance
 from .electrostatics import analyse_scenario
 from .errors import PlanningError
 from .estimation import Estimator
@@ -249,6 +249,7 @@ class _Runner:
         self.omega_nom = self.v / self.r
         self._helper = None
         self._missed = False
+        self._plan = None
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
     # -- plant I/O ------------------------------------------------------------------------------------
@@ -773,60 +774,169 @@ class _Runner:
     # stage 1: D_{n-1} onto its station orbit ---------------------------------------------------------
 
     def transfer(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
+        """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`form_pair`).
+
+        Each leg: D_{n-1} orbits until it heads along the leg, then drives straight (P_{n-2}), which drives
+        D_n straight too. D_n's track is either what it does anyway (it turns with D_{n-1} for a chosen
+        fraction of the wait, then runs straight: :meth:`transfer_option`) or a track chosen for it
+        (:meth:`transfer_run`), which D_n reaches first, timed to D_{n-1}'s departure. A leg too long for
+        any clear track is shortened (900, 600, 400 um) when D_{n-1} can orbit at its end.
+        """
         n = self.n
-        for attempt in range(3):
-            d_vec = c_star - self.centre(M)
+        q_next = self.approach_pose(N, M, c_star, D)
+        for attempt in range(8):
+            cM = self.centre(M)
+            d_vec = c_star - cM
             d = float(np.hypot(*d_vec))
             if d <= 60.0:
                 break
-            th_dep = float(np.mod(math.atan2(d_vec[0], d_vec[1]) - math.radians(3.0), TWO_PI))
-            turn = float(np.mod(th_dep - self.est[M, 2], TWO_PI))
-            t_turn = turn / self.omega_hat[M]
-            f = self.transfer_option(N, M, t_turn, d, th_dep, lower, c_star, self.approach_pose(N, M, c_star, D))
-            if f is None:
+            u = d_vec / d
+            th_dep = float(np.mod(math.atan2(u[0], u[1]) - math.radians(3.0), TWO_PI))
+            t_turn = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
+            plan = None
+            for leg in sorted({d, min(d, 900.0), min(d, 600.0), min(d, 400.0)}, reverse=True):
+                c_next = cM + leg * u
+                if leg < d - 1.0 and len(self.free_orbits(M, [], lower, clearance=10.0, centres=c_next[None, :])) == 0:
+                    continue
+                f = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
+                if f is not None:
+                    plan = ("turn", f, leg, c_next)
+                    break
+                start = self.transfer_run(N, M, leg, th_dep, lower, c_next, q_next)
+                if start is not None:
+                    plan = ("run", start, leg, c_next)
+                    break
+            if plan is None:
                 raise _Abort(
                     f"D_n ({self.scn.names[N]}) has no clear straight track while D_(n-1) ({self.scn.names[M]}) "
                     f"moves {d:.0f} um to its station orbit"
                 )
-            self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {d:.0f} um; {self.scn.names[N]} turns {f:.0%} of the wait, then runs straight")
+            kind, arg, leg, c_next = plan
             self.replans += 1
-            # the turn: D_{n-1} orbits to th_dep; D_n turns first (P_n) for f of it, then straight (P_{n-1})
-            turned = 0.0
-            n_turn = f * t_turn
-            while True:
-                left = (turn - turned) / self.omega_hat[M]
-                if left <= 1e-3:
-                    break
-                dt = left if left <= 1.6 * self.tx else self.tx
-                a = min(dt, max(n_turn, 0.0))
-                th0 = self.est[M, 2]
-                self.drive([(n, a), (n - 1, dt - a)])
-                n_turn -= a
-                turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
-                if dt == left:
-                    break
-            # the straight: P_{n-2}, with clockwise corrections of D_{n-1}'s bearing (P_{n-1} bursts)
-            for _ in range(200):
-                c = self.centre(M)
-                to = c_star - c
-                h = np.array([math.sin(self.est[M, 2]), math.cos(self.est[M, 2])])
-                rem = float(to @ h)
-                if rem <= 5.0:
-                    break
-                bearing = float(angle_difference(math.atan2(to[0], to[1]), self.est[M, 2]))
-                steps = []
-                if rem > 60.0 and math.radians(0.7) < bearing < math.radians(30.0):
-                    steps.append((n - 1, bearing / self.omega_hat[M]))
-                dt = rem / self.v_hat[M]
-                if dt > 1.6 * self.tx:
-                    dt = self.tx
-                steps.append((n - 2, dt))
-                if not self.track_clear(N, sum(d for k, d in steps if k <= n - 1) * self.v_hat[N] + 40.0, lower, M):
-                    self.log("transfer", N, "D_n's track runs out; D_(n-1) stops short and moves on from there")
-                    break
-                self.drive(steps)
+            if kind == "turn":
+                self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} turns {arg:.0%} of the wait, then runs straight")
+                turn = t_turn * self.omega_hat[M]
+                turned = 0.0
+                n_turn = arg * t_turn
+                while True:
+                    left = (turn - turned) / self.omega_hat[M]
+                    if left <= 1e-3:
+                        break
+                    dt = left if left <= 1.6 * self.tx else self.tx
+                    a = min(dt, max(n_turn, 0.0))
+                    th0 = self.est[M, 2]
+                    self.drive([(n, a), (n - 1, dt - a)])
+                    n_turn -= a
+                    turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+                    if dt == left:
+                        break
+            else:
+                self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} first takes a clear track")
+                if not self.arrive_timed(N, M, lambda: arg, th_dep, lower):
+                    raise _Abort(f"D_n ({self.scn.names[N]}) cannot reach a clear track in time for D_(n-1)'s move")
+                self.wait_straight(N, M, th_dep)
+            self.straight_leg(N, M, c_next, lower)
         miss = float(np.hypot(*(c_star - self.centre(M))))
         self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
+
+    def wait_straight(self, N: int, M: int, th_dep: float) -> None:
+        """D_n straight (P_{n-1}) while D_{n-1} orbits on to heading ``th_dep``."""
+        n = self.n
+        for _ in range(40):
+            left = (float(np.mod(th_dep - self.est[M, 2] + 0.1, TWO_PI)) - 0.1) / self.omega_hat[M]
+            if left <= 1e-3:
+                return
+            if left <= 1.6 * self.tx:
+                self.drive([(n - 1, left)])
+                return
+            self.drive([(n - 1, self.tx)])
+
+    def straight_leg(self, N: int, M: int, c_next, lower) -> None:
+        """D_{n-1} straight (P_{n-2}) until its turning centre reaches ``c_next``; clockwise bearing fixes."""
+        n = self.n
+        for _ in range(200):
+            c = self.centre(M)
+            to = c_next - c
+            h = np.array([math.sin(self.est[M, 2]), math.cos(self.est[M, 2])])
+            rem = float(to @ h)
+            if rem <= 5.0:
+                return
+            bearing = float(angle_difference(math.atan2(to[0], to[1]), self.est[M, 2]))
+            steps = []
+            if rem > 60.0 and math.radians(0.7) < bearing < math.radians(30.0):
+                steps.append((n - 1, bearing / self.omega_hat[M]))
+            dt = rem / self.v_hat[M]
+            if dt > 1.6 * self.tx:
+                dt = self.tx
+            steps.append((n - 2, dt))
+            if not self.track_clear(N, sum(d for _, d in steps) * self.v_hat[N] + 40.0, lower, M):
+                self.log("transfer", N, "D_n's track runs out; D_(n-1) stops short and moves on from there")
+                return
+            self.drive(steps)
+
+    def transfer_run(self, N: int, M: int, leg: float, th_dep: float, lower, c_next, q_next) -> np.ndarray | None:
+        """A start pose for D_n's straight track during a leg of D_{n-1}, reachable in time; or None.
+
+        Candidates: starts on a 150 um grid, 16 headings. A track is a timing buffer (1.2 s, driven while
+        D_{n-1} still orbits: clear of its orbit) and then the leg (synchronous with D_{n-1}'s straight:
+        bodies apart), all clear of the other orbits and the arena edge, ending clear of D_{n-1}'s new
+        orbit. The cheapest to reach (plus a pull toward the next target) that a timed path reaches wins.
+        """
+        vN, vM = float(self.v_hat[N]), float(self.v_hat[M])
+        c = self.opts.clearance_um + 10.0
+        buf = 1.2 * vN
+        run_len = buf + leg * vN / vM * 1.15 + 40.0
+        if self.scn.arena_um is None:
+            return None
+        w, h = self.scn.arena_um
+        xs, ys = np.arange(75.0, w, 150.0), np.arange(75.0, h, 150.0)
+        heads = np.radians(np.arange(0.0, 360.0, 22.5))
+        X, Y, T = np.meshgrid(xs, ys, heads, indexing="ij")
+        starts = np.stack([X.ravel(), Y.ravel(), T.ravel()], axis=1)
+        s = np.arange(0.0, run_len + 1e-9, 40.0)
+        K = len(s)
+        hv = np.stack([np.sin(starts[:, 2]), np.cos(starts[:, 2])], axis=1)
+        samples = np.empty((len(starts), K, 3))
+        samples[:, :, :2] = starts[:, None, :2] + s[None, :, None] * hv[:, None, :]
+        samples[:, :, 2] = starts[:, None, 2]
+        flat = samples.reshape(-1, 3)
+        bad = outside_arena(flat, self.L[N], self.W[N], (w, h)).reshape(len(starts), K) > 0
+        centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
+        radii = [float(x) + c for x in self.rstar[lower]] if lower else []
+        if centres:
+            bad |= bodies_hit_discs(flat, self.L[N], self.W[N], np.array(centres), np.array(radii)).any(axis=1).reshape(len(starts), K)
+        ok = ~bad.any(axis=1)
+        cM = self.centre(M)
+        # buffer: clear of D_{n-1}'s current orbit; end: clear of its new one
+        nb = int(np.searchsorted(s, buf)) + 1
+        ok &= ~bodies_hit_discs(samples[:, :nb].reshape(-1, 3), self.L[N], self.W[N], cM[None, :], np.array([self.rstar[M] + c])).reshape(len(starts), nb).any(axis=1)
+        ok &= ~bodies_hit_discs(samples[:, -1], self.L[N], self.W[N], np.asarray(c_next)[None, :], np.array([self.rstar[M] + 40.0]))[:, 0]
+        idx = np.flatnonzero(ok)
+        if len(idx) == 0:
+            return None
+        # synchronous with D_{n-1}'s straight
+        mdep = pose_on_orbit(cM, self.r_hat[M], th_dep)
+        tm = np.arange(0.0, leg / vM + 1.0, 0.4)
+        m_track = move(mdep, vM * tm, 0.0)
+        n_s = buf + vN * tm
+        keep = []
+        for j in idx:
+            n_track = move(starts[j], n_s, 0.0)
+            if not (penetration_depth(n_track, self.L[N], self.W[N], m_track, self.L[M], self.W[M]) > -c).any():
+                keep.append(j)
+        if not keep:
+            return None
+        keep = np.array(keep)
+        ends = samples[keep, -1]
+        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], (len(keep), 3)), starts[keep], self.r_hat[N]) + 0.5 * np.hypot(*(ends[:, :2] - np.asarray(q_next)[:2]).T)
+        disc = [(cM, self.rstar[M])]
+        t_dep = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
+        period = TWO_PI / self.omega_hat[M]
+        arrivals = [a for a in (t_dep + k * period - 1.2 for k in range(3)) if a > 0.3]
+        for j in np.argsort(cost)[:12]:
+            if self.loiter_path(N, starts[keep[j]], arrivals, lower, disc, tol_s=0.5) is not None:
+                return starts[keep[j]]
+        return None
 
     def transfer_option(self, N: int, M: int, t_turn: float, d: float, th_dep: float, lower, c_star, q_next) -> float | None:
         """Fraction of D_{n-1}'s turn during which D_n turns with it (then runs straight), or None.
@@ -915,7 +1025,7 @@ class _Runner:
                 return None
         return cand
 
-    def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3) -> pathlib.Path | None:
+    def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3):
         """D_n waits on its own orbit, then takes its shortest path into the region around ``target``.
 
         Waiting on its own orbit (P_n: D_{n-1} orbits too) is the compact way for a one-way robot to
@@ -925,7 +1035,8 @@ class _Runner:
         of it and 6 deg either way will do, because D_{n-1}'s departure is fitted to the line D_n really
         ends on. A pose target would turn a small error to the left into a full loop. The first of
         ``arrivals`` (s from now, for ``target`` itself) that some wait meets within ``tol_s`` with a
-        clear path wins; of those, the one nearest ``target``.
+        clear path wins; of those, the one nearest ``target``. Returns ``(path, goal, offset_s, arrival_s)``
+        or None.
         """
         vN, rN = self.v_hat[N], self.r_hat[N]
         q = np.asarray(target, float)
@@ -958,8 +1069,29 @@ class _Runner:
                         segs = (("R", vN * tw[j]),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
                 if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
-                    return path
+                    return path, goals[kk], float(offset[kk]), float(want)
         return None
+
+    def continued(self, N: int, arrivals: Sequence[float], lower, disc) -> pathlib.Path | None:
+        """The last plan's goal, re-planned from the measured pose, if its timing still holds (plans persist).
+
+        Without this, a plan that becomes marginally infeasible (a graze with an orbit, an arrival just
+        outside the tolerance) would be replaced by a different one every t_x.
+        """
+        if self._plan is None:
+            return None
+        goal, offset, t_abs = self._plan
+        vN, rN = self.v_hat[N], self.r_hat[N]
+        want = min(arrivals, key=lambda a: abs(self.t + a - t_abs)) if arrivals else None
+        if want is None or abs(self.t + want - t_abs) > 1.0:
+            return None
+        path = pathlib.shortest_path(self.est[N], goal, rN, approach_um=60.0)
+        if abs(path.length / vN - offset - want) > 0.5:
+            return None
+        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=[(c, r - self.opts.clearance_um) for c, r in disc]):
+            return None
+        self._plan = (goal, offset, self.t + want)
+        return path
 
     def approach_pose(self, N: int, M: int, centre, D: float, early: float = 1.2) -> np.ndarray:
         """Where D_n aims: on the tangent of D_{n-1}'s orbit (about ``centre``) leading to D_{n-1}'s slot,
@@ -970,55 +1102,99 @@ class _Runner:
         return np.array([*(tangent[:2] + (D + self.v_hat[N] * early) * h), np.mod(th_dep + math.pi, TWO_PI)])
 
     def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
-        n = self.n
-        vN = self.v_hat[N]
-        early = 1.2  # s: D_n plans to reach its line this long before D_{n-1} leaves its orbit
         th_dep = float(self.goals[M, 2])
-        k_min = 0
+        if not self.arrive_timed(N, M, lambda: self.approach_pose(N, M, self.centre(M), D), th_dep, lower):
+            raise _Abort(f"D_n ({self.scn.names[N]}) finds no timed path to its approach line")
+        return self.depart_and_meet(N, M, lower)
+
+    def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float = 1.2) -> bool:
+        """D_n drives to ``target_fn()`` (a pose on a line it then runs straight along), arriving ``early``
+        seconds before D_{n-1}, orbiting, reaches heading ``th_dep``. Replanned every t_x; the last leg
+        runs whole. False if no timed way exists even from a holding orbit.
+        """
+        n = self.n
+        self._plan = None
+        holds = 0
         for _ in range(600):
-            cM = self.centre(M)
-            q = self.approach_pose(N, M, cM, D, early)
-            disc = [(cM, self.rstar[M])]
+            vN = self.v_hat[N]
+            q = target_fn()
+            disc = [(self.centre(M), self.rstar[M])]
             t_dep = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
             period = TWO_PI / self.omega_hat[M]
-            arrivals = [t_dep + k * period - early for k in range(k_min, k_min + 4)]
-            arrivals = [a for a in arrivals if a > 0.3]
-            path = self.loiter_path(N, q, arrivals, lower, disc)
+            arrivals = [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
+            path = self.continued(N, arrivals, lower, disc)
+            for tol in (0.3, 0.7):
+                if path is not None:
+                    break
+                found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
+                path = None if found is None else found[0]
+                self._plan = None if found is None else (found[1], found[2], self.t + found[3])
             if path is None:
-                for t_arr in arrivals:
-                    path = self.timed_a_path(N, q, t_arr, lower, disc)
-                    if path is not None:
-                        break
-            if path is None:
-                # no timed way from here: head for a holding pose further out on the approach line
-                path = self.to_holding(N, M, q, lower, disc)
-                if path is None:
-                    raise _Abort(f"D_n ({self.scn.names[N]}) finds no timed path to its approach line")
-                self.replans += 1
-                self.drive(self.path_steps(path, vN, n, n - 1, self.tx))
+                # no timed way from here: go where D_n can wait on its orbit near the target, then retry
+                holds += 1
+                if holds > 3 or not self.to_holding(N, M, q, lower, disc):
+                    return False
                 continue
             self.replans += 1
             whole = path.length / vN <= 1.6 * self.tx
             self.drive(self.path_steps(path, vN, n, n - 1, None if whole else self.tx))
             if whole:
-                break
-        return self.depart_and_meet(N, M, lower)
+                return True
+        return False
 
-    def to_holding(self, N: int, M: int, q, lower, disc) -> pathlib.Path | None:
-        """An untimed route to a pose further out on D_n's approach line, from which waiting works."""
-        h = np.array([math.sin(q[2]), math.cos(q[2])])
-        for back in (600.0, 400.0, 900.0, 250.0):
-            hold = np.array([q[0] - back * h[0], q[1] - back * h[1], q[2]])
-            loop = move(hold, np.linspace(0.0, TWO_PI * self.r_hat[N], 40), 1.0 / self.r_hat[N])
-            if self._blocked(np.vstack([hold[None, :], loop]), N, self.orbiting_below(self.n - 1), 10.0, discs=[(disc[0][0], disc[0][1] + 10.0)]):
-                continue
-            path = pathlib.shortest_path(self.est[N], hold, self.r_hat[N])
+    def free_orbits(self, i: int, discs, lower, clearance: float = 15.0, centres=None) -> np.ndarray:
+        """Centres (K, 2) on a 100 um grid (or of ``centres``) where robot ``i`` can orbit without meeting anything."""
+        rs = float(self.rstar[i])
+        if self.scn.arena_um is not None:
+            w, h = self.scn.arena_um
+        else:
+            lo = self.est[:, :2].min(axis=0) - 1500.0
+            w, h = self.est[:, :2].max(axis=0) - lo + 1500.0
+        xs = np.arange(rs + clearance, w - rs - clearance + 1e-9, 100.0)
+        ys = np.arange(rs + clearance, h - rs - clearance + 1e-9, 100.0)
+        if self.scn.arena_um is None:
+            xs, ys = xs + lo[0], ys + lo[1]
+        if len(xs) == 0 or len(ys) == 0:
+            return np.zeros((0, 2))
+        cx, cy = np.meshgrid(xs, ys)
+        c = np.stack([cx.ravel(), cy.ravel()], axis=1)
+        if centres is not None:
+            c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
+            inside = np.ones(len(c), dtype=bool)
+            if self.scn.arena_um is not None:
+                inside = (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance) & (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
+            c = c[inside]
+        ok = np.ones(len(c), dtype=bool)
+        centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
+        radii = [float(x) for x in self.rstar[lower]] if lower else []
+        for cc, rr in discs:
+            centres.append(cc)
+            radii.append(rr)
+        for cc, rr in zip(centres, radii):
+            ok &= np.hypot(*(c - cc).T) >= rs + rr + clearance
+        for j in np.flatnonzero(self.docked):
+            ok &= point_rectangle_distance(c, self.est[j][None, :], self.L[j], self.W[j])[0] >= rs + clearance
+        return c[ok]
+
+    def to_holding(self, N: int, M: int, q, lower, disc) -> bool:
+        """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
+        n = self.n
+        free = self.free_orbits(N, disc, lower)
+        if len(free) == 0:
+            return False
+        rN = self.r_hat[N]
+        heads = np.radians(np.arange(0.0, 360.0, 30.0))
+        poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)], axis=1) for t in heads])
+        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + 0.7 * np.hypot(*(poses[:, :2] - q[:2]).T)
+        for j in np.argsort(cost)[:8]:
+            hold = poses[j]
+            path = pathlib.shortest_path(self.est[N], hold, rN)
             if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
-                path = self.detour(N, hold, lower, disc)
-            if path is not None:
-                self.log("hold", N, f"{self.scn.names[N]} heads for a holding pose {back:.0f} um out on its approach line")
-                return path
-        return None
+                continue
+            self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
+            self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=40)
+            return True
+        return False
 
     def depart_and_meet(self, N: int, M: int, lower) -> bool:
         """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
