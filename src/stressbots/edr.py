@@ -798,13 +798,16 @@ class _Runner:
                 c_next = cM + leg * u
                 if leg < d - 1.0 and len(self.free_orbits(M, [], lower, clearance=10.0, centres=c_next[None, :])) == 0:
                     continue
-                f = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
-                if f is not None:
-                    plan = ("turn", f, leg, c_next)
+                opt = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
+                if opt is not None and opt[1] < 1e4:
+                    plan = ("turn", opt[0], leg, c_next)
                     break
                 start = self.transfer_run(N, M, leg, th_dep, lower, c_next, q_next)
                 if start is not None:
                     plan = ("run", start, leg, c_next)
+                    break
+                if opt is not None:  # clear, though it leaves D_n in a tight spot
+                    plan = ("turn", opt[0], leg, c_next)
                     break
             if plan is None:
                 raise _Abort(
@@ -933,17 +936,19 @@ class _Runner:
         t_dep = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
         period = TWO_PI / self.omega_hat[M]
         arrivals = [a for a in (t_dep + k * period - 1.2 for k in range(3)) if a > 0.3]
-        for j in np.argsort(cost)[:12]:
+        order = np.argsort(cost)
+        for j in order[:12]:
             if self.loiter_path(N, starts[keep[j]], arrivals, lower, disc, tol_s=0.5) is not None:
                 return starts[keep[j]]
-        return None
+        return starts[keep[order[0]]]  # no timed path from here: D_n will wait on a free orbit first
 
-    def transfer_option(self, N: int, M: int, t_turn: float, d: float, th_dep: float, lower, c_star, q_next) -> float | None:
-        """Fraction of D_{n-1}'s turn during which D_n turns with it (then runs straight), or None.
+    def transfer_option(self, N: int, M: int, t_turn: float, d: float, th_dep: float, lower, c_star, q_next):
+        """``(fraction, cost)``: of D_{n-1}'s turn, D_n turns with it for the fraction (then runs straight); or None.
 
         Every fraction whose motion keeps D_n clear of the orbits, the arena edge and D_{n-1} (its orbit
         while it turns, its body while both drive straight, its new orbit afterwards) is a candidate; the
-        one leaving D_n the shortest path to its next target ``q_next`` wins.
+        one leaving D_n the shortest path to its next target ``q_next`` wins; the cost adds 1e5 um when that
+        path is blocked and 1e4 um when D_n has no room to wait on its orbit there.
         """
         vN, rN, vM = self.v_hat[N], self.r_hat[N], self.v_hat[M]
         c = self.opts.clearance_um + 10.0
@@ -982,7 +987,7 @@ class _Runner:
                 ell += 1e4
             if ell < best_len:
                 best, best_len = float(f), ell
-        return best
+        return None if best is None else (best, best_len)
 
     def _blocked(self, samples: np.ndarray, i: int, lower, clearance: float, discs=()) -> bool:
         """Whether robot ``i``'s body along ``samples`` meets a lower robot's orbit, ``discs`` or the arena edge."""
