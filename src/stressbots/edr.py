@@ -55,6 +55,9 @@ from .waveform import synthesize
 
 __all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
 
+G1_CLEARANCE_UM = 5.0
+"""Clearance of D_n's timed paths from the orbits while G_1 forms (its approach runs close to D_{n-1}'s orbit)."""
+
 PLAN_CLEARANCE_UM = 40.0
 """Clearance of the nominal plans the controller follows: room for tens of um of control error."""
 
@@ -100,7 +103,7 @@ class ControllerOptions:
     push_s: float = 1.5
     dock_tol_um: float = 30.0
     dock_tol_deg: float = 15.0
-    clearance_um: float = 5.0
+    clearance_um: float = 15.0
     shape_tol_um: float = SHAPE_TOL_UM
 
 
@@ -249,6 +252,7 @@ class _Runner:
         self.omega_nom = self.v / self.r
         self._helper = None
         self._missed = False
+        self._stuck = False
         self._plan = None
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
@@ -294,9 +298,9 @@ class _Runner:
 
     # -- geometry -------------------------------------------------------------------------------------
 
-    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=()) -> bool:
+    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None) -> bool:
         """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge."""
-        c = self.opts.clearance_um
+        c = self.opts.clearance_um if clearance is None else clearance
         orbiting = [j for j in orbiting if j != i]
         if orbiting or extra_discs:
             centres = [*turning_centres(self.est[orbiting], self.r[orbiting])] if orbiting else []
@@ -344,6 +348,8 @@ class _Runner:
         cheaply: a turn overdone (speed or radius misidentified, drift) would cost a full loop at the
         next replan, a turn cut short costs a slight turn.
         """
+        stalls = 0
+        self._stuck = False
         for _ in range(max_cycles):
             v, r = self.v_hat[i], self.r_hat[i]
             p = self.est[i]
@@ -378,12 +384,22 @@ class _Runner:
             steps = self.path_steps(path, v, turn_k, straight_k, limit)
             segs = path.segments
             if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
-                cut = min(r * math.radians(3.0), 0.5 * segs[0][1]) / v
-                if steps[0][1] > cut:
-                    steps[0] = (steps[0][0], steps[0][1] - cut)
-                    steps.insert(1, (straight_k, cut))
+                cut_um = min(r * math.radians(3.0), 0.5 * segs[0][1])
+                biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
+                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs):
+                    steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
+                    steps.insert(1, (straight_k, cut_um / v))
                     steps = _trim(steps, self.tx)
+            before = self.est[i].copy()
             self.drive(steps)
+            if float(np.hypot(*(self.est[i, :2] - before[:2]))) < 0.15 * v * sum(d for _, d in steps):
+                stalls += 1
+                if stalls >= 3:
+                    self.log("stuck", i, "stopped during gross motion (failure region H)")
+                    self._stuck = True
+                    return False
+            else:
+                stalls = 0
             if whole:
                 return True
         return False
@@ -525,7 +541,12 @@ class _Runner:
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
                 self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
+                if self._stuck:
+                    break
             waypoints = []
+            if self._stuck:
+                self.back_off(i, k)
+                continue
             if back is not None and not self.in_funnel(i, back):
                 self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
@@ -1073,7 +1094,7 @@ class _Runner:
                     else:
                         segs = (("R", vN * tw[j]),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
-                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
+                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc, clearance=G1_CLEARANCE_UM):
                     return path, goals[kk], float(offset[kk]), float(want)
         return None
 
@@ -1093,7 +1114,7 @@ class _Runner:
         path = pathlib.shortest_path(self.est[N], goal, rN, approach_um=60.0)
         if abs(path.length / vN - offset - want) > 0.5:
             return None
-        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=[(c, r - self.opts.clearance_um) for c, r in disc]):
+        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc, clearance=0.0):
             return None
         self._plan = (goal, offset, self.t + want)
         return path
@@ -1191,15 +1212,12 @@ class _Runner:
         heads = np.radians(np.arange(0.0, 360.0, 30.0))
         poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)], axis=1) for t in heads])
         cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + 0.7 * np.hypot(*(poses[:, :2] - q[:2]).T)
-        for j in np.argsort(cost)[:8]:
-            hold = poses[j]
-            path = pathlib.shortest_path(self.est[N], hold, rN)
-            if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc):
-                continue
-            self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
-            self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=40)
-            return True
-        return False
+        order = np.argsort(cost)[:8]
+        clear = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(self.est[N], poses[j], rN).sample(10.0), N, lower, extra_discs=disc, clearance=G1_CLEARANCE_UM)]
+        hold = poses[clear[0] if clear else order[0]]
+        self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
+        self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120)
+        return not self._stuck
 
     def depart_and_meet(self, N: int, M: int, lower) -> bool:
         """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
