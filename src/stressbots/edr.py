@@ -1074,25 +1074,32 @@ class _Runner:
         offset = s / vN  # further along the line: arrive correspondingly later
         penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)
         period = TWO_PI * rN / vN
+        # a straight of a um first, then a wait of tw s on the orbit: the shortest path's length jumps by a
+        # loop as the wait passes its first turn, and the straights fill those gaps in arrival time
+        pre = np.array([0.0, 100.0, 200.0, 350.0, 500.0])
         tw = np.arange(0.0, period, 0.05)
-        waits = move(self.est[N], vN * tw, 1.0 / rN)
-        W, K = len(tw), len(goals)
+        A, Tw = np.meshgrid(pre, tw, indexing="ij")
+        A, Tw = A.ravel(), Tw.ravel()
+        waits = move(move(self.est[N], A, 0.0), vN * Tw, 1.0 / rN)
+        W, K = len(Tw), len(goals)
         ell = pathlib.shortest_path_lengths(np.repeat(waits, K, axis=0), np.tile(goals, (W, 1)), rN, approach_um=60.0).reshape(W, K)
-        arr = tw[:, None] + ell / vN - offset[None, :]
+        arr = (A / vN + Tw)[:, None] + ell / vN - offset[None, :]
         for want in arrivals:
             err = np.abs(arr - want)
-            score = np.where(err <= tol_s, err + 0.1 * penalty[None, :], np.inf).ravel()
+            score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.002 * A[:, None] / vN, np.inf).ravel()
             for flat in np.argsort(score)[:10]:
                 if not np.isfinite(score[flat]):
                     break
                 j, kk = divmod(int(flat), K)
                 tail = pathlib.shortest_path(waits[j], goals[kk], rN, approach_um=60.0)
                 segs = tuple(tail.segments)
-                if tw[j] > 0:
+                if Tw[j] > 0:
                     if segs and segs[0][0] == "R":
-                        segs = (("R", segs[0][1] + vN * tw[j]),) + segs[1:]
+                        segs = (("R", segs[0][1] + vN * Tw[j]),) + segs[1:]
                     else:
-                        segs = (("R", vN * tw[j]),) + segs
+                        segs = (("R", vN * Tw[j]),) + segs
+                if A[j] > 0:
+                    segs = (("S", float(A[j])),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
                 if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc, clearance=G1_CLEARANCE_UM):
                     return path, goals[kk], float(offset[kk]), float(want)
