@@ -131,7 +131,12 @@ class AssemblyResult:
     trace_poses: np.ndarray = field(repr=False, default_factory=lambda: np.zeros((0, 0, 3)))
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``result.json`` content (SPEC 7 keys first)."""
+        """The ``result.json`` content (SPEC 7 keys first).
+
+        ``goal`` is the nominal slot (``position_error_um`` and ``heading_error_deg`` are measured from
+        it: the absolute placement error); ``goal_after_G1`` is the slot the controller aimed at once the
+        pair had formed where it did (later slots follow the pair, SPEC 6).
+        """
         final = self.final_true if self.final_true is not None else self.final_observed
         robots = []
         for i, name in enumerate(self.names):
@@ -139,12 +144,12 @@ class AssemblyResult:
                 {
                     "name": name,
                     "final": _deg(final[i]),
-                    "goal": _deg(self.goals[i]),
+                    "goal": _deg(self.nominal_goals[i]),
                     "docked": bool(self.docked[i]),
                     "position_error_um": float(self.placement_error_um[i]),
                     "heading_error_deg": float(self.heading_error_deg[i]),
                     "observed": _deg(self.final_observed[i]),
-                    "nominal_goal": _deg(self.nominal_goals[i]),
+                    "goal_after_G1": _deg(self.goals[i]),
                 }
             )
         return {
