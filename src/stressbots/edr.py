@@ -56,7 +56,10 @@ from .waveform import synthesize
 __all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
 
 G1_CLEARANCE_UM = 5.0
-"""Clearance of D_n's timed paths from the orbits while G_1 forms (its approach runs close to D_{n-1}'s orbit)."""
+"""Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
+
+WALL_CLEARANCE_UM = 40.0
+"""Clearance of D_n's timed paths from the arena edge and the other orbits (a robot against the edge is stuck)."""
 
 PLAN_CLEARANCE_UM = 40.0
 """Clearance of the nominal plans the controller follows: room for tens of um of control error."""
@@ -206,6 +209,16 @@ def _turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um
     return float(r / arc.radius_um), float(arc.length_um), th + float(arc.turn_rad)
 
 
+def _arena_gap(poses, length_um, width_um, arena_um) -> np.ndarray:
+    """Distance (um) of each body from the arena edge; negative when it sticks out."""
+    from .robots import body_corners
+
+    corners = body_corners(np.atleast_2d(poses), length_um, width_um)  # (M, 4, 2)
+    w, h = arena_um
+    gaps = np.stack([corners[..., 0], w - corners[..., 0], corners[..., 1], h - corners[..., 1]], axis=-1)
+    return gaps.min(axis=(1, 2))
+
+
 def _trim(steps, total_s: float):
     """The first ``total_s`` seconds of primitive steps ``(k, duration_s)``."""
     out, left = [], total_s
@@ -319,9 +332,8 @@ class _Runner:
         for j in docked:
             if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c).any():
                 return True
-        if self.scn.arena_um is not None:
-            if (outside_arena(samples, self.L[i], self.W[i], self.scn.arena_um) > 0).any():
-                return True
+        if self.scn.arena_um is not None and (_arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
+            return True
         return False
 
     def orbiting_below(self, k: int) -> list[int]:
@@ -1028,13 +1040,8 @@ class _Runner:
         for j in docked:
             if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -clearance).any():
                 return True
-        if self.scn.arena_um is not None:
-            w, hh = self.scn.arena_um
-            inner = (max(w - 2 * clearance, 1.0), max(hh - 2 * clearance, 1.0))
-            shifted = samples.copy()
-            shifted[:, :2] -= clearance
-            if (outside_arena(shifted, self.L[i], self.W[i], inner) > 0).any():
-                return True
+        if self.scn.arena_um is not None and (_arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < clearance).any():
+            return True
         return False
 
     def track_clear(self, N: int, length: float, lower, M: int) -> bool:
@@ -1106,9 +1113,13 @@ class _Runner:
                 if A[j] > 0:
                     segs = (("S", float(A[j])),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
-                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc, clearance=G1_CLEARANCE_UM):
+                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM):
                     return path, goals[kk], float(offset[kk]), float(want)
         return None
+
+    def _tight(self, disc, clearance: float = G1_CLEARANCE_UM):
+        """D_{n-1}'s orbit disc(s) shrunk so that checks at :data:`WALL_CLEARANCE_UM` keep ``clearance`` from them."""
+        return [(c, r - WALL_CLEARANCE_UM + clearance) for c, r in disc]
 
     def continued(self, N: int, arrivals: Sequence[float], lower, disc) -> pathlib.Path | None:
         """The last plan's goal, re-planned from the measured pose, if its timing still holds (plans persist).
@@ -1126,7 +1137,7 @@ class _Runner:
         path = pathlib.shortest_path(self.est[N], goal, rN, approach_um=60.0)
         if abs(path.length / vN - offset - want) > 0.5:
             return None
-        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=disc, clearance=0.0):
+        if self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc, 0.0), clearance=WALL_CLEARANCE_UM - 5.0):
             return None
         self._plan = (goal, offset, self.t + want)
         return path
@@ -1225,7 +1236,7 @@ class _Runner:
         poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)], axis=1) for t in heads])
         cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + 0.7 * np.hypot(*(poses[:, :2] - q[:2]).T)
         order = np.argsort(cost)[:8]
-        clear = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(self.est[N], poses[j], rN).sample(10.0), N, lower, extra_discs=disc, clearance=G1_CLEARANCE_UM)]
+        clear = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(self.est[N], poses[j], rN).sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM)]
         hold = poses[clear[0] if clear else order[0]]
         self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
         self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120)
