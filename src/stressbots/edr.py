@@ -58,6 +58,9 @@ __all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
 G1_CLEARANCE_UM = 5.0
 """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
 
+FINAL_LEG_S = 5.0
+"""D_n drives the last seconds of a timed path open loop when replanning them would cost a loop."""
+
 WALL_CLEARANCE_UM = 40.0
 """Clearance of D_n's timed paths from the arena edge and the other orbits (a robot against the edge is stuck)."""
 
@@ -1164,6 +1167,7 @@ class _Runner:
         n = self.n
         self._plan = None
         holds = 0
+        prev = None
         for _ in range(600):
             vN = self.v_hat[N]
             q = target_fn()
@@ -1172,12 +1176,20 @@ class _Runner:
             period = TWO_PI / self.omega_hat[M]
             arrivals = [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
             path = self.continued(N, arrivals, lower, disc)
+            if path is None and prev is not None and prev.length - vN * self.tx <= FINAL_LEG_S * vN:
+                # the final seconds: a small error can make the replanned path a loop (one-way robot);
+                # the rest of the plan, driven open loop, misses by a few um at most
+                rest = pathlib.sub_path(prev, min(vN * self.tx, prev.length), prev.length)
+                self.log("final", N, f"{self.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
+                self.drive(self.path_steps(rest, vN, n, n - 1, None))
+                return True
             for tol in (0.3, 0.7):
                 if path is not None:
                     break
                 found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
                 path = None if found is None else found[0]
                 self._plan = None if found is None else (found[1], found[2], self.t + found[3])
+            prev = path
             if path is None:
                 # no timed way from here: go where D_n can wait on its orbit near the target, then retry
                 holds += 1
