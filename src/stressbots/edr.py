@@ -55,7 +55,7 @@ from .waveform import synthesize
 
 __all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
 
-G1_CLEARANCE_UM = 5.0
+G1_CLEARANCE_UM = 25.0
 """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
 
 FINAL_LEG_S = 5.0
@@ -258,7 +258,6 @@ class _Runner:
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
         self.v, self.r = scenario.speeds_um_s, scenario.turn_radii_um
         self.L, self.W = scenario.lengths_um, scenario.widths_um
-        self.rstar = orbit_radii(self.L, self.W, self.r)
         self.nominal_goals = plan_result.plan.goal_array()
         self.goals = self.nominal_goals.copy()
         self.docked = np.zeros(n, dtype=bool)
@@ -298,6 +297,11 @@ class _Runner:
     @property
     def r_hat(self) -> np.ndarray:
         return self.estimator.radius
+
+    @property
+    def rstar(self) -> np.ndarray:
+        """Radii (um) of the discs the robots sweep when orbiting, with their identified turning radii."""
+        return orbit_radii(self.L, self.W, self.r_hat)
 
     def drive(self, steps: Sequence[tuple[int, float]]) -> None:
         """Apply primitive steps ``(k, duration_s)``, then update the estimates from the next frame."""
