@@ -1,38 +1,49 @@
 """Closed-loop assembly under control error: the two-step EDR strategy of seed Appendix 3.
 
 The controller talks to the robots only through a :class:`stressbots.control.Plant` (``observe`` and
-``apply``). It follows the phases of a nominal plan (:func:`stressbots.planning.plan_assembly`) but never
-trusts them blindly: every ``replan_interval_s`` (t_x) it measures the poses and replans the moving
-robot's motion from where it really is.
+``apply``). Every ``replan_interval_s`` (t_x) it takes a camera frame, updates its estimates
+(:mod:`stressbots.estimation`: filtered poses, identified speeds and turn rates) and re-plans the moving
+robot's motion from where it really is. The nominal plan (:func:`stressbots.planning.plan_assembly`)
+supplies the structure, the slots and the single robots' roadmap routes; the controller never replays
+its timing.
 
-**Gross motion (sigma_1).** The mover steers toward its phase target (a roadmap waypoint, the start of
-D_n's next run, a cut point of D_{n-1}'s route, or the intermediate pose a_i behind a slot): a shortest
-one-way path from the measured pose, checked against the orbit discs, the structure and the arena (a new
-roadmap route when it is blocked), of which one t_x is executed before measuring again. Once the target
-is within one t_x, the rest is executed and the next target taken.
+**One-way robots and regions.** A robot that only turns clockwise cannot undo a small error to its
+left without a full loop, so no step aims at an exact pose: every target is a region (the seed's A_i),
+gross motion keeps a left bias (turns into long straights are cut short by up to 3 deg; the next
+replan adds the missing clockwise turn), and the last seconds of a timed path run open loop rather
+than being re-planned into a loop.
 
-**Fine motion (sigma_2).** From a_i (outside the proximity region C_O) a docking robot D_i drives an
-interpolated turn (S_2f: P_i for a fraction rho_a, P_{i-1} for rho_b, SPEC 8's corrected
-``r' = r (1 + rho_b / rho_a)``) whose radius, recomputed from every measurement with the corrected seed
-eq. 1, passes through its docking point. The arrival angle that leaves is absorbed by docking compliance
-(the +-45 deg sticking cone). The G_1 pair closes with the three-primitive S_3f (P_n, P_{n-1}, P_{n-2};
-``r'_n = r (1 + (rho_b + rho_c) / rho_a)`` and ``r'_{n-1} = r (1 + rho_c / (rho_a + rho_b))``) when both
-arcs are realisable, else both drive straight; self-aligning compliance absorbs |alpha| < 60 deg and
-|w_y| < 80 um.
+**G_1 (App. 3.3), as an orbit rendezvous.** Under P_n and P_{n-1} D_{n-1} orbits in place while D_n is a
+free one-way robot (P_n turns it, P_{n-1} drives it straight); under P_{n-2} both drive straight.
 
-**G_1 (App. 3.3).** D_n is not corrected during its straight runs (it cannot be: it drives straight
-while D_{n-1} moves). When D_{n-1} is late, D_n would overrun its track: the controller then inserts a
-loop (D_n drives back to its run start while D_{n-1} orbits) and carries on (the seed's "re-plan sigma_1
-when one robot enters its region and the other does not").
+1. *Transfer*: D_{n-1} moves its orbit to a station orbit, in straight legs: it orbits until it heads
+   along the leg, then P_{n-2} drives it (and D_n) straight; clockwise bearing corrections (P_{n-1}
+   bursts) keep it on course. D_n either turns with D_{n-1} for a chosen fraction of the wait and then
+   runs straight on a track checked to be clear, or first drives to a chosen clear track, timed to
+   D_{n-1}'s departure.
+2. *Rendezvous*: D_n drives to a region on the tangent of D_{n-1}'s orbit that leads to D_{n-1}'s slot,
+   timed to arrive 1.2 s before D_{n-1} passes the tangent point. Timing comes from waiting on its own
+   orbit (and straights before it): any arrival time is reachable without long detours. D_n then runs
+   straight; D_{n-1} leaves its orbit at the heading that best lines it up with D_n as measured.
+3. *Meeting*: both drive straight into each other; self-aligning compliance (|alpha| < 60 deg,
+   |w_y| < 80 um) forms G_1 wherever they meet. The remaining slots follow the pair (``retarget``).
 
-**Failure detection and recovery.** A robot that stops far from its slot is stuck (failure region H):
-it backs off by turning and tries again. A robot the camera loses is dead-reckoned with the nominal model
-until it is seen again. Everything runs within a simulated time budget.
+**Docking of single robots (sigma_1, sigma_2).** Gross motion steers D_i (P_i turns, P_{i-1} straight,
+lower robots orbiting) into the approach funnel behind its slot, outside the proximity region C_O: the
+region from which it can merge onto the slot's approach line without a loop (to the line's right,
+pointing left of it). Fine motion merges with an interpolated clockwise arc of radius r' >= r (P_i for
+a fraction rho_a, P_{i-1} for rho_b, SPEC 8's ``r' = r (1 + rho_b / rho_a)``), drives straight in and
+pushes; docking compliance absorbs the last angle error. Tight gaps use the seed's S_2f arc through the
+docking point instead.
 
-After G_1 forms, the remaining slots are re-targeted by the rigid motion that maps the nominal pair onto
-the measured one: the pair may legitimately end shifted or rotated (SPEC 6), and later robots dock onto
-the structure as it really is. Success is judged on the shape after a best rigid alignment
-(:mod:`stressbots.assessment`); the absolute placement error is reported beside it.
+**Failure detection and recovery.** A robot that stops while it should move is in H (stuck): it backs
+off by turning and tries again; a robot that misses its approach line loops back through the funnel; a
+robot the camera loses is dead-reckoned until it is seen again; a path that would meet an orbit, the
+structure or the arena edge is routed around them on a roadmap (one route, followed waypoint by
+waypoint). Everything runs within a simulated time budget, and a run that fails says why.
+
+Success is judged on the shape after a best rigid alignment (:mod:`stressbots.assessment`); the absolute
+placement error is reported beside it.
 """
 
 from __future__ import annotations
