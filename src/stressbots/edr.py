@@ -69,7 +69,11 @@ __all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
 G1_CLEARANCE_UM = 25.0
 """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
 
-FINAL_LEG_S = 5.0
+FINAL_LEG_S = 3.0
+
+STATION_TOL_UM = 150.0
+"""After a first leg, D_{n-1} moves its orbit again only if it is farther than this from its station: the
+rendezvous adapts to the orbit it is on, and the pair then forms that far from its nominal place."""
 """D_n drives the last seconds of a timed path open loop when replanning them would cost a loop."""
 
 WALL_CLEARANCE_UM = 40.0
@@ -844,7 +848,7 @@ class _Runner:
             cM = self.centre(M)
             d_vec = c_star - cM
             d = float(np.hypot(*d_vec))
-            if d <= 60.0:
+            if d <= (60.0 if attempt == 0 else STATION_TOL_UM):
                 break
             u = d_vec / d
             th_dep = float(np.mod(math.atan2(u[0], u[1]) - math.radians(3.0), TWO_PI))
@@ -942,7 +946,7 @@ class _Runner:
         orbit. The cheapest to reach (plus a pull toward the next target) that a timed path reaches wins.
         """
         vN, vM = float(self.v_hat[N]), float(self.v_hat[M])
-        c = self.opts.clearance_um + 10.0
+        c = WALL_CLEARANCE_UM + 5.0  # the timed path's checks use WALL_CLEARANCE_UM: keep the track inside them
         buf = 1.2 * vN
         run_len = buf + leg * vN / vM * 1.15 + 40.0
         if self.scn.arena_um is None:
