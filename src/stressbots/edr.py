@@ -1259,7 +1259,8 @@ class _Runner:
     def to_holding(self, N: int, M: int, q, lower, disc) -> bool:
         """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
         n = self.n
-        free = self.free_orbits(N, disc, lower)
+        # the same clearances as the timed paths' checks, so that waiting there passes them
+        free = self.free_orbits(N, [(c, r + G1_CLEARANCE_UM - WALL_CLEARANCE_UM - 5.0) for c, r in disc], lower, clearance=WALL_CLEARANCE_UM + 5.0)
         if len(free) == 0:
             return False
         rN = self.r_hat[N]
