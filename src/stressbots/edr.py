@@ -974,6 +974,14 @@ class _Runner:
         nb = int(np.searchsorted(s, buf)) + 1
         ok &= ~bodies_hit_discs(samples[:, :nb].reshape(-1, 3), self.L[N], self.W[N], cM[None, :], np.array([self.rstar[M] + c])).reshape(len(starts), nb).any(axis=1)
         ok &= ~bodies_hit_discs(samples[:, -1], self.L[N], self.W[N], np.asarray(c_next)[None, :], np.array([self.rstar[M] + 40.0]))[:, 0]
+        # room for D_n to orbit (wait, or turn away) where its track ends
+        end_c = turning_centres(samples[:, -1], self.r_hat[N])
+        free = self.free_orbits(N, [(np.asarray(c_next), self.rstar[M] + G1_CLEARANCE_UM - WALL_CLEARANCE_UM)], lower, clearance=WALL_CLEARANCE_UM, centres=end_c)
+        if len(free):
+            room = (np.abs(end_c[:, None, :] - free[None, :, :]).max(axis=2) < 1e-9).any(axis=1)
+            ok &= room
+        else:
+            ok &= False
         idx = np.flatnonzero(ok)
         if len(idx) == 0:
             return None
@@ -984,8 +992,14 @@ class _Runner:
         n_s = buf + vN * tm
         keep = []
         for j in idx:
-            n_track = move(starts[j], n_s, 0.0)
-            if not (penetration_depth(n_track, self.L[N], self.W[N], m_track, self.L[M], self.W[M]) > -c).any():
+            # D_n may be up to 0.6 s early or late on its track: bodies apart for all three timings
+            clear = True
+            for shift in (0.0, -0.6 * vN, 0.6 * vN):
+                n_track = move(starts[j], np.maximum(n_s + shift, 0.0), 0.0)
+                if (penetration_depth(n_track, self.L[N], self.W[N], m_track, self.L[M], self.W[M]) > -c).any():
+                    clear = False
+                    break
+            if clear:
                 keep.append(j)
         if not keep:
             return None
