@@ -844,6 +844,7 @@ class _Runner:
         """
         n = self.n
         q_next = self.approach_pose(N, M, c_star, D)
+        failed_runs = 0
         for attempt in range(8):
             cM = self.centre(M)
             d_vec = c_star - cM
@@ -896,7 +897,12 @@ class _Runner:
             else:
                 self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} first takes a clear track")
                 if not self.arrive_timed(N, M, lambda: arg, th_dep, lower):
-                    raise _Abort(f"D_n ({self.scn.names[N]}) cannot reach a clear track in time for D_(n-1)'s move")
+                    # D_{n-1} still orbits where it was: choose again from where D_n is now
+                    self.log("retry", N, f"{self.scn.names[N]} could not reach its track in time; the leg is planned again")
+                    failed_runs += 1
+                    if failed_runs >= 4:
+                        raise _Abort(f"D_n ({self.scn.names[N]}) cannot reach a clear track in time for D_(n-1)'s move")
+                    continue
                 self.wait_straight(N, M, th_dep)
             self.straight_leg(N, M, c_next, lower)
         miss = float(np.hypot(*(c_star - self.centre(M))))
@@ -963,7 +969,7 @@ class _Runner:
         samples[:, :, :2] = starts[:, None, :2] + s[None, :, None] * hv[:, None, :]
         samples[:, :, 2] = starts[:, None, 2]
         flat = samples.reshape(-1, 3)
-        bad = outside_arena(flat, self.L[N], self.W[N], (w, h)).reshape(len(starts), K) > 0
+        bad = _arena_gap(flat, self.L[N], self.W[N], (w, h)).reshape(len(starts), K) < c
         centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
         radii = [float(x) + c for x in self.rstar[lower]] if lower else []
         if centres:
