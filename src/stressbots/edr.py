@@ -1286,10 +1286,13 @@ class _Runner:
         rN = self.r_hat[N]
         heads = np.radians(np.arange(0.0, 360.0, 30.0))
         poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)], axis=1) for t in heads])
-        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + 0.7 * np.hypot(*(poses[:, :2] - q[:2]).T)
-        order = np.argsort(cost)[:8]
-        clear = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(self.est[N], poses[j], rN).sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM)]
-        hold = poses[clear[0] if clear else order[0]]
+        # near the target, with a clear way on to it (the way there may be routed around obstacles)
+        cost = 0.3 * pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + pathlib.shortest_path_lengths(
+            poses, np.broadcast_to(np.asarray(q, float), poses.shape), rN, approach_um=60.0
+        )
+        order = np.argsort(cost)[:12]
+        onward = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM)]
+        hold = poses[onward[0] if onward else order[0]]
         self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
         self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120)
         return not self._stuck
