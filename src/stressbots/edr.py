@@ -1115,8 +1115,8 @@ class _Runner:
         of it and 6 deg either way will do, because D_{n-1}'s departure is fitted to the line D_n really
         ends on. A pose target would turn a small error to the left into a full loop. The first of
         ``arrivals`` (s from now, for ``target`` itself) that some wait meets within ``tol_s`` with a
-        clear path wins; of those, the one nearest ``target``. Returns ``(path, goal, offset_s, arrival_s)``
-        or None.
+        clear path wins; of those, the one nearest ``target``. Returns ``(path, goal, offset_s, arrival_s,
+        loop)`` (``loop`` = (radius_um, count) of interpolated loops to drive first, or None) or None.
         """
         vN, rN = self.v_hat[N], self.r_hat[N]
         q = np.asarray(target, float)
@@ -1156,7 +1156,28 @@ class _Runner:
                     segs = (("S", float(A[j])),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
                 if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM):
-                    return path, goals[kk], float(offset[kk]), float(want)
+                    return path, goals[kk], float(offset[kk]), float(want), None
+        # Waiting on the orbit only shifts arrival times in steps (it eats into the path's first turn, then
+        # costs a whole loop). One or two interpolated loops of radius R in [r, 1.6 r] (P_n / P_{n-1}
+        # alternating) end where they began after 2 pi R / v: every arrival time in a window wider than
+        # D_{n-1}'s period, continuously.
+        ell0 = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], goals.shape), goals, rN, approach_um=60.0)
+        radii = np.linspace(rN, 1.6 * rN, 61)
+        for want in arrivals:
+            for m in (1, 2):
+                arr = m * TWO_PI * radii[:, None] / vN + ell0[None, :] / vN - offset[None, :]
+                err = np.abs(arr - want)
+                score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.01 * radii[:, None] / rN, np.inf).ravel()
+                for flat in np.argsort(score)[:6]:
+                    if not np.isfinite(score[flat]):
+                        break
+                    jr, kk = divmod(int(flat), K)
+                    R = float(radii[jr])
+                    loop = move(self.est[N], np.linspace(0.0, TWO_PI * R, 72), 1.0 / R)
+                    tail = pathlib.shortest_path(self.est[N], goals[kk], rN, approach_um=60.0)
+                    if self.obstacles_hit(np.vstack([loop, tail.sample(10.0)]), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM):
+                        continue
+                    return tail, goals[kk], float(offset[kk]), float(want), (R, m)
         return None
 
     def _tight(self, disc, clearance: float = G1_CLEARANCE_UM):
@@ -1222,12 +1243,25 @@ class _Runner:
                 self.log("final", N, f"{self.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
                 self.drive(self.path_steps(rest, vN, n, n - 1, None))
                 return True
+            loop = None
             for tol in (0.3, 0.7):
                 if path is not None:
                     break
                 found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
                 path = None if found is None else found[0]
                 self._plan = None if found is None else (found[1], found[2], self.t + found[3])
+                loop = None if found is None else found[4]
+            if loop is not None:
+                R, m = loop
+                self.log("loop", N, f"{self.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
+                self.replans += 1
+                total = m * TWO_PI * R / vN
+                while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
+                    d = min(self.tx, total)
+                    self.drive(self.interpolated_steps(float(self.r_hat[N] / R), d, n, n - 1))
+                    total -= d
+                prev = None
+                continue
             prev = path
             if path is None:
                 # no timed way from here: go where D_n can wait on its orbit near the target, then retry
