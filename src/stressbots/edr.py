@@ -375,7 +375,7 @@ class _Runner:
                 break
         return out
 
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None, via: bool = True) -> bool:
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
         ``guard()`` may return an allowance (s) to stop early; ``ready()`` True ends the gross motion
@@ -395,17 +395,19 @@ class _Runner:
             if (ready is None and self.arrived(p, target)) or (ready is not None and ready()):
                 return True
             path = pathlib.shortest_path(p, target, r)
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs):
+            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance):
                 if via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     points = self.detour_waypoints(i, target, orbiting, extra_discs)
                     if points:
                         for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False)
+                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False, clearance=clearance)
                             if ready is not None and ready():
                                 return True
                         continue
+                if not via:
+                    return False  # a waypoint of a committed route is out of reach: the caller re-plans
                 detour = self.detour(i, target, orbiting, extra_discs)
                 if detour is not None:
                     path = detour
@@ -425,7 +427,7 @@ class _Runner:
             if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
                 cut_um = min(r * math.radians(3.0), 0.5 * segs[0][1])
                 biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs):
+                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance):
                     steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
                     steps.insert(1, (straight_k, cut_um / v))
                     steps = _trim(steps, self.tx)
@@ -1328,7 +1330,7 @@ class _Runner:
         onward = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=WALL_CLEARANCE_UM)]
         hold = poses[onward[0] if onward else order[0]]
         self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
-        self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120)
+        self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=G1_CLEARANCE_UM)
         return not self._stuck
 
     def depart_and_meet(self, N: int, M: int, lower) -> bool:
