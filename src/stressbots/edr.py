@@ -399,18 +399,21 @@ class _Runner:
                 if via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
-                    points = self.detour_waypoints(i, target, orbiting, extra_discs)
-                    if points:
+                    points, routed = self.detour_waypoints(i, target, orbiting, extra_discs)
+                    if len(points) > 1:
                         for w in points[:-1]:
                             self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False, clearance=clearance)
                             if ready is not None and ready():
                                 return True
                         continue
-                if not via:
+                    if routed is not None:  # a direct route (at the roadmap's clearance): drive it
+                        path = routed
+                    else:
+                        detour = self.detour(i, target, orbiting, extra_discs)
+                        if detour is not None:
+                            path = detour
+                else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
-                detour = self.detour(i, target, orbiting, extra_discs)
-                if detour is not None:
-                    path = detour
             self.replans += 1
             # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
             whole = path.length / v <= 1.6 * self.tx
@@ -481,8 +484,9 @@ class _Runner:
             return routed
         return self._helper._stretch(routed, want, obst, self.L[i], self.W[i]) or routed
 
-    def detour_waypoints(self, i: int, target, orbiting, extra_discs) -> list[np.ndarray]:
-        """The roadmap poses of a route around the obstacles to ``target`` (ending with it), or []."""
+    def detour_waypoints(self, i: int, target, orbiting, extra_discs):
+        """``(waypoints, path)``: a roadmap route around the obstacles to ``target`` (waypoints end with
+        it), or ``([], None)``."""
         from .planning import PlannerOptions, _NoRoute, _Planner, _route
 
         if self._helper is None:
@@ -493,9 +497,9 @@ class _Runner:
         try:
             _, routed, points = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
         except _NoRoute:
-            return []
+            return [], None
         self.log("detour", i, f"route around obstacles ({routed.length:.0f} um, {len(points)} waypoints)")
-        return [np.asarray(w, float) for w in points]
+        return [np.asarray(w, float) for w in points], routed
 
     def detour(self, i: int, target, orbiting, extra_discs) -> pathlib.Path | None:
         """A roadmap route around the obstacles from the measured pose (rarely needed)."""
