@@ -143,3 +143,32 @@ def test_recovers_from_dropouts(example):
     assert any(e["kind"] == "lost" for e in result.events)
     assert result.success, (result.failure, result.events[-6:])
     _check_truth(heavy, plan, sim, result)
+
+
+class DriftingCamera(ProtocolOnly):
+    """Reports one orbiting robot's pose sliding toward the arena's bottom edge for a while (as an orbit
+    drifting with accumulated heading error would), then the truth again."""
+
+    def __init__(self, inner, robot: int, start_s: float, stop_s: float, um_per_frame: float):
+        super().__init__(inner)
+        self.robot, self.start_s, self.stop_s, self.rate = robot, start_s, stop_s, um_per_frame
+        self.frames = 0
+
+    def observe(self):
+        obs = self._inner.observe()
+        t = self._inner.time_s
+        if self.start_s <= t < self.stop_s:
+            self.frames += 1
+            obs[self.robot, 1] -= self.rate * self.frames
+        return obs
+
+
+def test_detects_an_orbit_drifting_toward_a_collision(example):
+    scn, plan = example
+    scn = scn.with_noise(Noise())
+    b = scn.names.index("B")  # D_1: orbits about (800, 600) until it docks last; its disc is 336 um above the edge
+    plant = DriftingCamera(SimulatedPlant(scn, seed=0), b, start_s=10.0, stop_s=60.0, um_per_frame=8.0)
+    result = assemble(scn, plant, seed=0, plan=plan)
+    drift = [e for e in result.events if e["kind"] == "orbit-drift" and e["robot"] == "B"]
+    assert drift and "arena edge" in drift[0]["detail"], [e for e in result.events if e["kind"] == "orbit-drift"]
+    assert drift[0]["t_s"] >= 10.0

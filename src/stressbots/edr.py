@@ -289,6 +289,7 @@ class _Runner:
         self._missed = False
         self._stuck = False
         self._plan = None
+        self._warned: set = set()
         self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
 
     # -- plant I/O ------------------------------------------------------------------------------------
@@ -333,8 +334,38 @@ class _Runner:
         self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
         for i in np.flatnonzero(self.estimator.unseen == 3):
             self.log("lost", int(i), "not seen for 3 frames; dead-reckoning")
+        self.watch_orbits([i for i in range(self.n) if not self.docked[i] and self.rank[i] < min(k for k, _ in steps)])
         self.trace_t.append(self.t)
         self.trace_p.append(self.est.copy())
+
+    def watch_orbits(self, orbiting: Sequence[int]) -> None:
+        """Failure detection: an orbit (drifting with the heading noise) within 10 um of another orbit,
+        a docked body or the arena edge is logged once. Paths are always planned around the orbits as
+        measured, so the robot moving meanwhile keeps clear of them; a collision would show as a stall."""
+        if not orbiting:
+            return
+        c = turning_centres(self.est[orbiting], self.r_hat[orbiting])
+        rs = self.rstar[orbiting]
+        for a, i in enumerate(orbiting):
+            near = []
+            for b, j in enumerate(orbiting[a + 1:], start=a + 1):
+                gap = float(np.hypot(*(c[a] - c[b]))) - rs[a] - rs[b]
+                if gap < 10.0:
+                    near.append((f"the orbit of {self.scn.names[j]}", gap))
+            for j in np.flatnonzero(self.docked):
+                gap = float(point_rectangle_distance(c[a][None, :], self.est[j][None, :], self.L[j], self.W[j])[0, 0]) - rs[a]
+                if gap < 10.0:
+                    near.append((f"docked {self.scn.names[j]}", gap))
+            if self.scn.arena_um is not None:
+                w, h = self.scn.arena_um
+                gap = float(min(c[a][0], w - c[a][0], c[a][1], h - c[a][1])) - rs[a]
+                if gap < 10.0:
+                    near.append(("the arena edge", gap))
+            for what, gap in near:
+                key = (i, what)
+                if key not in self._warned:
+                    self._warned.add(key)
+                    self.log("orbit-drift", i, f"the orbit of {self.scn.names[i]} is {gap:.0f} um from {what}")
 
     # -- geometry -------------------------------------------------------------------------------------
 
