@@ -104,7 +104,8 @@ class ControllerOptions:
     time_budget_s:
         Simulated time after which the run is declared failed.
     fine_distance_um:
-        Distance of the intermediate pose a_i behind a slot, where fine motion takes over.
+        Distance of the intermediate pose a_i behind a slot for the S_2f arc (tight gaps only; elsewhere
+        the approach funnel's depth follows the clear corridor behind the slot, 150-450 um).
     switch_period_s:
         Period of the primitive alternation in interpolated turning (shorter = closer to the arc).
     push_s:
@@ -112,7 +113,8 @@ class ControllerOptions:
     dock_tol_um, dock_tol_deg:
         A stationary robot this close to its slot counts as docked (camera error included).
     clearance_um:
-        Clearance kept by replanned paths from orbits, the structure and the arena edge.
+        Clearance kept by single robots' replanned paths from orbits, the structure and the arena edge
+        (G_1's own: :data:`G1_CLEARANCE_UM`, :data:`WALL_CLEARANCE_UM`).
     shape_tol_um:
         Success threshold on the RMS shape error after best rigid alignment.
     """
@@ -1128,19 +1130,6 @@ class _Runner:
         return not self._blocked(track, N, lower, 0.0)
 
     # stage 2: the rendezvous -------------------------------------------------------------------------
-
-    def timed_a_path(self, N: int, target, duration: float, lower, disc) -> pathlib.Path | None:
-        """D_n's collision-free path to ``target`` lasting ``duration`` s (at its identified speed)."""
-        vN, rN = self.v_hat[N], self.r_hat[N]
-        try:
-            cand = pathlib.path_of_length(self.est[N], target, rN, vN * duration, approach_um=min(60.0, 0.3 * vN * duration))
-        except pathlib.InfeasibleLengthError:
-            return None
-        if self.obstacles_hit(cand.sample(10.0), N, lower, extra_discs=disc):
-            cand = self.timed_detour(N, target, duration, lower, disc)
-            if cand is None or abs(cand.length - vN * duration) > 5.0:
-                return None
-        return cand
 
     def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3):
         """D_n waits on its own orbit, then takes its shortest path into the region around ``target``.
