@@ -896,7 +896,7 @@ class _Runner:
             plan = None
             for leg in sorted({d, min(d, 900.0), min(d, 600.0), min(d, 400.0)}, reverse=True):
                 c_next = cM + leg * u
-                if leg < d - 1.0 and len(self.free_orbits(M, [], lower, clearance=10.0, centres=c_next[None, :])) == 0:
+                if leg < d - 1.0 and not self.orbits_free(M, c_next[None, :], [], lower, 10.0)[0]:
                     continue
                 opt = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
                 if opt is not None and opt[1] < 1e4:
@@ -1021,16 +1021,14 @@ class _Runner:
         ok &= ~bodies_hit_discs(samples[:, -1], self.L[N], self.W[N], np.asarray(c_next)[None, :], np.array([self.rstar[M] + 40.0]))[:, 0]
         # room for D_n to orbit (wait, or turn away) where its track ends
         end_c = turning_centres(samples[:, -1], self.r_hat[N])
-        free = self.free_orbits(N, [(np.asarray(c_next), self.rstar[M] + G1_CLEARANCE_UM - WALL_CLEARANCE_UM)], lower, clearance=WALL_CLEARANCE_UM, centres=end_c)
-        if len(free):
-            room = (np.abs(end_c[:, None, :] - free[None, :, :]).max(axis=2) < 1e-9).any(axis=1)
-            ok &= room
-        else:
-            ok &= False
+        ok &= self.orbits_free(N, end_c, [(np.asarray(c_next), self.rstar[M] + G1_CLEARANCE_UM - WALL_CLEARANCE_UM)], lower, WALL_CLEARANCE_UM)
         idx = np.flatnonzero(ok)
         if len(idx) == 0:
             return None
-        # synchronous with D_{n-1}'s straight
+        # cheapest first (to reach, plus a pull toward the next target); then the synchronous check
+        ends = samples[idx, -1]
+        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], (len(idx), 3)), starts[idx], self.r_hat[N]) + 0.5 * np.hypot(*(ends[:, :2] - np.asarray(q_next)[:2]).T)
+        idx = idx[np.argsort(cost)]
         mdep = pose_on_orbit(cM, self.r_hat[M], th_dep)
         tm = np.arange(0.0, leg / vM + 1.0, 0.4)
         m_track = move(mdep, vM * tm, 0.0)
@@ -1038,28 +1036,21 @@ class _Runner:
         keep = []
         for j in idx:
             # D_n may be up to 0.6 s early or late on its track: bodies apart for all three timings
-            clear = True
-            for shift in (0.0, -0.6 * vN, 0.6 * vN):
-                n_track = move(starts[j], np.maximum(n_s + shift, 0.0), 0.0)
-                if (penetration_depth(n_track, self.L[N], self.W[N], m_track, self.L[M], self.W[M]) > -c).any():
-                    clear = False
-                    break
-            if clear:
+            n_track = move(starts[j], np.maximum(np.concatenate([n_s, n_s - 0.6 * vN, n_s + 0.6 * vN]), 0.0), 0.0)
+            if not (penetration_depth(n_track, self.L[N], self.W[N], np.tile(m_track, (3, 1)), self.L[M], self.W[M]) > -c).any():
                 keep.append(j)
+                if len(keep) >= 12:
+                    break
         if not keep:
             return None
-        keep = np.array(keep)
-        ends = samples[keep, -1]
-        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], (len(keep), 3)), starts[keep], self.r_hat[N]) + 0.5 * np.hypot(*(ends[:, :2] - np.asarray(q_next)[:2]).T)
         disc = [(cM, self.rstar[M])]
         t_dep = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
         period = TWO_PI / self.omega_hat[M]
         arrivals = [a for a in (t_dep + k * period - 1.2 for k in range(3)) if a > 0.3]
-        order = np.argsort(cost)
-        for j in order[:12]:
-            if self.loiter_path(N, starts[keep[j]], arrivals, lower, disc, tol_s=0.5) is not None:
-                return starts[keep[j]]
-        return starts[keep[order[0]]]  # no timed path from here: D_n will wait on a free orbit first
+        for j in keep:
+            if self.loiter_path(N, starts[j], arrivals, lower, disc, tol_s=0.5) is not None:
+                return starts[j]
+        return starts[keep[0]]  # no timed path from here: D_n will wait on a free orbit first
 
     def transfer_option(self, N: int, M: int, t_turn: float, d: float, th_dep: float, lower, c_star, q_next):
         """``(fraction, cost)``: of D_{n-1}'s turn, D_n turns with it for the fraction (then runs straight); or None.
@@ -1302,39 +1293,37 @@ class _Runner:
                 return True
         return False
 
-    def free_orbits(self, i: int, discs, lower, clearance: float = 15.0, centres=None) -> np.ndarray:
-        """Centres (K, 2) on a 100 um grid (or of ``centres``) where robot ``i`` can orbit without meeting anything."""
+    def orbits_free(self, i: int, centres, discs, lower, clearance: float) -> np.ndarray:
+        """Mask (K,): robot ``i`` could orbit about each of ``centres`` (K, 2) without meeting the arena edge,
+        a lower robot's orbit, ``discs`` or a docked body (with ``clearance``)."""
+        c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
         rs = float(self.rstar[i])
+        ok = np.ones(len(c), dtype=bool)
         if self.scn.arena_um is not None:
             w, h = self.scn.arena_um
+            ok &= (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance) & (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
+        others = [*zip(turning_centres(self.est[lower], self.r_hat[lower]), self.rstar[lower])] if lower else []
+        for cc, rr in [*others, *discs]:
+            ok &= np.hypot(*(c - cc).T) >= rs + float(rr) + clearance
+        for j in np.flatnonzero(self.docked):
+            ok &= point_rectangle_distance(c, self.est[j][None, :], self.L[j], self.W[j])[0] >= rs + clearance
+        return ok
+
+    def free_orbits(self, i: int, discs, lower, clearance: float = 15.0) -> np.ndarray:
+        """Centres (K, 2) on a 100 um grid where robot ``i`` can orbit without meeting anything."""
+        rs = float(self.rstar[i])
+        if self.scn.arena_um is not None:
+            lo, (w, h) = np.zeros(2), self.scn.arena_um
         else:
             lo = self.est[:, :2].min(axis=0) - 1500.0
             w, h = self.est[:, :2].max(axis=0) - lo + 1500.0
-        xs = np.arange(rs + clearance, w - rs - clearance + 1e-9, 100.0)
-        ys = np.arange(rs + clearance, h - rs - clearance + 1e-9, 100.0)
-        if self.scn.arena_um is None:
-            xs, ys = xs + lo[0], ys + lo[1]
+        xs = lo[0] + np.arange(rs + clearance, w - rs - clearance + 1e-9, 100.0)
+        ys = lo[1] + np.arange(rs + clearance, h - rs - clearance + 1e-9, 100.0)
         if len(xs) == 0 or len(ys) == 0:
             return np.zeros((0, 2))
         cx, cy = np.meshgrid(xs, ys)
         c = np.stack([cx.ravel(), cy.ravel()], axis=1)
-        if centres is not None:
-            c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
-            inside = np.ones(len(c), dtype=bool)
-            if self.scn.arena_um is not None:
-                inside = (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance) & (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
-            c = c[inside]
-        ok = np.ones(len(c), dtype=bool)
-        centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
-        radii = [float(x) for x in self.rstar[lower]] if lower else []
-        for cc, rr in discs:
-            centres.append(cc)
-            radii.append(rr)
-        for cc, rr in zip(centres, radii):
-            ok &= np.hypot(*(c - cc).T) >= rs + rr + clearance
-        for j in np.flatnonzero(self.docked):
-            ok &= point_rectangle_distance(c, self.est[j][None, :], self.L[j], self.W[j])[0] >= rs + clearance
-        return c[ok]
+        return c[self.orbits_free(i, c, discs, lower, clearance)]
 
     def to_holding(self, N: int, M: int, q, lower, disc) -> bool:
         """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
