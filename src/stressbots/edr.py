@@ -376,7 +376,7 @@ class _Runner:
         c = self.opts.clearance_um if clearance is None else clearance
         orbiting = [j for j in orbiting if j != i]
         if orbiting or extra_discs:
-            centres = [*turning_centres(self.est[orbiting], self.r[orbiting])] if orbiting else []
+            centres = [*turning_centres(self.est[orbiting], self.r_hat[orbiting])] if orbiting else []
             radii = list(self.rstar[orbiting]) if orbiting else []
             for cc, rr in extra_discs:
                 centres.append(cc)
@@ -489,7 +489,7 @@ class _Runner:
         from .planning import _Obstacles
 
         orbiting = [j for j in orbiting if j != i]
-        centres = list(turning_centres(self.est[orbiting], self.r[orbiting])) if orbiting else []
+        centres = list(turning_centres(self.est[orbiting], self.r_hat[orbiting])) if orbiting else []
         radii = list(self.rstar[orbiting]) if orbiting else []
         for c, rr in extra_discs:
             centres.append(c)
