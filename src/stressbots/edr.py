@@ -432,14 +432,17 @@ class _Runner:
                 if via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
-                    points, routed = self.detour_waypoints(i, target, orbiting, extra_discs)
+                    c_eff = self.opts.clearance_um if clearance is None else clearance
+                    points, routed = self.detour_waypoints(i, target, orbiting, extra_discs, clearance=c_eff + 5.0)
+                    t_before = self.t
                     if len(points) > 1:
                         for w in points[:-1]:
                             self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False, clearance=clearance)
                             if ready is not None and ready():
                                 return True
-                        continue
-                    if routed is not None:  # a direct route (at the roadmap's clearance): drive it
+                        if self.t > t_before:
+                            continue
+                    if routed is not None:  # drive the route itself (it was checked at a wider clearance)
                         path = routed
                     else:
                         detour = self.detour(i, target, orbiting, extra_discs)
@@ -517,7 +520,7 @@ class _Runner:
             return routed
         return self._helper._stretch(routed, want, obst, self.L[i], self.W[i]) or routed
 
-    def detour_waypoints(self, i: int, target, orbiting, extra_discs):
+    def detour_waypoints(self, i: int, target, orbiting, extra_discs, clearance: float = 20.0):
         """``(waypoints, path)``: a roadmap route around the obstacles to ``target`` (waypoints end with
         it), or ``([], None)``."""
         from .planning import PlannerOptions, _NoRoute, _Planner, _route
@@ -526,7 +529,7 @@ class _Runner:
             self._helper = _Planner(self.scn, self.analysis, self.pr.structure, PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200)))
         obst = self._obstacles(i, orbiting, extra_discs)
         rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i, 7]))
-        opts = replace(self._helper.opts, clearance_um=max(self._helper.opts.clearance_um, 20.0))
+        opts = replace(self._helper.opts, clearance_um=max(self._helper.opts.clearance_um, clearance, 20.0))
         try:
             _, routed, points = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
         except _NoRoute:
