@@ -706,9 +706,10 @@ class _Runner:
         behind, right, psi = self.line_coords(i)
         if not (120.0 <= behind <= back + 250.0) or right > 60.0 or right < -2.0 or psi < -math.radians(12.0):
             return False
-        if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0):
+        if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0) and abs(right) <= 5.0:
             return True
-        return self.merge(i, behind, right, psi) is not None
+        # robustly: the merge must still exist if the robot points 1.5 deg less to the left than measured
+        return self.merge(i, behind, right, psi + math.radians(1.5)) is not None
 
     def line_approach(self, i: int, k: int) -> bool:
         """Fine motion along the approach line: merge (straight, interpolated arc), straight in, push.
@@ -731,7 +732,7 @@ class _Runner:
                 continue
             m = self.merge(i, behind, right, psi)
             if m is None:
-                if abs(miss) <= 12.0:  # cannot do better without a loop: a small miss it is (one robot 12 um off: ~6 um RMS)
+                if abs(miss) <= 12.0 and abs(right) <= 12.0:  # no better without a loop: a small miss (12 um: ~6 um RMS)
                     self.drive([(k - 1, (max(behind, 0.0) / v + self.opts.push_s) if last else self.tx)])
                     if last:
                         return self.check_docked(i, k)
