@@ -616,7 +616,7 @@ def simulate(
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
-    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, run_pictures, verdict_text
+    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, robot_table, run_pictures, verdict_text
     from .report import animation_page
 
     budget = finite_budget(time_budget_s)
@@ -644,17 +644,10 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         write_text(folder / "animation.html", animation_page(anim, title=anim["title"], subtitle=f"{verdict_text(doc)}"))
     if quiet:
         return
-    from rich.table import Table
-
     res = run.result
     out.print(f"[bold]{scn.name}[/bold]: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated in "
               f"{run.wall_s:.1f} s, {res.replans} re-plans", highlight=False, soft_wrap=True)
-    t = Table()
-    for col, just in (("robot", "left"), ("docked", "left"), ("position error (um)", "right"), ("heading error (deg)", "right")):
-        t.add_column(col, justify=just)  # type: ignore[arg-type]
-    for k, name in enumerate(scn.names):
-        t.add_row(name, "yes" if res.docked[k] else "no", f"{res.placement_error_um[k]:.3g}", f"{res.heading_error_deg[k]:.3g}")
-    out.print(t)
+    out.print(robot_table(scn.names, res))
     style = "bold green" if res.success else "bold red"
     out.print(f"[{style}]{verdict_text(doc)}[/{style}]", highlight=False, soft_wrap=True)
     out.print(

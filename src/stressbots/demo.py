@@ -187,7 +187,7 @@ def _comparisons(ctx):
             "note": "the plan played without feedback" + ("; every robot ends in its slot" if a.success and scn is nominal else ""),
         })
         extra.files += [(f"comparisons/{label}.json", f"result of the plan open loop, {what}"),
-                        (f"comparisons/{label}.png", f"picture of that run")]
+                        (f"comparisons/{label}.png", "picture of that run")]
     plant = SimulatedPlant(nominal, seed=seed)
     res = assemble(nominal, plant, seed=seed, plan=ctx.plan_result)
     write_json(cdir / "closed-loop-nominal.json", {**res.to_dict(), "noise": nominal.noise.to_file_units(), "provenance": provenance(seed)})

@@ -60,7 +60,7 @@ from .collision import bodies_hit_discs, outside_arena, penetration_depth, point
 from .electrostatics import analyse_scenario
 from .errors import PlanningError
 from .estimation import Estimator
-from .kinematics import advance, move
+from .kinematics import move
 from .robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
 from .waveform import synthesize
 
@@ -1479,7 +1479,7 @@ def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget
     """
     from dataclasses import replace
 
-    from .planning import PlanResult, plan_assembly
+    from .planning import PlanResult
 
     opts = options or ControllerOptions()
     if time_budget_s is not None:

@@ -438,8 +438,6 @@ def _print_summary(console, scenario, plan_summary, res, doc, out: Path, report_
             highlight=False, soft_wrap=True,
         )
         return
-    from rich.table import Table
-
     s = plan_summary
     console.print(
         f"[bold]Plan[/bold]: {s['structure']} in {s['duration_s']:.1f} s, {s['steps']} steps (lower bound {s['lower_bound_s']:.1f} s, "
@@ -448,12 +446,7 @@ def _print_summary(console, scenario, plan_summary, res, doc, out: Path, report_
     )
     console.print(f"[bold]Closed loop[/bold] on the simulated plant, seed {res.seed}: {res.duration_s:.1f} s simulated, "
                   f"{res.replans} re-plans", highlight=False, soft_wrap=True)
-    t = Table()
-    for col, just in (("robot", "left"), ("docked", "left"), ("placement error (um)", "right"), ("heading error (deg)", "right")):
-        t.add_column(col, justify=just)  # type: ignore[arg-type]
-    for i, name in enumerate(scenario.names):
-        t.add_row(name, "yes" if res.docked[i] else "no", f"{res.placement_error_um[i]:.3g}", f"{res.heading_error_deg[i]:.3g}")
-    console.print(t)
+    console.print(robot_table(scenario.names, res))
     style = "bold green" if res.success else "bold red"
     console.print(f"[{style}]{verdict}[/{style}]", highlight=False, soft_wrap=True)
     console.print(
@@ -478,3 +471,15 @@ def finite_budget(value: float | None, option: str = "--time-budget-s") -> float
     if not (math.isfinite(value) and value > 0):
         raise StressbotsError(f"must be a finite number > 0 s, got {value:g}", source=option)
     return float(value)
+
+
+def robot_table(names, res):
+    """A rich table of a closed-loop result, one row per robot: docked, placement and heading error."""
+    from rich.table import Table
+
+    t = Table()
+    for col, just in (("robot", "left"), ("docked", "left"), ("placement error (um)", "right"), ("heading error (deg)", "right")):
+        t.add_column(col, justify=just)  # type: ignore[arg-type]
+    for i, name in enumerate(names):
+        t.add_row(name, "yes" if res.docked[i] else "no", f"{res.placement_error_um[i]:.3g}", f"{res.heading_error_deg[i]:.3g}")
+    return t
