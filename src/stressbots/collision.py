@@ -89,21 +89,23 @@ def pairwise_overlaps(poses, lengths_um, widths_um, *, tol_um: float = 1e-6) -> 
     return [(int(a), int(b), float(dd)) for a, b, dd in zip(i[hit], j[hit], depth[hit])]
 
 
+def arena_gap(poses, length_um, width_um, arena_um) -> np.ndarray:
+    """Distance (um) from each body to the nearest wall of the arena ``[0, w] x [0, h]``; negative when it
+    sticks out. Closed form: a rectangle's half extents along x and y are ``L/2 |sin| + W/2 |cos|`` and
+    ``L/2 |cos| + W/2 |sin|``. Broadcasts like ``poses[..., 0]``."""
+    p = np.asarray(poses, dtype=np.float64)
+    hl, hw = 0.5 * np.asarray(length_um, dtype=np.float64), 0.5 * np.asarray(width_um, dtype=np.float64)
+    s, c = np.abs(np.sin(p[..., 2])), np.abs(np.cos(p[..., 2]))
+    ex = hl * s + hw * c
+    ey = hl * c + hw * s
+    w, h = arena_um
+    x, y = p[..., 0], p[..., 1]
+    return np.minimum(np.minimum(x - ex, w - x - ex), np.minimum(y - ey, h - y - ey))
+
+
 def outside_arena(poses, length_um, width_um, arena_um, *, tol_um: float = 1e-6) -> np.ndarray:
     """How far (um) each body sticks out of the arena ``[0, w] x [0, h]``; 0 when inside. ``(M,)``."""
-    from .robots import body_corners
-
-    corners = body_corners(poses, length_um, width_um)  # (M, 4, 2)
-    w, h = arena_um
-    over = np.maximum.reduce(
-        [
-            -corners[..., 0],
-            corners[..., 0] - w,
-            -corners[..., 1],
-            corners[..., 1] - h,
-            np.zeros(corners.shape[:2]),
-        ]
-    ).max(axis=1)
+    over = -arena_gap(_as_poses(poses), length_um, width_um, arena_um)
     return np.where(over > tol_um, over, 0.0)
 
 

@@ -56,7 +56,7 @@ import numpy as np
 
 from . import paths as pathlib
 from .assessment import SHAPE_TOL_UM, shape_error
-from .collision import bodies_hit_discs, outside_arena, penetration_depth, point_rectangle_distance
+from .collision import arena_gap, bodies_hit_discs, outside_arena, penetration_depth, point_rectangle_distance
 from .electrostatics import analyse_scenario
 from .errors import PlanningError
 from .estimation import Estimator
@@ -229,16 +229,6 @@ def _turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um
     return float(r / arc.radius_um), float(arc.length_um), th + float(arc.turn_rad)
 
 
-def _arena_gap(poses, length_um, width_um, arena_um) -> np.ndarray:
-    """Distance (um) of each body from the arena edge; negative when it sticks out."""
-    from .robots import body_corners
-
-    corners = body_corners(np.atleast_2d(poses), length_um, width_um)  # (M, 4, 2)
-    w, h = arena_um
-    gaps = np.stack([corners[..., 0], w - corners[..., 0], corners[..., 1], h - corners[..., 1]], axis=-1)
-    return gaps.min(axis=(1, 2))
-
-
 def _trim(steps, total_s: float):
     """The first ``total_s`` seconds of primitive steps ``(k, duration_s)``."""
     out, left = [], total_s
@@ -286,7 +276,6 @@ class _Runner:
         self.estimator = Estimator(obs, scenario.starts, self.v, self.r)
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
-        self.omega_nom = self.v / self.r
         self._helper = None
         self._missed = False
         self._stuck = False
@@ -387,7 +376,7 @@ class _Runner:
         for j in docked:
             if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c).any():
                 return True
-        if self.scn.arena_um is not None and (_arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
+        if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
             return True
         return False
 
@@ -408,12 +397,11 @@ class _Runner:
                 break
         return out
 
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, guard=None, ready=None, via: bool = True, clearance: float | None = None) -> bool:
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, ready=None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
-        ``guard()`` may return an allowance (s) to stop early; ``ready()`` True ends the gross motion
-        early (the robot is already in the region from which the next step works: the seed's regions
-        A_i instead of a point).
+        ``ready()`` True ends the gross motion early (the robot is already in the region from which the
+        next step works: the seed's regions A_i instead of a point).
 
         Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
         points a little left of where it must. Clockwise is the only correction a one-way robot makes
@@ -433,11 +421,11 @@ class _Runner:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     c_eff = self.opts.clearance_um if clearance is None else clearance
-                    points, routed = self.detour_waypoints(i, target, orbiting, extra_discs, clearance=c_eff + 5.0)
+                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0), salt=7)
                     t_before = self.t
                     if len(points) > 1:
                         for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, guard=guard, ready=ready, via=False, clearance=clearance)
+                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False, clearance=clearance)
                             if ready is not None and ready():
                                 return True
                         if self.t > t_before:
@@ -445,7 +433,7 @@ class _Runner:
                     if routed is not None:  # drive the route itself (it was checked at a wider clearance)
                         path = routed
                     else:
-                        detour = self.detour(i, target, orbiting, extra_discs)
+                        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
                         if detour is not None:
                             path = detour
                 else:
@@ -454,13 +442,6 @@ class _Runner:
             # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
             whole = path.length / v <= 1.6 * self.tx
             limit = None if whole else self.tx
-            if guard is not None:
-                allowed = guard()
-                if allowed is not None and allowed < (path.length / v if whole else self.tx):
-                    if allowed <= 1e-6:
-                        return False
-                    self.drive(self.path_steps(path, v, turn_k, straight_k, allowed))
-                    return False
             steps = self.path_steps(path, v, turn_k, straight_k, limit)
             segs = path.segments
             if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
@@ -503,46 +484,23 @@ class _Runner:
             self.est[docked], self.L[docked], self.W[docked], tuple("a docked robot" for _ in docked), self.scn.arena_um,
         )
 
-    def timed_detour(self, i: int, target, duration_s: float, orbiting, extra_discs) -> pathlib.Path | None:
-        """A collision-free path of exactly ``duration_s``: routed around obstacles, then stretched."""
+    def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float, salt: int = 0):
+        """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
+        structure and the arena edge to ``target`` (waypoints end with it), at ``clearance``; ``([], None)``
+        when there is none. Logged as a detour."""
         from .planning import PlannerOptions, _NoRoute, _Planner, _route
 
         if self._helper is None:
             self._helper = _Planner(self.scn, self.analysis, self.pr.structure, PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200)))
         obst = self._obstacles(i, orbiting, extra_discs)
-        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i]))
-        try:
-            _, routed, _ = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, self._helper.opts, rng, "")
-        except _NoRoute:
-            return None
-        want = self.v_hat[i] * max(duration_s, 0.0)
-        if routed.length >= want:
-            return routed
-        return self._helper._stretch(routed, want, obst, self.L[i], self.W[i]) or routed
-
-    def detour_waypoints(self, i: int, target, orbiting, extra_discs, clearance: float = 20.0):
-        """``(waypoints, path)``: a roadmap route around the obstacles to ``target`` (waypoints end with
-        it), or ``([], None)``."""
-        from .planning import PlannerOptions, _NoRoute, _Planner, _route
-
-        if self._helper is None:
-            self._helper = _Planner(self.scn, self.analysis, self.pr.structure, PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200)))
-        obst = self._obstacles(i, orbiting, extra_discs)
-        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i, 7]))
-        opts = replace(self._helper.opts, clearance_um=max(self._helper.opts.clearance_um, clearance, 20.0))
+        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i, *([salt] if salt else [])]))
+        opts = replace(self._helper.opts, clearance_um=clearance)
         try:
             _, routed, points = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
         except _NoRoute:
             return [], None
         self.log("detour", i, f"route around obstacles ({routed.length:.0f} um, {len(points)} waypoints)")
         return [np.asarray(w, float) for w in points], routed
-
-    def detour(self, i: int, target, orbiting, extra_discs) -> pathlib.Path | None:
-        """A roadmap route around the obstacles from the measured pose (rarely needed)."""
-        path = self.timed_detour(i, target, 0.0, orbiting, extra_discs)
-        if path is not None:
-            self.log("detour", i, f"route around obstacles ({path.length:.0f} um)")
-        return path
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
         """S_2f for ``duration`` s: symmetric cycles (half turn, straight, half turn) with turn fraction rho."""
@@ -981,7 +939,7 @@ class _Runner:
             if dt > 1.6 * self.tx:
                 dt = self.tx
             steps.append((n - 2, dt))
-            if not self.track_clear(N, sum(d for _, d in steps) * self.v_hat[N] + 40.0, lower, M):
+            if not self.track_clear(N, sum(d for _, d in steps) * self.v_hat[N] + 40.0, lower):
                 self.log("transfer", N, "D_n's track runs out; D_(n-1) stops short and moves on from there")
                 return
             self.drive(steps)
@@ -1012,7 +970,7 @@ class _Runner:
         samples[:, :, :2] = starts[:, None, :2] + s[None, :, None] * hv[:, None, :]
         samples[:, :, 2] = starts[:, None, 2]
         flat = samples.reshape(-1, 3)
-        bad = _arena_gap(flat, self.L[N], self.W[N], (w, h)).reshape(len(starts), K) < c
+        bad = arena_gap(flat, self.L[N], self.W[N], (w, h)).reshape(len(starts), K) < c
         centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
         radii = [float(x) + c for x in self.rstar[lower]] if lower else []
         if centres:
@@ -1104,23 +1062,10 @@ class _Runner:
         return None if best is None else (best, best_len)
 
     def _blocked(self, samples: np.ndarray, i: int, lower, clearance: float, discs=()) -> bool:
-        """Whether robot ``i``'s body along ``samples`` meets a lower robot's orbit, ``discs`` or the arena edge."""
-        centres = [*turning_centres(self.est[lower], self.r_hat[lower])] if lower else []
-        radii = [float(x) + clearance for x in self.rstar[lower]] if lower else []
-        for cc, rr in discs:
-            centres.append(cc)
-            radii.append(rr)
-        if centres and bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii)).any():
-            return True
-        docked = np.flatnonzero(self.docked)
-        for j in docked:
-            if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -clearance).any():
-                return True
-        if self.scn.arena_um is not None and (_arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < clearance).any():
-            return True
-        return False
+        """Like :meth:`obstacles_hit`, but ``discs`` are kept clear of by their own radius, without ``clearance``."""
+        return self.obstacles_hit(samples, i, lower, extra_discs=[(c, r - clearance) for c, r in discs], clearance=clearance)
 
-    def track_clear(self, N: int, length: float, lower, M: int) -> bool:
+    def track_clear(self, N: int, length: float, lower) -> bool:
         track = move(self.est[N], np.linspace(0.0, max(length, 1.0), 30), 0.0)
         return not self._blocked(track, N, lower, 0.0)
 

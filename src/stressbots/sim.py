@@ -92,7 +92,7 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .collision import point_rectangle_distance
+from .collision import arena_gap, point_rectangle_distance
 from .kinematics import move, wrap
 from .robots import angle_difference, body_corners
 from .waveform import Segment, replay
@@ -184,13 +184,8 @@ def _depth(pa, pb, hla, hwa, hlb, hwb) -> np.ndarray:
 
 
 def _arena_gap(p, hl, hw, arena) -> np.ndarray:
-    """Distance (um) from each body to the nearest arena wall; negative when it sticks out."""
-    s, c = np.abs(np.sin(p[..., 2])), np.abs(np.cos(p[..., 2]))
-    ex = hl * s + hw * c  # half extent along x
-    ey = hl * c + hw * s
-    w, h = arena
-    x, y = p[..., 0], p[..., 1]
-    return np.minimum(np.minimum(x - ex, w - x - ex), np.minimum(y - ey, h - y - ey))
+    """Distance (um) from each body (half lengths ``hl``, ``hw``) to the nearest arena wall; negative outside."""
+    return arena_gap(p, 2.0 * hl, 2.0 * hw, arena)
 
 
 def _rotate_about(pose, centre, phi) -> np.ndarray:
