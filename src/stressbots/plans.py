@@ -1,9 +1,9 @@
 """Plans: a control sequence of primitives with durations, and its file format ``plan.json``.
 
-A plan is what the whole group receives: one primitive after another (SPEC 4: a primitive is an arm-state
-pattern reached by a Hold, then a Drive), each for a duration. Which robots turn under each primitive is
+A plan is what the whole group receives: one primitive after another (a primitive is an arm-state
+pattern reached by Holds, then a Drive), each for a duration. Which robots turn under each primitive is
 written into the file, so an independent reader needs no voltage analysis to replay it. The format
-(SPEC 7) is::
+is::
 
     {"format": "stressbots.plan/1",
      "robots": ["D1", "D2", "D3", "D4"],
@@ -20,9 +20,10 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Annotated, Any, Literal, Mapping, Sequence
 
 import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints, ValidationError
 
 from .errors import StressbotsError
 from .robots import Pose
@@ -121,67 +122,158 @@ def _fail(problem: str, source: str | None, field_: str | None = None) -> Stress
     return StressbotsError(problem, source=source, field=field_)
 
 
+#: Longest plan (sum of its drive durations, s) a file may hold: an hour of drives is far beyond any
+#: assembly (the example's plan takes about two minutes) and bounds what replaying it may cost.
+MAX_PLAN_S = 3600.0
+#: Most steps and primitives a plan file may list.
+MAX_STEPS = 100_000
+MAX_PRIMITIVES = 4096
+#: Largest plan file read (bytes).
+MAX_PLAN_BYTES = 20_000_000
+
+
+def _short(v: Any) -> str:
+    try:
+        text = repr(v)
+    except ValueError:  # an integer too large to print
+        return "a huge integer"
+    if not text.isprintable():
+        text = text.encode("unicode_escape").decode("ascii")
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _robot_name(v: Any) -> str:
+    from .scenario import _name_check
+
+    return _name_check(v)
+
+
+def _duration(v: Any) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"must be a number of seconds in [0, {MAX_PLAN_S:g}], got {type(v).__name__} {_short(v)}")
+    if not (0 <= v <= MAX_PLAN_S):  # exact for integers too large for a float; False for NaN
+        raise ValueError(f"must be a number of seconds in [0, {MAX_PLAN_S:g}], got {_short(v)}")
+    return float(v)
+
+
+def _pose3(v: Any) -> list[float]:
+    from .scenario import _pose_list
+
+    if v is None:
+        raise ValueError("must be [x_um, y_um, heading_deg], got null")
+    return _pose_list(v)
+
+
+_Name = Annotated[str, BeforeValidator(_robot_name)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(strict=True, extra="allow")
+
+
+class _PrimitiveFile(_Model):
+    name: Annotated[str, StringConstraints(min_length=1, max_length=64)]
+    turning: Annotated[list[str], Field(max_length=64)]
+
+
+class _StepFile(_Model):
+    primitive: Annotated[str, StringConstraints(max_length=64)]
+    duration_s: Annotated[float, BeforeValidator(_duration)]
+
+
+class _PlanFile(_Model):
+    format: Literal["stressbots.plan/1"]
+    robots: Annotated[list[_Name], Field(min_length=1, max_length=64)]
+    primitives: Annotated[list[_PrimitiveFile], Field(min_length=1, max_length=MAX_PRIMITIVES)]
+    steps: Annotated[list[_StepFile], Field(max_length=MAX_STEPS)]
+    goals: dict[str, Annotated[list[float], BeforeValidator(_pose3)]] | None = None
+    provenance: dict[str, Any] | None = None
+
+
+def _where(loc: tuple) -> str:
+    out = ""
+    for item in loc:
+        out += f"[{item}]" if isinstance(item, int) else (("." if out else "") + str(item))
+    return out
+
+
+def _problem(err: dict) -> str:
+    kind, inp = err.get("type", ""), err.get("input")
+    if kind == "missing":
+        return "missing: this field is required"
+    if kind == "literal_error":
+        return f"must be {FORMAT!r}, got {_short(inp)}"
+    msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
+    msg = msg[0].lower() + msg[1:]
+    if kind.endswith("_type"):
+        return f"{msg}, got {type(inp).__name__} {_short(inp)}"
+    return msg
+
+
 def from_dict(data: Any, *, source: str | None = None) -> Plan:
-    """Validate a parsed plan.json; every problem is one line naming the field."""
+    """Validate a parsed plan.json; every problem is one line naming the field and what is accepted."""
     if not isinstance(data, dict):
-        raise _fail("a plan must be a JSON object", source)
-    if data.get("format") != FORMAT:
-        raise _fail(f"must be {FORMAT!r}, got {data.get('format')!r}", source, "format")
-    robots = data.get("robots")
-    if not isinstance(robots, list) or not robots or not all(isinstance(r, str) and r for r in robots):
-        raise _fail("must be a non-empty list of robot names", source, "robots")
+        raise _fail(f"a plan must be a JSON object, got {type(data).__name__}", source)
+    try:
+        model = _PlanFile.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise _fail(_problem(err), source, _where(err["loc"]) or None) from None
+    except RecursionError:
+        raise _fail("nested too deeply to be a plan", source) from None
+    robots = model.robots
     if len(set(robots)) != len(robots):
         raise _fail("robot names must be unique", source, "robots")
-    prims_raw = data.get("primitives")
-    if not isinstance(prims_raw, list) or not prims_raw:
-        raise _fail("must be a non-empty list of {name, turning}", source, "primitives")
     prims: list[PlanPrimitive] = []
-    for k, p in enumerate(prims_raw):
-        where = f"primitives[{k}]"
-        if not isinstance(p, dict) or not isinstance(p.get("name"), str) or not p["name"]:
-            raise _fail("must be an object with a name", source, where)
-        turning = p.get("turning")
-        if not isinstance(turning, list) or not all(isinstance(t, str) for t in turning):
-            raise _fail("must be a list of robot names", source, f"{where}.turning")
-        unknown = [t for t in turning if t not in robots]
+    for k, p in enumerate(model.primitives):
+        unknown = [t for t in p.turning if t not in robots]
         if unknown:
-            raise _fail(f"unknown robot {unknown[0]!r} (not in robots)", source, f"{where}.turning")
-        prims.append(PlanPrimitive(p["name"], tuple(turning)))
+            raise _fail(f"unknown robot {_short(unknown[0])} (not in robots)", source, f"primitives[{k}].turning")
+        prims.append(PlanPrimitive(p.name, tuple(p.turning)))
     names = [p.name for p in prims]
     if len(set(names)) != len(names):
         raise _fail("primitive names must be unique", source, "primitives")
-    steps_raw = data.get("steps")
-    if not isinstance(steps_raw, list):
-        raise _fail("must be a list of {primitive, duration_s}", source, "steps")
     steps: list[PlanStep] = []
-    for k, s in enumerate(steps_raw):
-        where = f"steps[{k}]"
-        if not isinstance(s, dict):
-            raise _fail("must be an object {primitive, duration_s}", source, where)
-        if s.get("primitive") not in names:
-            raise _fail(f"unknown primitive {s.get('primitive')!r}", source, f"{where}.primitive")
-        d = s.get("duration_s")
-        if isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d) or d < 0:
-            raise _fail(f"must be a finite number >= 0, got {d!r}", source, f"{where}.duration_s")
-        steps.append(PlanStep(s["primitive"], float(d)))
+    total = 0.0
+    for k, st in enumerate(model.steps):
+        if st.primitive not in names:
+            raise _fail(f"unknown primitive {_short(st.primitive)} (not in primitives)", source, f"steps[{k}].primitive")
+        total += st.duration_s
+        if total > MAX_PLAN_S:
+            raise _fail(f"the plan's drives add up to more than {MAX_PLAN_S:g} s (the longest plan accepted)", source,
+                        f"steps[{k}].duration_s")
+        steps.append(PlanStep(st.primitive, st.duration_s))
     goals: dict[str, Pose] = {}
-    for name, g in (data.get("goals") or {}).items():
-        if name not in robots or not isinstance(g, list) or len(g) != 3:
-            raise _fail("must map robot names to [x_um, y_um, heading_deg]", source, f"goals.{name}")
+    for name, g in (model.goals or {}).items():
+        if name not in robots:
+            raise _fail(f"unknown robot {_short(name)} (not in robots)", source, "goals")
         goals[name] = Pose.from_degrees(*g)
-    return Plan(tuple(robots), tuple(prims), tuple(steps), goals, data.get("provenance") or {})
+    return Plan(tuple(robots), tuple(prims), tuple(steps), goals, model.provenance or {})
 
 
 def load(path) -> Plan:
-    """Read and validate a plan.json file."""
+    """Read and validate a plan.json file (errors name the file and the field)."""
     p = Path(path)
+    source = str(path)
     if not p.is_file():
-        raise _fail("no such file" if not p.exists() else "not a file", str(path))
+        raise _fail("no such file" if not p.exists() else "not a file", source)
     try:
-        data = json.loads(p.read_bytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise _fail(f"not valid JSON: {exc}", str(path)) from None
-    return from_dict(data, source=str(path))
+        if p.stat().st_size > MAX_PLAN_BYTES:
+            raise _fail(f"too large ({p.stat().st_size} bytes; a plan file has at most {MAX_PLAN_BYTES})", source)
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise _fail(f"cannot read: {exc.strerror}", source) from None
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise _fail(f"not UTF-8 text (byte {exc.start}); expected plan JSON", source) from None
+    except json.JSONDecodeError as exc:
+        raise _fail(f"not valid JSON: {exc}", source) from None
+    except RecursionError:
+        raise _fail("not valid JSON: nested too deeply", source) from None
+    except ValueError as exc:  # e.g. an integer with more digits than Python converts
+        raise _fail(f"not valid JSON: {' '.join(str(exc).split())}", source) from None
+    return from_dict(data, source=source)
 
 
 def save(plan: Plan, path) -> Path:

@@ -1,4 +1,4 @@
-"""Scenario files: the TOML format of SPEC section 5, loaded into immutable values.
+"""Scenario files: the TOML format of the README's "Scenario files", loaded into immutable values.
 
 A scenario names the robots (body, motion and electrostatic parameters, optional start and goal poses),
 the electrode limits, an optional target structure, the control error model and the controller's
@@ -27,10 +27,10 @@ import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator
 
 from .electrostatics import Electrodes
 from .errors import ScenarioError
@@ -49,7 +49,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Noise:
-    """Control error and sensing error (SPEC section 5 ``[noise]``); all zero means nominal.
+    """Control error and sensing error (``[noise]``); all zero means nominal.
 
     Relative standard deviations are fractions (0.05 = 5 %). Heading drift is in rad per um driven in
     the Python API (the file gives deg/mm).
@@ -91,7 +91,7 @@ class Noise:
 
 @dataclass(frozen=True)
 class ControlSettings:
-    """Closed-loop controller settings (SPEC section 5 ``[control]``)."""
+    """Closed-loop controller settings (``[control]``)."""
 
     replan_interval_s: float = 1.0
 
@@ -191,43 +191,157 @@ class Scenario:
 
 
 # ----------------------------------------------------------------------------------------------------
-# File schema (pydantic). Kept private: the public values are the frozen dataclasses above.
+# Accepted ranges. Every number a scenario file gives must lie in its range: the ranges are physically
+# plausible for MEMS microrobots on an electrode array, and they bound what any command can be asked to
+# compute (robots, arena extent, travel times, random draws), so no input makes a run allocate absurdly
+# or take forever. The README's "Scenario files" section lists the same table (a test checks it).
 
-_Finite = Annotated[float, Field(allow_inf_nan=False)]
-_Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-_NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+class Range(NamedTuple):
+    """Accepted closed interval ``[low, high]`` of a scenario field, in the file's ``unit``.
+
+    ``open_low`` makes the low end exclusive (``low < value``)."""
+
+    low: float
+    high: float
+    unit: str
+    open_low: bool = False
+
+    def text(self) -> str:
+        lo = "(" if self.open_low else "["
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{lo}{self.low:g}, {self.high:g}]{unit}"
+
+    def contains(self, value: float) -> bool:
+        above = value > self.low if self.open_low else value >= self.low
+        return above and value <= self.high
 
 
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=False)
+#: Longest scenario, robot or structure name (characters); names are printed in tables and file names.
+MAX_NAME_CHARS = 64
+#: Most robots a scenario may hold: planning, the controller and the simulator grow quickly with N, and
+#: the accessible-state search of a non-STRING design is exponential in N.
+MAX_ROBOTS = 10
+#: Largest scenario file read (bytes): a scenario of MAX_ROBOTS robots is a few kB.
+MAX_FILE_BYTES = 1_000_000
+#: Longest straight travel a run may need at the slowest robot's speed (s): the arena's diagonal divided
+#: by the smallest speed. Keeps every closed-loop run within a few minutes of wall time.
+MAX_CROSSING_S = 600.0
+
+#: The accepted range of every numeric field, by its name in the file (``x``/``y``/``heading`` are the
+#: items of the start, goal and ``[structure] at`` poses).
+LIMITS: dict[str, Range] = {
+    "arena_um": Range(200.0, 20_000.0, "um"),
+    "x_um, y_um": Range(-20_000.0, 20_000.0, "um"),
+    "heading_deg": Range(-3600.0, 3600.0, "deg"),
+    "length_um": Range(10.0, 2_000.0, "um"),
+    "width_um": Range(5.0, 1_000.0, "um"),
+    "speed_um_s": Range(10.0, 5_000.0, "um/s"),
+    "turn_radius_um": Range(10.0, 10_000.0, "um"),
+    "snap_down_V": Range(0.0, 1_000.0, "V"),
+    "release_V": Range(0.0, 1_000.0, "V"),
+    "max_V": Range(1.0, 1_000.0, "V"),
+    "margin_V": Range(0.0, 100.0, "V"),
+    "drive_low_V": Range(0.0, 1_000.0, "V"),
+    "drive_high_V": Range(0.0, 1_000.0, "V", open_low=True),
+    "drive_frequency_hz": Range(1.0, 50_000.0, "Hz"),
+    "hold_s": Range(1e-5, 1.0, "s"),
+    "speed_rel_sd": Range(0.0, 0.5, ""),
+    "turn_radius_rel_sd": Range(0.0, 0.5, ""),
+    "heading_drift_deg_per_mm": Range(0.0, 100.0, "deg/mm"),
+    "camera_position_sd_um": Range(0.0, 100.0, "um"),
+    "camera_heading_sd_deg": Range(0.0, 30.0, "deg"),
+    "camera_dropout": Range(0.0, 0.9, ""),
+    "replan_interval_s": Range(0.05, 60.0, "s"),
+}
+
+
+def _show(v: Any) -> str:
+    """A short, printable rendering of a user value (never a 10,000-digit integer or a newline)."""
+    try:
+        text = repr(v)
+    except ValueError:  # int too large to print
+        return "a huge integer"
+    if not text.isprintable():
+        text = text.encode("unicode_escape").decode("ascii")
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def number_in(key: str, v: Any) -> float:
+    """``v`` as a float if it is a real number (not a bool or a string) within ``LIMITS[key]``."""
+    rng = LIMITS[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f"must be a number in {rng.text()}, got {type(v).__name__} {_show(v)}")
+    if isinstance(v, float) and not math.isfinite(v):
+        raise ValueError(f"must be a finite number in {rng.text()}, got {_show(v)}")
+    if not rng.contains(v):  # compares exactly, also for integers too large for a float
+        raise ValueError(f"must be in {rng.text()}, got {_show(v)}")
+    return float(v)
+
+
+def _num(key: str):
+    return Annotated[float, BeforeValidator(lambda v: number_in(key, v))]
+
+
+def _name_check(v: Any) -> str:
+    if not isinstance(v, str):
+        raise ValueError(f"must be a string, got {type(v).__name__} {_show(v)}")
+    if not v.strip():
+        raise ValueError("must not be blank")
+    if len(v) > MAX_NAME_CHARS:
+        raise ValueError(f"must have at most {MAX_NAME_CHARS} characters, got {len(v)}")
+    if not v.isprintable():
+        raise ValueError(f"must be printable (no newline, tab or control characters), got {_show(v)}")
+    if v != v.strip():
+        raise ValueError("must not start or end with spaces")
+    return v
+
+
+_Name = Annotated[str, BeforeValidator(_name_check)]
+
+
+def _is_clean_name(v: str) -> bool:
+    try:
+        return _name_check(v) == v
+    except ValueError:
+        return False
 
 
 def _pose_list(v: Any) -> Any:
     if v is None:
         return v
     if not isinstance(v, list):
-        raise ValueError("must be a list [x_um, y_um, heading_deg]")
+        raise ValueError(f"must be a list [x_um, y_um, heading_deg], got {type(v).__name__} {_show(v)}")
     if len(v) != 3:
         raise ValueError(f"must have 3 numbers [x_um, y_um, heading_deg], got {len(v)}")
-    for k, x in enumerate(v):
-        if isinstance(x, bool) or not isinstance(x, (int, float)):
-            raise ValueError(f"item {k} must be a number, got {type(x).__name__}")
-        if not math.isfinite(x):
-            raise ValueError(f"item {k} must be finite, got {x}")
-    return [float(x) for x in v]
+    out = []
+    for k, (x, key) in enumerate(zip(v, ("x_um, y_um", "x_um, y_um", "heading_deg"))):
+        try:
+            out.append(number_in(key, x))
+        except ValueError as exc:
+            raise ValueError(f"item {k} ({('x_um', 'y_um', 'heading_deg')[k]}) {exc}") from None
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------
+# File schema (pydantic). Kept private: the public values are the frozen dataclasses above.
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class _RobotDefaults(_Strict):
-    length_um: _Positive | None = None
-    width_um: _Positive | None = None
-    speed_um_s: _Positive | None = None
-    turn_radius_um: _Positive | None = None
-    snap_down_V: _NonNegative | None = None
-    release_V: _NonNegative | None = None
+    length_um: _num("length_um") | None = None  # type: ignore[valid-type]
+    width_um: _num("width_um") | None = None  # type: ignore[valid-type]
+    speed_um_s: _num("speed_um_s") | None = None  # type: ignore[valid-type]
+    turn_radius_um: _num("turn_radius_um") | None = None  # type: ignore[valid-type]
+    snap_down_V: _num("snap_down_V") | None = None  # type: ignore[valid-type]
+    release_V: _num("release_V") | None = None  # type: ignore[valid-type]
 
 
 class _RobotFile(_RobotDefaults):
-    name: str = Field(min_length=1)
+    name: _Name
     start: list[float] | None = None
     goal: list[float] | None = None
 
@@ -236,40 +350,31 @@ class _RobotFile(_RobotDefaults):
     def _poses(cls, v):
         return _pose_list(v)
 
-    @field_validator("name")
-    @classmethod
-    def _name(cls, v: str) -> str:
-        if not v.strip():
-            raise ValueError("must not be blank")
-        if v != v.strip():
-            raise ValueError("must not start or end with spaces")
-        return v
-
 
 class _ElectrodesFile(_Strict):
-    max_V: _Positive = 200.0
-    margin_V: _NonNegative = 5.0
-    drive_low_V: _NonNegative = 75.0
-    drive_high_V: _Positive = 105.0
-    drive_frequency_hz: _Positive = 10000.0
-    hold_s: _Positive = 0.001
+    max_V: _num("max_V") = 200.0  # type: ignore[valid-type]
+    margin_V: _num("margin_V") = 5.0  # type: ignore[valid-type]
+    drive_low_V: _num("drive_low_V") = 75.0  # type: ignore[valid-type]
+    drive_high_V: _num("drive_high_V") = 105.0  # type: ignore[valid-type]
+    drive_frequency_hz: _num("drive_frequency_hz") = 10000.0  # type: ignore[valid-type]
+    hold_s: _num("hold_s") = 0.001  # type: ignore[valid-type]
 
 
 class _NoiseFile(_Strict):
-    speed_rel_sd: _NonNegative = 0.0
-    turn_radius_rel_sd: _NonNegative = 0.0
-    heading_drift_deg_per_mm: _NonNegative = 0.0
-    camera_position_sd_um: _NonNegative = 0.0
-    camera_heading_sd_deg: _NonNegative = 0.0
-    camera_dropout: Annotated[float, Field(ge=0, lt=1, allow_inf_nan=False)] = 0.0
+    speed_rel_sd: _num("speed_rel_sd") = 0.0  # type: ignore[valid-type]
+    turn_radius_rel_sd: _num("turn_radius_rel_sd") = 0.0  # type: ignore[valid-type]
+    heading_drift_deg_per_mm: _num("heading_drift_deg_per_mm") = 0.0  # type: ignore[valid-type]
+    camera_position_sd_um: _num("camera_position_sd_um") = 0.0  # type: ignore[valid-type]
+    camera_heading_sd_deg: _num("camera_heading_sd_deg") = 0.0  # type: ignore[valid-type]
+    camera_dropout: _num("camera_dropout") = 0.0  # type: ignore[valid-type]
 
 
 class _ControlFile(_Strict):
-    replan_interval_s: _Positive = 1.0
+    replan_interval_s: _num("replan_interval_s") = 1.0  # type: ignore[valid-type]
 
 
 class _StructureFile(_Strict):
-    shape: str = Field(min_length=1)
+    shape: _Name
     at: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
 
     @field_validator("at", mode="before")
@@ -278,22 +383,29 @@ class _StructureFile(_Strict):
         return _pose_list(v)
 
 
+def _robot_list(v: Any) -> Any:
+    if isinstance(v, list) and len(v) > MAX_ROBOTS:
+        raise ValueError(f"at most {MAX_ROBOTS} robots are supported, got {len(v)}")
+    return v
+
+
+def _arena_list(v: Any) -> Any:
+    if v is None:
+        return v
+    if not isinstance(v, list) or len(v) != 2:
+        raise ValueError(f"must be [width_um, height_um], got {_show(v)}")
+    return [number_in("arena_um", x) for x in v]
+
+
 class _ScenarioFile(_Strict):
-    name: str = "scenario"
-    arena_um: list[_Positive] | None = None
+    name: _Name = "scenario"
+    arena_um: Annotated[list[float] | None, BeforeValidator(_arena_list)] = None
     robot_defaults: _RobotDefaults = Field(default_factory=_RobotDefaults)
     electrodes: _ElectrodesFile = Field(default_factory=_ElectrodesFile)
-    robots: list[_RobotFile] = Field(min_length=1)
+    robots: Annotated[list[_RobotFile], BeforeValidator(_robot_list)] = Field(min_length=1)
     structure: _StructureFile | None = None
     noise: _NoiseFile = Field(default_factory=_NoiseFile)
     control: _ControlFile = Field(default_factory=_ControlFile)
-
-    @field_validator("arena_um")
-    @classmethod
-    def _arena(cls, v):
-        if v is not None and len(v) != 2:
-            raise ValueError(f"must be [width_um, height_um], got {len(v)} numbers")
-        return v
 
 
 def _field_path(loc: tuple, data: Any) -> str:
@@ -306,7 +418,7 @@ def _field_path(loc: tuple, data: Any) -> str:
             if isinstance(node, list) and 0 <= item < len(node):
                 node = node[item]
                 if isinstance(node, dict) and isinstance(node.get("name"), str):
-                    label += f" ({node['name']})"
+                    label += f" ({node['name']})" if _is_clean_name(node["name"]) else f" ({_show(node['name'])})"
             else:
                 node = None
             if parts:
@@ -325,13 +437,13 @@ def _friendly(err: dict) -> str:
     if kind == "missing":
         return "missing: this field is required"
     if kind == "extra_forbidden":
-        return "unknown field (check the spelling; see SPEC section 5)"
+        return "unknown field (check the spelling; the README's 'Scenario files' lists every field)"
     if kind in ("finite_number",):
         return f"must be a finite number, got {inp!r}"
     msg = err.get("msg", "invalid value")
     msg = msg.removeprefix("Value error, ")
     if kind.endswith("_type") or kind.endswith("_parsing"):
-        return f"{msg[0].lower()}{msg[1:]}, got {type(inp).__name__} {inp!r}"
+        return f"{msg[0].lower()}{msg[1:]}, got {type(inp).__name__} {_show(inp)}"
     return f"{msg[0].lower()}{msg[1:]}"
 
 
@@ -416,6 +528,8 @@ def from_dict(data: dict, *, source: str | None = None) -> Scenario:
                         field=f"robots[{i}] ({r.name}).{which}",
                     )
 
+    _check_crossing(robots, arena, source)
+
     structure = None
     if model.structure is not None:
         structure = StructureSpec(shape=model.structure.shape, at=Pose.from_degrees(*model.structure.at))
@@ -449,17 +563,50 @@ def from_dict(data: dict, *, source: str | None = None) -> Scenario:
     )
 
 
+def _check_crossing(robots: list[Robot], arena: tuple[float, ...] | None, source: str | None) -> None:
+    """Refuse a layout whose straight crossing at the slowest speed exceeds :data:`MAX_CROSSING_S`.
+
+    The extent is the arena's diagonal, or without an arena the diagonal of the box around every
+    start and goal; a run's simulated time (and so its wall time) grows with it.
+    """
+    if arena is not None:
+        extent, what = math.hypot(*arena), "the arena's diagonal"
+    else:
+        pts = [(p.x, p.y) for r in robots for p in (r.start, r.goal) if p is not None]
+        if len(pts) < 2:
+            return
+        xs, ys = zip(*pts)
+        extent, what = math.hypot(max(xs) - min(xs), max(ys) - min(ys)), "the spread of the start and goal poses"
+    i = min(range(len(robots)), key=lambda k: robots[k].speed_um_s)
+    r = robots[i]
+    if extent / r.speed_um_s > MAX_CROSSING_S:
+        raise ScenarioError(
+            f"{r.speed_um_s:g} um/s is too slow for {what} ({extent:.0f} um): crossing it would take "
+            f"{extent / r.speed_um_s:.0f} s, the limit is {MAX_CROSSING_S:g} s (speed >= {extent / MAX_CROSSING_S:.0f} um/s "
+            f"or a smaller arena)",
+            source=source,
+            field=f"robots[{i}] ({r.name}).speed_um_s",
+        )
+
+
 def loads(text: str, *, source: str | None = None) -> Scenario:
     """Parse and validate scenario TOML text."""
+    if len(text) > MAX_FILE_BYTES:
+        raise ScenarioError(f"too large ({len(text)} characters; a scenario has at most {MAX_FILE_BYTES})", source=source)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"not valid TOML: {exc}", source=source) from None
-    return from_dict(data, source=source)
+        raise ScenarioError(f"not valid TOML: {' '.join(str(exc).split())}", source=source) from None
+    except RecursionError:
+        raise ScenarioError("not valid TOML: nested too deeply", source=source) from None
+    try:
+        return from_dict(data, source=source)
+    except RecursionError:
+        raise ScenarioError("nested too deeply to be a scenario", source=source) from None
 
 
 def load(path) -> Scenario:
-    """Load and validate a scenario file (SPEC section 5).
+    """Load and validate a scenario file (the README's "Scenario files").
 
     Raises :class:`~stressbots.errors.ScenarioError` for a missing or unreadable file, text that is not
     UTF-8 TOML, or any invalid field.
@@ -471,6 +618,8 @@ def load(path) -> Scenario:
     if p.is_dir():
         raise ScenarioError("is a directory, expected a scenario .toml file", source=source)
     try:
+        if p.stat().st_size > MAX_FILE_BYTES:
+            raise ScenarioError(f"too large ({p.stat().st_size} bytes; a scenario has at most {MAX_FILE_BYTES})", source=source)
         raw = p.read_bytes()
     except OSError as exc:
         raise ScenarioError(f"cannot read: {exc.strerror}", source=source) from None
