@@ -62,15 +62,12 @@ def chromium():
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     """A report of a closed-loop run of the example without noise (the main job, in-process)."""
-    from rich.console import Console
-
     from stressbots.pipeline import run_job
     from stressbots.scenario import Noise, load
 
     out = tmp_path_factory.mktemp("report")
     scn = load(EXAMPLES / "four-robots.toml").with_noise(Noise())
-    quiet = Console(file=open(os.devnull, "w"))
-    job = run_job(scn, out, seed=2, console=quiet, err_console=quiet, quiet=True)
+    job = run_job(scn, out, seed=2)
     return job.report_path
 
 

@@ -105,7 +105,7 @@ ROBOT = '[[robots]]\nname = "a"\nsnap_down_V = 120.0\nrelease_V = 30.0\n'
         (ROBOT + ROBOT, ["robots[1] (a).name", "duplicate"]),
         ('[[robots]]\nname = "a"\nsnap_down_V = 30.0\nrelease_V = 30.0\n', ["robots[0] (a).release_V", "below snap_down_V"]),
         ('[[robots]]\nname = "a"\nsnap_down_V = 30.0\nrelease_V = 90.0\n', ["robots[0] (a).release_V", "below snap_down_V"]),
-        ("[electrodes]\nmax_V = 0.0\n" + ROBOT, ["electrodes.max_V", "greater than 0"]),
+        ("[electrodes]\nmax_V = 0.0\n" + ROBOT, ["electrodes.max_V", "in [1, 1000] V"]),
         ("[electrodes]\nmargin_V = -2.0\n" + ROBOT, ["electrodes.margin_V"]),
         ("[electrodes]\ndrive_frequency_hz = -5.0\n" + ROBOT, ["electrodes.drive_frequency_hz"]),
         ("[electrodes]\nhold_s = 0\n" + ROBOT, ["electrodes.hold_s"]),

@@ -1,8 +1,9 @@
 """The main job and its report: `stressbots run`, `stressbots simulate` in closed loop, report.html.
 
 Runs use the example scenario without noise (`--noise none`), where the closed loop assembles the tee
-deterministically, plus runs that do not assemble (a tiny time budget, a controller that raises): a
-failed run must still give the full report with its reason and event log, and exit status 0.
+deterministically, plus a run that does not assemble (a tiny time budget): a failed run must still
+give the full report with its reason and event log, and exit status 0. A controller that raises is an
+internal error (exit 1), not a failed run.
 """
 
 from __future__ import annotations
@@ -121,7 +122,7 @@ def test_a_run_that_does_not_assemble_still_gets_the_full_report(run_cli, tmp_pa
     assert r.code == 0, r.err  # the job ran; the run failed
     res = _result(out)
     assert res["success"] is False and res["failure"]
-    assert len(r.out.strip().splitlines()) == 1 and "not assembled" in r.out and r.err == ""  # --quiet: one line
+    assert r.out == "" and r.err == ""  # --quiet: nothing but errors
     html = (out / "report.html").read_text(encoding="utf-8")
     refs = check_self_contained(html)
     assert all(sid in refs.ids for sid in SECTION_IDS)
@@ -134,7 +135,9 @@ def test_a_run_that_does_not_assemble_still_gets_the_full_report(run_cli, tmp_pa
         assert (out / name).exists(), name
 
 
-def test_a_controller_that_raises_is_reported_as_the_runs_failure(run_cli, tmp_path, monkeypatch, cached_plan):
+def test_a_controller_that_raises_is_an_internal_error(run_cli, tmp_path, monkeypatch, cached_plan):
+    """An exception inside the computation is a bug: one `error: internal error:` line, exit 1, no
+    traceback (unless STRESSBOTS_DEBUG is set), never a normal failed run with exit 0."""
     import stressbots.control
 
     def broken(scenario, plant, **kw):
@@ -143,13 +146,14 @@ def test_a_controller_that_raises_is_reported_as_the_runs_failure(run_cli, tmp_p
 
     monkeypatch.setattr(stressbots.control, "nominal_plan", lambda scenario, **kw: cached_plan)
     monkeypatch.setattr(stressbots.control, "assemble", broken)
-    out = tmp_path / "crash"
-    r = run_cli("run", EXAMPLE, "--out", out, "--noise", "none", "-q")
-    assert r.code == 0, r.err
-    res = _result(out)
-    assert res["success"] is False and "RuntimeError: controller exploded on purpose" in res["failure"]
-    assert "Traceback" in res["controller_traceback"]
-    assert "controller exploded on purpose" in (out / "report.html").read_text(encoding="utf-8")
+    monkeypatch.delenv("STRESSBOTS_DEBUG", raising=False)
+    for cmd in ("run", "simulate"):
+        r = run_cli(cmd, EXAMPLE, "--out", tmp_path / cmd, "--noise", "none", "-q")
+        assert r.code == 1, (cmd, r.code, r.err)
+        lines = r.err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: internal error: RuntimeError: controller exploded on purpose"), r.err
+        assert "Traceback" not in r.err and r.out == ""
+        assert not (tmp_path / cmd / "result.json").exists()  # no result pretends the run happened
 
 
 def test_run_bad_input(run_cli, tmp_path):

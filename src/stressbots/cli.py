@@ -8,6 +8,7 @@ options, into one ``error:`` line on stderr and exit status 2, with no traceback
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from enum import Enum
 from pathlib import Path
@@ -46,11 +47,16 @@ class NoiseChoice(str, Enum):
     literature = "literature"
 
 
-def scenario_arg(path: Path):
-    """Load a scenario given on the command line (errors name the file and field)."""
-    from .scenario import load
+def scenario_arg(path: Path, *, moving: bool = False):
+    """Load a scenario given on the command line (errors name the file and field).
 
-    return load(path)
+    ``moving``: the command plans or simulates the robots, so the scenario must also be small enough
+    for that (:func:`stressbots.scenario.check_movable`), checked before any computation.
+    """
+    from .scenario import check_movable, load
+
+    scn = load(path)
+    return check_movable(scn, source=str(path)) if moving else scn
 
 
 def _show_version(value: bool) -> None:
@@ -74,7 +80,7 @@ def _root(
 def demo(
     out_dir: Path = typer.Option(Path("stressbots-demo"), "--out", help="Folder for the demo's outputs."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulated plant (same seed, same run)."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; print only one summary line."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
 ) -> None:
     """Run the main job end to end on the built-in 4-robot scenario and write its report.
 
@@ -103,7 +109,7 @@ def run(
     time_budget_s: Optional[float] = typer.Option(
         None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default the controller's.", show_default=False
     ),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; print only one summary line."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
 ) -> None:
     """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
 
@@ -120,9 +126,11 @@ def run(
     from .pipeline import finite_budget, run_job
 
     budget = finite_budget(time_budget_s)
-    scn = _with_noise_choice(scenario_arg(scenario), noise)
-    run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget, console=out,
-            err_console=err, quiet=quiet)
+    scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
+    from .console import RichJobObserver
+
+    run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget,
+            observer=RichJobObserver(out, err, quiet=quiet))
 
 
 def _with_noise_choice(scn, choice):
@@ -138,126 +146,7 @@ def _with_noise_choice(scn, choice):
 
 
 # ----------------------------------------------------------------------------------------------------
-# Presentation of an analysis (shared with the demo)
-
-
-def _bits(state, n: int) -> str:
-    return (" " if n <= 16 else "").join(str(int(x)) for x in state)
-
-
-def render_analysis(analysis, console: Console, *, title: str | None = None, max_rows: int = 32) -> None:
-    """Print a control analysis as rich tables: robots, verdict, states, control matrix, primitives."""
-    from rich.table import Table
-
-    a = analysis
-    n = a.n
-    e = a.electrodes
-    head = f"{title}: " if title else ""
-    def line(text: str) -> None:
-        console.print(text, soft_wrap=True, highlight=False)
-
-    def heading(text: str) -> None:
-        console.print()
-        console.print(f"[bold]{text}[/bold]", soft_wrap=True, highlight=False)
-
-    if a.is_string:
-        line(f"[bold]{head}{n} robot{'s' if n != 1 else ''}, STRING[/bold]: order D_1..D_{n} = {', '.join(a.order)}")
-        line(f"Lemma 1: {a.count} accessible control states, the primitives P_0..P_{n} (P_k: D_1..D_k arm down).")
-    else:
-        line(f"[bold]{head}{n} robot{'s' if n != 1 else ''}, not STRING[/bold]:")
-        for r in a.reasons:
-            line(f"  - {r}")
-        line(f"{a.count} accessible control states (exhaustive search); each one is a primitive, P0 = all arms up.")
-    line(
-        f"Limits: levels in [0, {e.max_V:g}] V, margin_V {e.margin_V:g} V; drive band [{e.drive_low_V:g}, "
-        f"{e.drive_high_V:g}] V at {e.drive_frequency_hz:g} Hz; {len(a.levels)} admissible level cells."
-    )
-
-    rank = {i: k for k, i in enumerate(a.order_index)} if a.is_string else {}
-    heading("Robots (scenario order)")
-    robots = Table()
-    robots.add_column("robot")
-    robots.add_column("snap-down V_d (V)", justify="right")
-    robots.add_column("release V_u (V)", justify="right")
-    if a.is_string:
-        robots.add_column("order", justify="right")
-    for i, nm in enumerate(a.names[:max_rows]):
-        row = [nm, f"{a.snap_down_V[i]:g}", f"{a.release_V[i]:g}"]
-        if a.is_string:
-            row.append(f"D_{rank[i] + 1}")
-        robots.add_row(*row)
-    if n > max_rows:
-        robots.add_row(f"... {n - max_rows} more", "", "", *([""] if a.is_string else []))
-    console.print(robots)
-
-    heading(f"Accessible control states: {a.count} (1 = arm down = turning; robots in scenario order)")
-    states = Table()
-    states.add_column("#", justify="right")
-    states.add_column(" ".join(a.names) if n <= 16 else "arm states", no_wrap=True)
-    states.add_column("primitive")
-    for k, row in enumerate(a.accessible_states[:max_rows]):
-        # STRING: the state with j arms down is P_j; otherwise the sorted states are P0, P1, ...
-        states.add_row(str(k + 1), _bits(row, n), f"P{int(row.sum())}" if a.is_string else f"P{k}")
-    if a.count > max_rows:
-        states.add_row("...", f"{a.count - max_rows} more (see --json)", "")
-    console.print(states)
-
-    n_prims = a.primitive_states.shape[0]
-    k_cols = min(n_prims, 24)
-    if n <= max_rows:
-        rows_lbl = [f"D_{i + 1} {a.order[i]}" for i in range(n)] if a.is_string else list(a.names)
-        heading(
-            "Control matrix M (1 = the robot turns under the primitive"
-            + ("; rows D_1..D_n)" if a.is_string else "; rows in scenario order)")
-        )
-        m = Table()
-        m.add_column("")
-        for k in range(k_cols):
-            m.add_column(f"P{k}", justify="right")
-        if n_prims > k_cols:
-            m.add_column("...")
-        for i in range(n):
-            cells = [str(int(x)) for x in a.control_matrix[i, :k_cols]]
-            m.add_row(rows_lbl[i], *cells, *(["..."] if n_prims > k_cols else []))
-        console.print(m)
-
-    heading("Primitives (reach the arm state with Holds, then Drive)")
-    prims = Table()
-    prims.add_column("primitive")
-    prims.add_column("turning (arm down)")
-    if a.is_string:
-        prims.add_column("Hold from below (V)", justify="right")
-        prims.add_column("Hold from above (V)", justify="right")
-    for p in (a.primitive_at(k) for k in range(min(n_prims, max_rows))):
-        row = [p.name, ", ".join(p.turning) or "none (all straight)"]
-        if a.is_string:
-            up, down = a.raise_levels_V[p.index], a.release_levels_V[p.index]
-            row += [f"{up:g}" if np.isfinite(up) else ("-" if p.index == 0 else "2 levels (tie)"),
-                    f"{down:g}" if np.isfinite(down) else ("-" if p.index == n else "2 levels (tie)")]
-        prims.add_row(*row)
-    if n_prims > max_rows:
-        prims.add_row(f"... {n_prims - max_rows} more", "", *(["", ""] if a.is_string else []))
-    console.print(prims)
-
-
-def render_waveform(waveform, console: Console, *, title: str = "Waveform") -> None:
-    """Print a waveform's segments as a table (levels in V, durations in s)."""
-    from rich.table import Table
-
-    from .waveform import Hold
-
-    console.print(f"[bold]{title}[/bold]", soft_wrap=True, highlight=False)
-    t = Table()
-    t.add_column("#", justify="right")
-    t.add_column("segment")
-    t.add_column("level(s) (V)", justify="right")
-    t.add_column("duration (s)", justify="right")
-    for k, seg in enumerate(waveform):
-        if isinstance(seg, Hold):
-            t.add_row(str(k), "Hold", f"{seg.volts:g}", f"{seg.duration_s:g}")
-        else:
-            t.add_row(str(k), "Drive", f"{seg.low_V:g} .. {seg.high_V:g}", f"{seg.duration_s:g}")
-    console.print(t)
+# JSON on stdout
 
 
 def _print_json(obj) -> None:
@@ -277,7 +166,7 @@ def _print_json(obj) -> None:
 @app.command()
 def states(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML), e.g. examples/four-robots.toml.", show_default=False),
-    as_json: bool = typer.Option(False, "--json", help="Print only the SPEC 7 JSON object on stdout."),
+    as_json: bool = typer.Option(False, "--json", help="Print only the JSON object (as shown below) on stdout."),
 ) -> None:
     """Which arm-state patterns (control states) the one global voltage can reach.
 
@@ -290,6 +179,7 @@ def states(
     `{"robots": [...], "string": true, "order": [...], "accessible_states": [[0, 0, 0, 0], ...], "count": 5}`
     (states in scenario order, sorted).
     """
+    from .console import render_analysis
     from .electrostatics import analyse_scenario
 
     sc = scenario_arg(scenario)
@@ -315,8 +205,12 @@ def design(
     sd_v: Optional[float] = typer.Option(
         None, "--sd-V", help="Also estimate the yield when every threshold scatters with this standard deviation (V).", show_default=False
     ),
-    trials: int = typer.Option(10000, "--trials", help="Monte Carlo trials for the yield."),
-    seed: int = typer.Option(0, "--seed", help="Random seed for the yield (same seed, same estimate)."),
+    resolution_v: float = typer.Option(
+        0.1, "--resolution-V", min=0.0, max=10.0,
+        help="Round every voltage to this step (V): the resolution of the instrument that sets the levels; 0 = exact.",
+    ),
+    trials: int = typer.Option(10000, "--trials", min=1, max=10_000_000, help="Monte Carlo trials for the yield."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed for the yield (same seed, same estimate)."),
     as_json: bool = typer.Option(False, "--json", help="Write JSON instead of a TOML scenario fragment."),
     out_file: Optional[Path] = typer.Option(
         None, "--out", help="Write to this file (atomically) instead of stdout; .json implies --json.", show_default=False
@@ -333,9 +227,9 @@ def design(
     Examples: `stressbots design --robots 4`;
     `stressbots design --robots 12 --ties --sd-V 2 --out design.toml`.
     """
-    from .design import design_string, estimate_yield
+    from .design import design_string, estimate_yield, round_design
     from .electrostatics import Electrodes
-    from .outputs import to_json, write_text
+    from .outputs import prepare_file, to_json, write_text
 
     e = Electrodes(
         max_V=max_v,
@@ -345,32 +239,46 @@ def design(
         drive_frequency_hz=drive_frequency_hz,
         hold_s=hold_s,
     )
+    if out_file is not None:
+        prepare_file(out_file)
     d = design_string(robots, e, ties=ties)
+    if resolution_v > 0:
+        d = round_design(d, resolution_v)
+    if sd_v is not None and not (0 <= sd_v <= 100):
+        raise StressbotsError(f"must be a number in [0, 100] V, got {sd_v:g}", source="--sd-V")
     y = estimate_yield(d, sd_v, trials=trials, seed=seed) if sd_v is not None else None
     use_json = as_json or (out_file is not None and out_file.suffix.lower() == ".json")
     text = to_json(d.to_json_dict(y)) if use_json else d.to_toml(y)
     if out_file is None:
         sys.stdout.write(text)
         return
-    if out_file.exists() and out_file.is_dir():
-        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
     write_text(out_file, text)
     err.print(f"wrote {out_file}: STRING design for {d.n} robots, smallest gap {d.min_gap_V:g} V", highlight=False, soft_wrap=True)
     if y is not None:
         err.print(f"yield (sd {y.sd_V:g} V): {y.fraction:.4f}, 95% CI {y.ci_low:.4f}-{y.ci_high:.4f}", highlight=False, soft_wrap=True)
 
 
+#: Sampled waveform outputs (.npy/.csv) above this many samples need --large: about 32 MB as .npy and
+#: 40 MB as CSV. The segments (.json) describe any waveform exactly in a few kB.
+LARGE_SAMPLES = 2_000_000
+
+
 @app.command()
 def waveform(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages and the limits.", show_default=False),
     out_file: Path = typer.Option(
-        ..., "--out", help="Output file: .npy (samples, columns t_s and volts), .csv (same) or .json (segments).", show_default=False
+        ..., "--out", help="Output file: .json (segments, small), .npy (samples, columns t_s and volts) or .csv (same).",
+        show_default=False,
     ),
     steps: Optional[str] = typer.Option(
         None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False
     ),
-    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (SPEC 7) instead of --steps.", show_default=False),
-    rate_hz: float = typer.Option(100_000.0, "--rate-hz", help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (as `stressbots plan` writes) instead of --steps.",
+                                        show_default=False),
+    rate_hz: float = typer.Option(100_000.0, "--rate-hz", min=1.0, max=10_000_000.0,
+                                  help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
+    large: bool = typer.Option(False, "--large", help=f"Allow a sampled output of more than {LARGE_SAMPLES:,} samples (tens of MB or more)."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Synthesise the voltage waveform of a list of primitives and write it.
 
@@ -378,35 +286,34 @@ def waveform(
     keep margin_V from every threshold and stay in [0, max_V]), then drives for the given time: a
     square wave between drive_low_V and drive_high_V at drive_frequency_hz. Refuses inaccessible states
     and a drive band that would flip an arm. Primitive names are those `stressbots states` prints.
+    A .json output lists the segments (exact, small); .npy/.csv sample them, which for a whole plan is
+    large (a 2-minute plan at 100 kS/s is 200 MB of CSV), so more than 2,000,000 samples need --large.
 
     Examples: `stressbots waveform examples/four-robots.toml --steps P1:2.5,P0:1.0 --out wf.npy`;
-    `stressbots waveform SCENARIO --plan out/plan.json --out wf.csv --rate-hz 50000`.
+    `stressbots waveform SCENARIO --plan out/plan/plan.json --out wf.json`.
     """
     from .electrostatics import analyse_scenario
-    from .outputs import check_not_input
-    from .waveform import export, parse_steps, replay, steps_from_plan, synthesize
+    from .outputs import prepare_file
+    from .waveform import export, replay, synthesize
 
     if (steps is None) == (plan is None):
         raise StressbotsError("give exactly one of --steps or --plan", source="stressbots waveform")
-    check_not_input(out_file, [scenario, plan])
-    if out_file.exists() and out_file.is_dir():
-        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
     if out_file.suffix.lower() not in (".npy", ".csv", ".json"):
-        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .npy, .csv or .json file", source="--out")
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .json, .npy or .csv file", source="--out")
+    prepare_file(out_file, inputs=[scenario, plan])
     sc = scenario_arg(scenario)
     analysis = analyse_scenario(sc)
-    if plan is not None:
-        from .plans import load as load_plan
-
-        step_list = steps_from_plan(load_plan(plan), analysis, source=str(plan))
-    else:
-        step_list = parse_steps(steps, analysis)
+    step_list = _waveform_steps(analysis, steps, plan)
+    _check_sampled_size(out_file, step_list, sc, rate_hz, large)
     wf = synthesize(analysis, step_list)
     decoded = replay(wf, analysis.snap_down_V, analysis.release_V)
     summary = export(wf, out_file, rate_hz=rate_hz, drive_frequency_hz=sc.electrodes.drive_frequency_hz)
+    if quiet:
+        return
     levels = ", ".join(f"{v:g}" for v in summary.levels_V)
+    size = out_file.stat().st_size
     out.print(
-        f"wrote {out_file}: {summary.segments} segments ({summary.holds} holds, {summary.drives} drives), "
+        f"wrote {out_file} ({size / 1e6:.3g} MB): {summary.segments} segments ({summary.holds} holds, {summary.drives} drives), "
         f"{summary.duration_s:g} s" + (f", {summary.samples} samples at {summary.rate_hz:g} Hz" if summary.samples else ""),
         highlight=False,
         soft_wrap=True,
@@ -420,40 +327,126 @@ def waveform(
     )
 
 
+def _waveform_steps(analysis, steps: str | None, plan: Path | None) -> list:
+    """The (state, duration) steps of ``waveform``, from --plan or --steps, bounded in total duration."""
+    from .plans import MAX_PLAN_S
+    from .waveform import parse_steps, steps_from_plan
+
+    if plan is not None:
+        from .plans import load as load_plan
+
+        return steps_from_plan(load_plan(plan), analysis, source=str(plan))
+    assert steps is not None
+    if len(steps) > 100_000:
+        raise StressbotsError(f"too long ({len(steps)} characters); give a plan file (--plan) for long sequences", source="--steps")
+    step_list = parse_steps(steps, analysis)
+    total = sum(d for _, d in step_list)
+    if total > MAX_PLAN_S:
+        raise StressbotsError(f"the drives add up to {total:g} s; at most {MAX_PLAN_S:g} s are accepted", source="--steps")
+    return step_list
+
+
+def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bool) -> None:
+    """Refuse, before synthesising, a sampled output larger than :data:`LARGE_SAMPLES` without --large."""
+    if out_file.suffix.lower() == ".json":
+        return
+    e = sc.electrodes
+    total = sum(d for _, d in step_list) + 2 * sc.n * e.hold_s * len(step_list)
+    samples = int(total * rate_hz)
+    if samples > LARGE_SAMPLES and not large:
+        per = 16 if out_file.suffix.lower() == ".npy" else 22
+        raise StressbotsError(
+            f"{out_file} would hold about {samples:,} samples ({total:.3g} s at {rate_hz:g} Hz, about {samples * per / 1e6:.0f} MB): "
+            f"write the segments instead (a .json file), lower --rate-hz, or pass --large",
+            source="--out",
+        )
+
+
 @app.command()
 def plan(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) with start poses and goals or a [structure].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for plan.json, plan.png and summary.json.", show_default=False),
-    seed: int = typer.Option(0, "--seed", help="Seed of the route search's random waypoints (recorded in plan.json)."),
-    clearance_um: float = typer.Option(10.0, "--clearance-um", min=0.0, help="Distance kept from orbits, the structure and the arena edge (um)."),
-    approach_um: float = typer.Option(160.0, "--approach-um", min=1.0, help="Final approach into every slot (um): a gentle clockwise arc, then a short straight push."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the route search's random waypoints (recorded in plan.json)."),
+    clearance_um: Optional[float] = typer.Option(
+        None, "--clearance-um", min=0.0, max=1000.0,
+        help="Distance kept from orbits, the structure and the arena edge (um); default the controller's setting.", show_default=False,
+    ),
+    approach_um: Optional[float] = typer.Option(
+        None, "--approach-um", min=1.0, max=5000.0,
+        help="Final approach into every slot (um): a gentle clockwise arc, then a short straight push; default the controller's.",
+        show_default=False,
+    ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Plan the assembly: one sequence of primitives that docks every robot in its slot.
 
     D_n and D_{n-1} form G_1 while the others orbit; then D_{n-2} .. D_1 dock one at a time
-    (seed Appendix 2, generalised). The plan is replayed by an independent verifier before it is written.
+    (the paper's Appendix 2, generalised). The plan is replayed by an independent verifier before it
+    is written. With the default settings it is exactly the plan `run`, `simulate` and `demo` follow;
+    --clearance-um or --approach-um plan differently (for exploring), and say so.
 
     Example: `stressbots plan examples/four-robots.toml --out out/plan`
     """
+    import time
+
     from . import plans as plans_mod
     from .outputs import check_not_input, prepare_dir, save_figure, write_json
-    from .planning import PlannerOptions, plan_assembly
+    from .pipeline import plan_for
     from .viz import plot_plan
 
-    scn = scenario_arg(scenario)
+    t0 = time.perf_counter()
+    scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
     for name in ("plan.json", "plan.png", "summary.json"):
         check_not_input(folder / name, [scenario])
-    opts = PlannerOptions(clearance_um=clearance_um, approach_um=approach_um, seed=seed)
-    with err.status("planning...", spinner="dots") if not quiet else _nullcontext():
-        result = plan_assembly(scn, opts)
+    options = _planner_options(seed, clearance_um, approach_um)
+    with err.status("planning...", spinner="dots") if not quiet and err.is_terminal else _nullcontext():
+        result = plan_for(scn, str(scenario), seed=seed, options=options)
     plans_mod.save(result.plan, folder / "plan.json")
-    write_json(folder / "summary.json", {**result.summary, "provenance": dict(result.plan.provenance)})
+    wall = time.perf_counter() - t0
+    write_json(folder / "summary.json", {**result.summary, "wall_time_s": wall, "controller_settings": options is None,
+                                         "provenance": dict(result.plan.provenance)})
     save_figure(plot_plan(scn, result), folder / "plan.png")
     if not quiet:
-        _print_plan_summary(scn, result)
-        out.print(f"wrote {folder / 'plan.json'}, {folder / 'plan.png'}, {folder / 'summary.json'}")
+        _print_plan_summary(scn, result, time.perf_counter() - t0)
+        if options is not None:
+            out.print("note: planned with non-default settings: `run`, `simulate` and `demo` follow a different plan",
+                      highlight=False, soft_wrap=True)
+        out.print(f"wrote {folder / 'plan.json'}, {folder / 'plan.png'}, {folder / 'summary.json'}", highlight=False, soft_wrap=True)
+
+
+def _planner_options(seed: int, clearance_um: float | None, approach_um: float | None):
+    """None (the controller's planner settings) unless the user changed a planner option."""
+    if clearance_um is None and approach_um is None:
+        return None
+    from dataclasses import replace
+
+    from .planning import PlannerOptions
+
+    base = PlannerOptions(seed=seed)
+    try:
+        from .edr import PLAN_CLEARANCE_UM
+
+        base = replace(base, clearance_um=PLAN_CLEARANCE_UM)
+    except ImportError:  # pragma: no cover - depends on the controller
+        pass
+    if clearance_um is not None:
+        base = replace(base, clearance_um=clearance_um)
+    if approach_um is not None:
+        base = replace(base, approach_um=approach_um)
+    return base
+
+
+@contextlib.contextmanager
+def _attributed(source: str):
+    """Name ``source`` in a user error raised inside that names no file (e.g. a planning error)."""
+    try:
+        yield
+    except StressbotsError as exc:
+        if exc.source is None:
+            exc.source = source
+            exc.args = (exc.message,)
+        raise
 
 
 def _nullcontext():
@@ -462,7 +455,7 @@ def _nullcontext():
     return contextlib.nullcontext()
 
 
-def _print_plan_summary(scn, result) -> None:
+def _print_plan_summary(scn, result, wall_s: float) -> None:
     from rich.table import Table
 
     s = result.summary
@@ -477,10 +470,11 @@ def _print_plan_summary(scn, result) -> None:
     out.print(t)
     out.print(
         f"duration {s['duration_s']:.1f} s in {s['steps']} steps; lower bound {s['lower_bound_s']:.1f} s; "
-        f"efficiency {s['efficiency']:.2f}; planned in {s['planning_time_s']:.2f} s"
+        f"efficiency {s['efficiency']:.2f}; planned in {wall_s:.1f} s (wall time of the command)",
+        highlight=False, soft_wrap=True,
     )
     for note in result.notes:
-        out.print(f"note: {note}")
+        out.print(f"note: {note}", highlight=False, soft_wrap=True)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -538,10 +532,13 @@ def simulate(
     if plan is None:
         _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet)
         return
-    scn = scenario_arg(scenario)
+    from .scenario import check_starts
+
+    scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario, plan])
     for name in ("result.json", "trajectory.png"):
         check_not_input(folder / name, [scenario, plan])
+    check_starts(scn, source=str(scenario))
     the_plan = load_plan(plan)
     check_against(the_plan, scn, source=str(plan))
     goals = np.full((scn.n, 3), np.nan)
@@ -616,17 +613,20 @@ def simulate(
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
-    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, robot_table, run_pictures, verdict_text
+    from .console import robot_table, verdict_text
+    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, run_pictures
     from .report import animation_page
+    from .scenario import check_starts
 
     budget = finite_budget(time_budget_s)
-    scn = _with_noise_choice(scenario_arg(scenario), noise)
+    scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
     folder = prepare_dir(out_dir, inputs=[scenario])
     names = ("result.json", "trajectory.png", "structure.png", "animation.html")
     for name in names:
         check_not_input(folder / name, [scenario])
     if not scn.has_starts:
         raise StressbotsError("every robot needs a start pose to be simulated (robots[].start)", source=str(scenario), field="robots")
+    check_starts(scn, source=str(scenario))
     show = not quiet and err.is_terminal  # spinners only on a terminal (no stray lines in logs)
     with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext() as status:
         plan_result = plan_for(scn, str(scenario))
@@ -662,6 +662,39 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
 # bounds, montecarlo
 
 
+#: Largest --k of `bounds` (standard deviations): beyond 10 sigma every error box is meaningless.
+MAX_K = 10.0
+
+
+def _check_structure_in_arena(scn, source: str) -> None:
+    """Refuse, before computing, a target whose every slot layout leaves the arena (as the planner does)."""
+    if scn.arena_um is None:
+        return
+    from .collision import outside_arena
+    from .electrostatics import analyse_scenario
+    from .structures import target_structures
+
+    analysis = analyse_scenario(scn)
+    if not analysis.is_string or scn.n < 2:
+        return  # the command itself explains why it cannot go on
+    robots = [scn.robots[i] for i in analysis.order_index]
+    worst = None
+    for st in target_structures(robots, scn.structure):
+        goals = st.goal_poses(scn.names)
+        over = outside_arena(goals, scn.lengths_um, scn.widths_um, scn.arena_um)
+        if not np.any(over > 0):
+            return
+        i = int(np.argmax(over))
+        worst = (scn.names[i], float(over[i])) if worst is None or over[i] > worst[1] else worst
+    if worst is not None:
+        w, h = scn.arena_um
+        field = "structure.at" if scn.structure is not None else "robots.goal"
+        raise StressbotsError(
+            f"the target does not fit in the arena [0, {w:g}] x [0, {h:g}] um: the slot of {worst[0]} is {worst[1]:.1f} um outside",
+            source=source, field=field,
+        )
+
+
 def _finite_nonneg(value: float, option: str) -> float:
     import math
 
@@ -680,15 +713,15 @@ def bounds(
         False, "--critical", help="Also find, per robot, the largest multiple of [noise] at which it is still guaranteed (a few s)."
     ),
     coverage_trials: int = typer.Option(
-        0, "--coverage-trials", min=0, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
+        0, "--coverage-trials", min=0, max=10_000, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the coverage runs."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
 ) -> None:
-    """Error bounds of the EDR strategy (seed App. 3.4): delta(t), C_alpha,i, A_i* and a verdict per robot.
+    """Error bounds of the EDR strategy (the paper's App. 3.4): delta(t), C_alpha,i, A_i* and a verdict per robot.
 
-    delta(t) integrates the kinematic error model in closed form (SPEC 3 arcs with speed v + v_e and
-    turn rate omega + omega_e, SPEC 8) over a k-sigma box of the scenario's [noise]: speed and radius
+    delta(t) integrates the kinematic error model in closed form (straight runs and clockwise arcs with
+    speed v + v_e and turn rate omega + omega_e) over a k-sigma box of the scenario's [noise]: speed and radius
     factors (plus the simulator's per-Drive jitter) and heading drift; the worst case over the box and
     over time. C_alpha,i has radius delta_xy(t_2pi) and half-height delta_theta(t_2pi) (t_theta =
     theta / omega_hat, slowest turn), plus the camera's error. D_n's timed forward projection covers its
@@ -707,7 +740,10 @@ def bounds(
     from .viz import plot_bounds
 
     k = _finite_nonneg(k, "--k")
-    scn = scenario_arg(scenario)
+    if k > MAX_K:
+        raise StressbotsError(f"must be in [0, {MAX_K:g}] standard deviations, got {k:g}", source="--k")
+    scn = scenario_arg(scenario, moving=True)
+    _check_structure_in_arena(scn, str(scenario))
     folder = None
     if out_dir is not None:
         folder = prepare_dir(out_dir, inputs=[scenario])
@@ -795,10 +831,10 @@ def bounds(
 @app.command()
 def montecarlo(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, target and [noise].", show_default=False),
-    trials: int = typer.Option(100, "--trials", min=1, help="Closed-loop trials (at each noise scale)."),
+    trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
     seed: int = typer.Option(0, "--seed", min=0, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
     sweep: Optional[str] = typer.Option(
         None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
     ),
@@ -827,14 +863,15 @@ def montecarlo(
     factors = mc.parse_sweep(sweep) if sweep is not None else None
     if time_budget_s is not None and not (time_budget_s > 0 and time_budget_s < float("inf")):
         raise StressbotsError(f"must be a finite number > 0 s, got {time_budget_s:g}", source="--time-budget-s")
-    scn = scenario_arg(scenario)
+    scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
     for name in ("summary.json", "montecarlo.png", "sweep.png"):
         check_not_input(folder / name, [scenario])
     assemble = mc.default_assemble()
     show = not (quiet or as_json)
     with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext():
-        plan = mc.default_planner()(scn)
+        with _attributed(str(scenario)):
+            plan = mc.default_planner()(scn)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     total = trials * (1 + len([f for f in (factors or ()) if f != 1.0]))
@@ -904,28 +941,82 @@ _ClickException = _click_base("ClickException")
 
 
 def main(argv: Optional[list[str]] = None) -> None:
-    """Console-script entry point: run the CLI, mapping user errors to ``error:`` + exit 2."""
-    command = typer.main.get_command(app)
+    """Console-script entry point: run the CLI, mapping every failure to one ``error:`` line.
+
+    Exit status: 0 done, 1 internal error (a bug: ``error: internal error: ...``; set
+    ``STRESSBOTS_DEBUG=1`` for the traceback), 2 bad input, 130 interrupted (files already written stay,
+    none is left half-written). Warnings of the numerical libraries are not shown (one line per error).
+    """
+    import os
+    import warnings
+
+    command = _plain_flags(typer.main.get_command(app))
     args = sys.argv[1:] if argv is None else list(argv)
     try:
-        code = command.main(args=args, prog_name="stressbots", standalone_mode=False)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            code = command.main(args=args, prog_name="stressbots", standalone_mode=False)
     except StressbotsError as exc:
-        print(f"error: {exc.message}", file=sys.stderr)
-        sys.exit(2)
+        _fail(exc.message, 2)
     except _UsageError as exc:
         if type(exc).__name__ == "NoArgsIsHelpError":  # bare `stressbots`: Typer has shown the help
             sys.exit(0)
         msg = " ".join(exc.format_message().split())
         where = f"stressbots {exc.ctx.info_name}" if exc.ctx is not None and exc.ctx.parent is not None else "stressbots"
-        print(f"error: {msg} (see '{where} --help')", file=sys.stderr)
-        sys.exit(2)
+        _fail(f"{msg} (see '{where} --help')", 2)
     except _ClickException as exc:
-        print(f"error: {' '.join(exc.format_message().split())}", file=sys.stderr)
-        sys.exit(2)
+        _fail(" ".join(exc.format_message().split()), 2)
     except (typer.Abort, KeyboardInterrupt):
-        print("error: interrupted", file=sys.stderr)
-        sys.exit(130)
+        _fail("interrupted", 130)
     except BrokenPipeError:  # e.g. `stressbots states x.toml | head`
         sys.exit(0)
+    except typer.Exit as exc:  # pragma: no cover - Typer raises it only in standalone mode
+        sys.exit(exc.exit_code)
+    except MemoryError:
+        _fail("out of memory: the problem is too large for this machine (fewer robots or a smaller arena)", 2)
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, exit 1, the traceback on request
+        if os.environ.get("STRESSBOTS_DEBUG"):
+            raise
+        _fail(f"internal error: {type(exc).__name__}: {exc} (please report it; STRESSBOTS_DEBUG=1 shows the traceback)", 1)
     if isinstance(code, int) and code != 0:
         sys.exit(code)
+
+
+def _plain_flags(command):
+    """Show on/off options (``--json``, ``-q``, ``--help``) as plain flags in ``--help``: Typer would print a
+    ``<bool>`` type beside them, suggesting a value (``--json true``) that the flag does not take."""
+
+    def fix(cmd) -> None:
+        for p in getattr(cmd, "params", ()):
+            if getattr(p, "is_flag", False) and not getattr(p, "count", False):
+                p.metavar = ""
+        for sub in getattr(cmd, "commands", {}).values():
+            fix(sub)
+
+    fix(command)
+    # --help is made on demand by each command class: make it plain too (once per class).
+    for cls in {type(command), *(type(c) for c in getattr(command, "commands", {}).values())}:
+        if cls.__dict__.get("_stressbots_plain_help"):
+            continue
+        original = cls.get_help_option
+
+        def get_help_option(self, ctx, _original=original):
+            opt = _original(self, ctx)
+            if opt is not None:
+                opt.metavar = ""
+            return opt
+
+        cls.get_help_option = get_help_option  # type: ignore[method-assign]
+        cls._stressbots_plain_help = True  # type: ignore[attr-defined]
+    return command
+
+
+def _fail(message: str, status: int) -> None:
+    """Print ``error: MESSAGE`` as exactly one line on stderr and exit with ``status``."""
+    text = " ".join(str(message).split())
+    if not text.isprintable():
+        text = text.encode("unicode_escape").decode("ascii")
+    try:
+        print(f"error: {text}", file=sys.stderr)
+    finally:
+        sys.exit(status)

@@ -94,7 +94,7 @@ def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_
     error levels, plus the waveform tour (``tour/``) and, for comparison, the same plan open loop with and
     without noise and closed loop without noise (``comparisons/``). Returns a small summary dict.
     """
-    from .cli import render_analysis, render_waveform
+    from .console import RichJobObserver, render_analysis, render_waveform
     from .electrostatics import analyse_scenario
     from .outputs import prepare_dir, save_figure, write_json
     from .pipeline import run_job
@@ -141,7 +141,7 @@ def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_
         console.print()
     job = run_job(
         scenario, out, seed=seed, source="built-in demo scenario (stressbots/data/demo.toml)", time_budget_s=DEMO_TIME_BUDGET_S,
-        console=console, err_console=err_console, quiet=quiet, show_analysis=False, extra=_comparisons,
+        observer=RichJobObserver(console, err_console, quiet=quiet, show_analysis=False), extra=_comparisons,
         title=f"stressbots demo: {scenario.name}",
     )
     return {

@@ -36,7 +36,7 @@ import numpy as np
 from .electrostatics import TOLERANCE_V, ControlAnalysis, Electrodes, analyse_thresholds, apply_level
 from .errors import DesignError
 
-__all__ = ["StringDesign", "YieldEstimate", "side_clearance", "max_robots", "design_string", "estimate_yield", "works", "check_limits"]
+__all__ = ["StringDesign", "YieldEstimate", "side_clearance", "max_robots", "design_string", "estimate_yield", "works", "check_limits", "round_design", "DEFAULT_RESOLUTION_V"]
 
 #: Largest design produced (the check analyses it, with O(N^2) memory); a margin of 0 fits any N.
 MAX_DESIGN_ROBOTS = 2000
@@ -296,6 +296,69 @@ def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> Stri
         draft,
         raise_levels_V=tuple(float(x) for x in a.raise_levels_V),
         release_levels_V=tuple(float(x) for x in a.release_levels_V),
+    )
+
+
+#: Resolution of the levels an instrument sets (V): a waveform generator behind a high-voltage amplifier
+#: sets levels in steps of about 0.1 V, so designed thresholds finer than that are spurious precision.
+DEFAULT_RESOLUTION_V = 0.1
+
+
+def _on_grid(values, resolution_V: float) -> tuple[float, ...]:
+    """Values rounded to multiples of ``resolution_V``, printed without float noise (133.9, not 133.90000000000001)."""
+    digits = max(0, -math.floor(math.log10(resolution_V)) + 3)
+    return tuple(round(round(float(v) / resolution_V) * resolution_V, digits) for v in values)
+
+
+def round_design(design: StringDesign, resolution_V: float = DEFAULT_RESOLUTION_V) -> StringDesign:
+    """The design with every threshold and hold level rounded to the instrument's resolution.
+
+    Rounding moves each value by at most ``resolution_V / 2``; the gaps and the clearance are measured
+    again on the rounded values (the clearance as the smallest distance from a threshold to a level
+    used: 0 V, the hold levels, the drive band, max_V).
+
+    Raises
+    ------
+    DesignError
+        ``resolution_V`` is not a finite number > 0, or the rounded design is no longer STRING or keeps
+        less than margin_V from a level (then use a finer resolution).
+
+    Examples
+    --------
+    >>> from stressbots.electrostatics import Electrodes
+    >>> d = round_design(design_string(4, Electrodes()))
+    >>> d.snap_down_V
+    (116.9, 140.6, 164.4, 188.1)
+    """
+    if isinstance(resolution_V, bool) or not (isinstance(resolution_V, (int, float)) and 0 < resolution_V <= 10):
+        raise DesignError(f"must be a number in (0, 10] V, got {resolution_V!r}", source="--resolution-V")
+    vd = _on_grid(design.snap_down_V, resolution_V)
+    vu = _on_grid(design.release_V, resolution_V)
+    a = analyse_thresholds(vd, vu, design.electrodes, names=design.names)
+    e = design.electrodes
+    levels = _on_grid([v for v in np.r_[a.raise_levels_V, a.release_levels_V] if math.isfinite(v)], resolution_V)
+    used = np.array([*levels, 0.0, e.drive_low_V, e.drive_high_V, e.max_V])
+    th = np.array(vd + vu)
+    clearance = float(np.min(np.abs(th[:, None] - used[None, :])))
+    if not a.is_string or clearance < e.margin_V - 1e-9:
+        raise DesignError(
+            f"rounding the design to {resolution_V:g} V leaves {clearance:.3g} V between a threshold and a level, less "
+            f"than margin_V {e.margin_V:g} V; use a finer resolution",
+            source="--resolution-V",
+        )
+    gaps = [b - c for side in (sorted(set(vd)), sorted(set(vu))) for c, b in zip(side, side[1:])]
+
+    def rounded_levels(vals) -> tuple[float, ...]:
+        return tuple(_on_grid([v], resolution_V)[0] if math.isfinite(v) else math.nan for v in vals)
+
+    return replace(
+        design,
+        snap_down_V=vd,
+        release_V=vu,
+        raise_levels_V=rounded_levels(a.raise_levels_V),
+        release_levels_V=rounded_levels(a.release_levels_V),
+        min_gap_V=_on_grid([min(gaps)], resolution_V / 1000)[0] if gaps else math.inf,
+        clearance_V=_on_grid([clearance], resolution_V / 1000)[0],
     )
 
 

@@ -58,25 +58,125 @@ def check_not_input(path: Path, inputs: Iterable[Path | str | None], *, option: 
 
 
 def prepare_dir(path: Path | str, *, inputs: Iterable[Path | str | None] = (), option: str = "--out") -> Path:
-    """Create an output folder (and parents). Refuses a path that is an existing file or an input."""
+    """Create an output folder (and parents) and check that it can be written, before any computation.
+
+    Refuses a path that is an input, an existing file, under a regular file, or not writable, with one
+    :class:`StressbotsError` naming the path. Hidden temporary files that a killed earlier run left
+    behind (:func:`clean_stale_temporaries`) are removed.
+    """
     out = Path(path)
     for src in inputs:
         if src is not None and _same_file(out, Path(src)):
-            raise StressbotsError(f"is the input file {src}; give a folder for the outputs", source=option)
+            raise StressbotsError(f"{out} is the input file {src}; give a folder for the outputs", source=option)
     if out.exists() and not out.is_dir():
         raise StressbotsError(f"{out} exists and is not a folder", source=option)
+    blocker = _file_ancestor(out)
+    if blocker is not None:
+        raise StressbotsError(f"cannot create folder {out}: {blocker} is a file, not a folder", source=option)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise StressbotsError(f"cannot create folder {out}: {exc.strerror}", source=option) from None
+        raise StressbotsError(f"cannot create folder {out}: {exc.strerror or exc}", source=option) from None
+    _probe_writable(out, option)
+    clean_stale_temporaries(out)
     return out
 
 
-def write_bytes(path: Path | str, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename)."""
+def prepare_file(path: Path | str, *, inputs: Iterable[Path | str | None] = (), option: str = "--out") -> Path:
+    """Check, before any computation, that a single output file can be written at ``path``.
+
+    The path must not be an input or an existing folder; its folder is created if needed and must be
+    writable. The file itself is written later (atomically) by :func:`write_bytes`.
+    """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    check_not_input(target, inputs, option=option)
+    if target.is_dir():
+        raise StressbotsError(f"{target} is a folder; give a file name", source=option)
+    prepare_dir(target.parent if str(target.parent) else Path("."), option=option)
+    return target
+
+
+def _file_ancestor(path: Path) -> Path | None:
+    """The first existing ancestor of ``path`` (or ``path``'s parent chain) that is not a folder."""
+    for p in [path, *path.parents]:
+        if p.exists():
+            return None if p.is_dir() else (p if p != path else None)
+    return None
+
+
+def _probe_writable(folder: Path, option: str) -> None:
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".stressbots-probe.{os.getpid()}.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise StressbotsError(f"cannot write into folder {folder}: {exc.strerror or exc}", source=option) from None
+    os.close(fd)
+    try:
+        os.unlink(probe)
+    except OSError:  # pragma: no cover - the folder was writable a moment ago
+        pass
+
+
+#: Temporary files older than this (s) whose writer cannot be identified are stale.
+STALE_TMP_S = 600.0
+
+
+def clean_stale_temporaries(folder: Path) -> list[Path]:
+    """Remove hidden ``.NAME.PID.XXXX.tmp`` files of :func:`write_bytes` whose writer is gone.
+
+    A process killed with SIGKILL cannot remove its temporary file; the next run in the same folder
+    does. A file whose process id is still alive (another run writing now) is kept; one without a
+    readable id is removed only when older than :data:`STALE_TMP_S`.
+    """
+    import time
+
+    removed: list[Path] = []
+    try:
+        entries = list(folder.glob(".*.tmp"))
+    except OSError:
+        return removed
+    for f in entries:
+        parts = f.name.split(".")
+        pid = int(parts[-3]) if len(parts) >= 4 and parts[-3].isdigit() else None
+        try:
+            if pid is not None:
+                if pid != os.getpid() and _alive(pid):
+                    continue
+                if pid == os.getpid():
+                    continue
+            elif time.time() - f.stat().st_mtime < STALE_TMP_S:
+                continue
+            f.unlink()
+            removed.append(f)
+        except OSError:
+            continue
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def write_bytes(path: Path | str, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename).
+
+    The temporary file is hidden and carries the writer's process id (``.NAME.PID.XXXX.tmp``) so that a
+    later run can remove it if this process is killed. A failure to write is a :class:`StressbotsError`
+    naming the path.
+    """
+    target = Path(path)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.is_dir():
+            raise StressbotsError(f"{target} is a folder; cannot write a file there", source="--out")
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent)
+    except OSError as exc:
+        raise StressbotsError(f"cannot write {target}: {exc.strerror or exc}", source="--out") from None
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
@@ -84,11 +184,13 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644 & ~_umask())  # mkstemp makes 0600; results are ordinary readable files
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(exc, OSError):
+            raise StressbotsError(f"cannot write {target}: {exc.strerror or exc}", source="--out") from None
         raise
     return target
 

@@ -10,17 +10,17 @@
    ``states.json``, ``waveform.json`` / ``waveform.npy`` and the pictures.
 
 A run that does not assemble is still a finished job: it gets the same files, with the controller's
-failure reason and the event log. Only bad input (a :class:`~stressbots.errors.StressbotsError`) stops
-the job. An unexpected exception inside the controller is reported as the run's failure (with its
-traceback in ``result.json``), as the Monte Carlo runner does, so the report still shows how far the
-robots got.
+failure reason and the event log. Bad input (a :class:`~stressbots.errors.StressbotsError`) stops the
+job before anything is computed where it can be found out in advance. An unexpected exception inside
+the computation is a bug, not an outcome: it propagates (the CLI reports it as an internal error, exit
+status 1). Progress goes to a :class:`JobObserver` (the console's is in :mod:`stressbots.console`), so
+this module prints nothing.
 """
 
 from __future__ import annotations
 
 import math
 import time
-import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
@@ -29,7 +29,8 @@ import numpy as np
 
 from .errors import StressbotsError
 
-__all__ = ["OUTPUT_FILES", "ClosedLoop", "JobResult", "closed_loop", "result_document", "merged_events", "run_job"]
+__all__ = ["OUTPUT_FILES", "ClosedLoop", "JobObserver", "JobResult", "JobSummary", "closed_loop", "plan_for", "result_document",
+           "merged_events", "run_job"]
 
 #: Sample rate of the sampled waveform excerpt (Hz) and its length (s).
 RATE_HZ = 100_000.0
@@ -85,7 +86,6 @@ class ClosedLoop:
     plant: Any  # stressbots.sim.SimulatedPlant
     wall_s: float
     time_budget_s: float | None
-    error: str | None = None  # traceback of an exception the controller raised
 
 
 def default_time_budget_s() -> float | None:
@@ -98,13 +98,22 @@ def default_time_budget_s() -> float | None:
         return None
 
 
-def plan_for(scenario, source: str | None = None):
-    """The nominal plan the controller follows (:func:`stressbots.control.nominal_plan`); a planning
-    error that names no file is attributed to ``source``."""
-    from .control import nominal_plan
+def plan_for(scenario, source: str | None = None, *, seed: int = 0, options=None):
+    """The nominal plan the controller follows (:func:`stressbots.control.nominal_plan`).
 
+    This one function plans for ``stressbots plan``, ``run``, ``simulate`` and ``demo``, so they all
+    follow the same plan (the planner settings are the controller's). ``seed`` is the route search's
+    seed; ``options`` (a :class:`~stressbots.planning.PlannerOptions`) replaces the controller's
+    settings when given. A planning error that names no file is attributed to ``source``.
+    """
     try:
-        return nominal_plan(scenario)
+        if options is not None:
+            from .planning import plan_assembly
+
+            return plan_assembly(scenario, options)
+        from .control import nominal_plan
+
+        return nominal_plan(scenario, seed=seed) if seed else nominal_plan(scenario)
     except StressbotsError as exc:
         if exc.source is None and source:
             exc.source = source
@@ -122,32 +131,8 @@ def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None
     if time_budget_s is not None:
         kwargs["time_budget_s"] = float(time_budget_s)
     t0 = time.perf_counter()
-    try:
-        res = assemble(scenario, _WatchedPlant(plant, on_time), **kwargs)
-        error = None
-    except StressbotsError:
-        raise
-    except Exception as exc:  # noqa: BLE001 - a controller crash is the run's outcome; the report shows it
-        error = traceback.format_exc()
-        res = _crashed_result(scenario, plant, plan_result, seed, f"controller error: {type(exc).__name__}: {exc}")
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error)
-
-
-def _crashed_result(scenario, plant, plan_result, seed, reason: str):
-    """An AssemblyResult for a run whose controller raised: the plant's truth, nothing docked by the controller."""
-    from .assessment import placement_errors, shape_error
-    from .control import AssemblyResult
-
-    final = plant.true_poses()
-    goals = plan_result.plan.goal_array()
-    shape = shape_error(final, goals, scenario.lengths_um, scenario.widths_um)
-    pos, head = placement_errors(final, goals)
-    return AssemblyResult(
-        success=False, seed=seed, names=scenario.names, final_true=final, final_observed=final.copy(), goals=goals,
-        nominal_goals=goals.copy(), docked=plant.docked, shape_error_rms_um=shape.rms_um, shape_rotation_deg=shape.rotation_deg,
-        placement_error_um=pos, heading_error_deg=head, duration_s=plant.time_s, replans=0,
-        events=({"t_s": round(plant.time_s, 3), "kind": "error", "robot": None, "detail": reason},), failure=reason,
-    )
+    res = assemble(scenario, _WatchedPlant(plant, on_time), **kwargs)
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s)
 
 
 def merged_events(result, plant) -> list[dict[str, Any]]:
@@ -196,8 +181,6 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
         **(extra or {}),
         "provenance": provenance(run.result.seed),
     }
-    if run.error:
-        more["controller_traceback"] = run.error
     for k, v in more.items():
         doc.setdefault(k, v)
     return doc
@@ -292,13 +275,42 @@ class Extra:
     summary: dict[str, Any] = field(default_factory=dict)
 
 
-def _progress(err_console, quiet: bool):
-    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+class JobObserver:
+    """Watches :func:`run_job`: the job tells it what it computed and how far it got; this base does nothing.
 
-    return Progress(
-        SpinnerColumn(), TextColumn("{task.description:<22}"), BarColumn(), TextColumn("{task.fields[info]}"), TimeElapsedColumn(),
-        console=err_console, disable=quiet or not err_console.is_terminal, transient=False,
-    )
+    A console (:class:`stressbots.console.RichJobObserver`) shows tables and progress bars; tests and
+    library callers use the silent default. Used as a context manager around the job's stages.
+    """
+
+    def analysed(self, scenario, analysis, source: str | None) -> None:
+        """The voltage analysis is done."""
+
+    def stage(self, name: str, *, total: float | None = None, completed: float | None = None, info: str | None = None,
+              advance: float | None = None) -> None:
+        """Stage ``name`` started (first call) or progressed."""
+
+    def finished(self, summary: "JobSummary") -> None:
+        """The job is done and its files are written."""
+
+    def __enter__(self) -> "JobObserver":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+
+@dataclass(frozen=True, eq=False)
+class JobSummary:
+    """What a finished job hands its observer: enough to print a summary."""
+
+    scenario: Any
+    plan_summary: dict[str, Any]
+    result: Any  # AssemblyResult
+    document: dict[str, Any]
+    out_dir: Path
+    report_bytes: int
+    wall_s: float
+    lines: tuple[str, ...] = ()
 
 
 def run_job(
@@ -309,158 +321,118 @@ def run_job(
     source: str | None = None,
     inputs: Iterable[Path | str | None] = (),
     time_budget_s: float | None = None,
-    console=None,
-    err_console=None,
-    quiet: bool = False,
+    observer: JobObserver | None = None,
     title: str | None = None,
     extra: Callable[[JobContext], Extra] | None = None,
-    show_analysis: bool = True,
 ) -> JobResult:
     """Analyse, plan, run closed loop on the simulator and write the report and its files into ``out_dir``.
 
-    ``inputs`` are the user's input files (never overwritten). ``console`` gets the readable summary
-    (stdout), ``err_console`` the progress bars; ``quiet`` leaves one summary line. ``extra`` runs after the
-    closed loop and adds comparison rows and files to the report (the demo uses it).
+    ``inputs`` are the user's input files (never overwritten). ``observer`` is told of every stage (for
+    progress bars and a printed summary; default: silent). ``extra`` runs after the closed loop and
+    adds comparison rows and files to the report (the demo uses it). The output folder is checked
+    before anything is computed.
     """
-    from rich.console import Console
-
-    from . import plans
     from .electrostatics import analyse_scenario
-    from .outputs import check_not_input, figure_bytes, prepare_dir, write_bytes, write_json, write_text
-    from .report import build_report
+    from .outputs import check_not_input, prepare_dir
+    from .scenario import check_movable, check_starts
     from .sim import plan_waveform
-    from .viz import plot_plan, plot_plan_waveform
-    from .waveform import export, excerpt, summarize, to_json
 
     t_job = time.perf_counter()
-    console = console or Console()
-    err_console = err_console or Console(stderr=True)
+    obs = observer or JobObserver()
     inputs = [p for p in inputs if p is not None]
     out = prepare_dir(out_dir, inputs=inputs)
     for name, _ in OUTPUT_FILES:
         check_not_input(out / name, inputs)
     if not scenario.has_starts:
         raise StressbotsError("every robot needs a start pose for the job (robots[].start)", source=source, field="robots")
+    check_movable(scenario, source=source)
+    check_starts(scenario, source=source)
     budget = time_budget_s if time_budget_s is not None else default_time_budget_s()
-
-    def line(text: str) -> None:
-        if not quiet:
-            console.print(text, highlight=False, soft_wrap=True)
-
     analysis = analyse_scenario(scenario)
-    if show_analysis and not quiet:
-        from .cli import render_analysis
-
-        render_analysis(analysis, console, title=f"{scenario.name}" + (f" ({source})" if source else ""))
-        console.print()
-    with _progress(err_console, quiet) as bar:
-        t_plan = bar.add_task("planning", total=None, info="")
+    obs.analysed(scenario, analysis, source)
+    with obs:
+        obs.stage("planning")
         plan_result = plan_for(scenario, source)
         s = plan_result.summary
-        bar.update(t_plan, total=1, completed=1, info=f"{s['duration_s']:.1f} s plan, {s['steps']} steps")
+        obs.stage("planning", total=1, completed=1, info=f"{s['duration_s']:.1f} s plan, {s['steps']} steps")
         wf = plan_waveform(scenario, plan_result.plan)
-        t_run = bar.add_task("closed loop", total=budget or None, info="")
+        obs.stage("closed loop", total=budget or None)
 
         def on_time(t: float) -> None:
-            bar.update(t_run, completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
+            obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
         run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time)
         res = run.result
-        bar.update(t_run, total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
-                   info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
-        ctx = JobContext(scenario, analysis, plan_result, out, run)
+        obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
+                  info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
         more = Extra()
         if extra is not None:
-            t_extra = bar.add_task("comparisons", total=None, info="")
-            more = extra(ctx)
-            bar.update(t_extra, total=1, completed=1, info=f"{len(more.comparisons)} runs")
-        t_rep = bar.add_task("pictures and report", total=5, info="")
-        figs: dict[str, bytes] = {}
-        figs["plan"] = figure_bytes(plot_plan(scenario, plan_result))
-        bar.advance(t_rep)
-        figs["waveform"] = figure_bytes(plot_plan_waveform(wf, analysis, title=f"{scenario.name}: waveform of the nominal plan"))
-        bar.advance(t_rep)
-        run_figs, anim = run_pictures(scenario, run)
-        figs.update(run_figs)
-        bar.advance(t_rep)
-        # files beside the report
-        plans.save(plan_result.plan, out / "plan.json")
-        write_json(out / "states.json", analysis.to_json_dict())
-        write_json(out / "waveform.json", to_json(wf))
-        wsum = export(excerpt(wf, EXCERPT_S), out / "waveform.npy", rate_hz=RATE_HZ,
-                      drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
-        for key in ("waveform", "plan", "run", "structure"):
-            write_bytes(out / f"{key}.png", figs[key])
-        doc = result_document(scenario, run, source=source, extra={
-            "plan": {"file": "plan.json", **{k: s.get(k) for k in ("structure", "variant", "duration_s", "steps", "lower_bound_s", "efficiency")}},
-            **({"comparisons": more.comparisons} if more.comparisons else {}),
-        })
-        write_json(out / "result.json", doc)
-        bar.advance(t_rep)
-        full = summarize(wf).as_dict()
-        full["excerpt"] = (f"waveform.json: all {full['segments']} segments; waveform.npy: the first {wsum.duration_s:g} s sampled at "
-                           f"{RATE_HZ / 1000:g} kS/s ({wsum.samples} samples); `stressbots waveform SCENARIO --plan plan.json --out FILE` "
-                           f"samples all of it")
-        by_name = {p.name: p for p in plan_result.plan.primitives}
-        steps = [(st.primitive, by_name[st.primitive].turning, st.duration_s) for st in plan_result.plan.steps]
-        files = [f for f in OUTPUT_FILES] + list(more.files)
-        html_text = build_report(
-            title=title or f"stressbots: {scenario.name}",
-            scenario=scenario, analysis=analysis, plan_summary=s, plan_steps=steps, plan_notes=plan_result.notes,
-            goals=plan_result.plan.goal_array(), waveform_summary=full, result=doc, figures=figs, animation=anim,
-            events=merged_events(res, run.plant), files=files, comparisons=more.comparisons,
-            provenance=doc.get("provenance"), source=source,
-        )
-        write_text(out / "report.html", html_text)
-        bar.advance(t_rep)
-        report_bytes = (out / "report.html").stat().st_size
-        bar.update(t_rep, info=f"report.html {report_bytes / 1e6:.2f} MB")
+            obs.stage("comparisons")
+            more = extra(JobContext(scenario, analysis, plan_result, out, run))
+            obs.stage("comparisons", total=1, completed=1, info=f"{len(more.comparisons)} runs")
+        doc, files, report_bytes = _write_outputs(scenario, analysis, plan_result, wf, run, more, out, obs,
+                                                  source=source, title=title)
     wall = time.perf_counter() - t_job
-    _print_summary(console, scenario, s, res, doc, out, report_bytes, wall, quiet, more.lines)
-    return JobResult(out, doc, out / "report.html", report_bytes, wall, tuple(n for n, _ in files), more.summary)
+    obs.finished(JobSummary(scenario, s, res, doc, out, report_bytes, wall, tuple(more.lines)))
+    return JobResult(out, doc, out / "report.html", report_bytes, wall, files, more.summary)
 
 
-def verdict_text(result_doc: dict[str, Any]) -> str:
-    """``assembled`` or ``not assembled: <reason>``."""
-    from .report import outcome_text
+def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: Extra, out: Path, obs: JobObserver, *,
+                   source: str | None, title: str | None) -> tuple[dict[str, Any], tuple[str, ...], int]:
+    """Pictures, the files beside the report, and report.html; returns the result document, the file
+    names and the report's size (bytes)."""
+    from . import plans
+    from .outputs import figure_bytes, write_bytes, write_json, write_text
+    from .viz import plot_plan, plot_plan_waveform
+    from .waveform import excerpt, export, to_json
 
-    return outcome_text(result_doc)
+    res, s = run.result, plan_result.summary
+    obs.stage("pictures and report", total=5)
+    figs: dict[str, bytes] = {"plan": figure_bytes(plot_plan(scenario, plan_result))}
+    obs.stage("pictures and report", advance=1)
+    figs["waveform"] = figure_bytes(plot_plan_waveform(wf, analysis, title=f"{scenario.name}: waveform of the nominal plan"))
+    obs.stage("pictures and report", advance=1)
+    run_figs, anim = run_pictures(scenario, run)
+    figs.update(run_figs)
+    obs.stage("pictures and report", advance=1)
+    plans.save(plan_result.plan, out / "plan.json")
+    write_json(out / "states.json", analysis.to_json_dict())
+    write_json(out / "waveform.json", to_json(wf))
+    wsum = export(excerpt(wf, EXCERPT_S), out / "waveform.npy", rate_hz=RATE_HZ,
+                  drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
+    for key in ("waveform", "plan", "run", "structure"):
+        write_bytes(out / f"{key}.png", figs[key])
+    doc = result_document(scenario, run, source=source, extra={
+        "plan": {"file": "plan.json", **{k: s.get(k) for k in ("structure", "variant", "duration_s", "steps", "lower_bound_s", "efficiency")}},
+        **({"comparisons": more.comparisons} if more.comparisons else {}),
+    })
+    write_json(out / "result.json", doc)
+    obs.stage("pictures and report", advance=1)
+    files = [*OUTPUT_FILES, *more.files]
+    write_text(out / "report.html", _report_html(scenario, analysis, plan_result, wf, wsum, run, doc, figs, anim, more, files,
+                                                 source=source, title=title))
+    report_bytes = (out / "report.html").stat().st_size
+    obs.stage("pictures and report", advance=1, info=f"report.html {report_bytes / 1e6:.2f} MB")
+    return doc, tuple(n for n, _ in files), report_bytes
 
 
-def _print_summary(console, scenario, plan_summary, res, doc, out: Path, report_bytes: int, wall: float, quiet: bool,
-                   extra_lines: Sequence[str]) -> None:
-    docked = int(np.sum(res.docked))
-    verdict = verdict_text(doc)
-    if quiet:
-        console.print(
-            f"{scenario.name}: {verdict}; {docked}/{scenario.n} docked, shape error {res.shape_error_rms_um:.3g} um RMS, "
-            f"{res.duration_s:.1f} s simulated; report {out / 'report.html'} ({report_bytes / 1e6:.2f} MB), {wall:.1f} s",
-            highlight=False, soft_wrap=True,
-        )
-        return
-    s = plan_summary
-    console.print(
-        f"[bold]Plan[/bold]: {s['structure']} in {s['duration_s']:.1f} s, {s['steps']} steps (lower bound {s['lower_bound_s']:.1f} s, "
-        f"efficiency {s['efficiency']:.2f}); replayed independently: ok",
-        highlight=False, soft_wrap=True,
-    )
-    console.print(f"[bold]Closed loop[/bold] on the simulated plant, seed {res.seed}: {res.duration_s:.1f} s simulated, "
-                  f"{res.replans} re-plans", highlight=False, soft_wrap=True)
-    console.print(robot_table(scenario.names, res))
-    style = "bold green" if res.success else "bold red"
-    console.print(f"[{style}]{verdict}[/{style}]", highlight=False, soft_wrap=True)
-    console.print(
-        f"{docked}/{scenario.n} docked, shape error {res.shape_error_rms_um:.3g} um RMS after the best rigid alignment "
-        f"(rotation {res.shape_rotation_deg:.1f} deg); {len(doc.get('events', []))} controller events, "
-        f"{len(doc.get('plant_events', []))} plant events",
-        highlight=False, soft_wrap=True,
-    )
-    for text in extra_lines:
-        console.print(text, highlight=False, soft_wrap=True)
-    console.print(
-        f"wrote {out / 'report.html'} ({report_bytes / 1e6:.2f} MB, opens offline), result.json, plan.json, states.json, "
-        f"waveform.json, waveform.npy and the pictures to {out} in {wall:.1f} s",
-        highlight=False, soft_wrap=True,
+def _report_html(scenario, analysis, plan_result, wf, wsum, run: ClosedLoop, doc, figs, anim, more: Extra, files, *,
+                 source: str | None, title: str | None) -> str:
+    from .report import build_report
+    from .waveform import summarize
+
+    full = summarize(wf).as_dict()
+    full["excerpt"] = (f"waveform.json: all {full['segments']} segments; waveform.npy: the first {wsum.duration_s:g} s sampled at "
+                       f"{RATE_HZ / 1000:g} kS/s ({wsum.samples} samples); `stressbots waveform SCENARIO --plan plan.json --out FILE` "
+                       f"samples all of it")
+    by_name = {p.name: p for p in plan_result.plan.primitives}
+    steps = [(st.primitive, by_name[st.primitive].turning, st.duration_s) for st in plan_result.plan.steps]
+    return build_report(
+        title=title or f"stressbots: {scenario.name}",
+        scenario=scenario, analysis=analysis, plan_summary=plan_result.summary, plan_steps=steps, plan_notes=plan_result.notes,
+        goals=plan_result.plan.goal_array(), waveform_summary=full, result=doc, figures=figs, animation=anim,
+        events=merged_events(run.result, run.plant), files=files, comparisons=more.comparisons,
+        provenance=doc.get("provenance"), source=source,
     )
 
 
@@ -471,15 +443,3 @@ def finite_budget(value: float | None, option: str = "--time-budget-s") -> float
     if not (math.isfinite(value) and value > 0):
         raise StressbotsError(f"must be a finite number > 0 s, got {value:g}", source=option)
     return float(value)
-
-
-def robot_table(names, res):
-    """A rich table of a closed-loop result, one row per robot: docked, placement and heading error."""
-    from rich.table import Table
-
-    t = Table()
-    for col, just in (("robot", "left"), ("docked", "left"), ("placement error (um)", "right"), ("heading error (deg)", "right")):
-        t.add_column(col, justify=just)  # type: ignore[arg-type]
-    for i, name in enumerate(names):
-        t.add_row(name, "yes" if res.docked[i] else "no", f"{res.placement_error_um[i]:.3g}", f"{res.heading_error_deg[i]:.3g}")
-    return t

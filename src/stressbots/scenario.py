@@ -44,6 +44,10 @@ __all__ = [
     "load",
     "loads",
     "from_dict",
+    "check_movable",
+    "check_starts",
+    "LIMITS",
+    "Range",
 ]
 
 
@@ -219,9 +223,12 @@ class Range(NamedTuple):
 
 #: Longest scenario, robot or structure name (characters); names are printed in tables and file names.
 MAX_NAME_CHARS = 64
-#: Most robots a scenario may hold: planning, the controller and the simulator grow quickly with N, and
-#: the accessible-state search of a non-STRING design is exponential in N.
-MAX_ROBOTS = 10
+#: Most robots a scenario file may hold (voltage analysis and design; the accessible-state search of a
+#: non-STRING design is capped separately).
+MAX_ROBOTS = 100
+#: Most robots the commands that plan and move them (plan, simulate, run, bounds, montecarlo) accept:
+#: planning, the controller and the simulator grow quickly with N (checked by :func:`check_movable`).
+MAX_MOVING_ROBOTS = 8
 #: Largest scenario file read (bytes): a scenario of MAX_ROBOTS robots is a few kB.
 MAX_FILE_BYTES = 1_000_000
 #: Longest straight travel a run may need at the slowest robot's speed (s): the arena's diagonal divided
@@ -587,6 +594,36 @@ def _check_crossing(robots: list[Robot], arena: tuple[float, ...] | None, source
             source=source,
             field=f"robots[{i}] ({r.name}).speed_um_s",
         )
+
+
+def check_movable(scenario: Scenario, *, source: str | None = None) -> Scenario:
+    """Refuse, before any computation, a scenario too large to plan and simulate (:data:`MAX_MOVING_ROBOTS`)."""
+    if scenario.n > MAX_MOVING_ROBOTS:
+        raise ScenarioError(
+            f"{scenario.n} robots: planning and simulating take at most {MAX_MOVING_ROBOTS} robots "
+            f"(`stressbots states` analyses up to {MAX_ROBOTS})",
+            source=source or scenario.source,
+            field="robots",
+        )
+    return scenario
+
+
+def check_starts(scenario: Scenario, *, source: str | None = None) -> np.ndarray:
+    """The start poses ``(n, 3)``, refusing robots whose start bodies overlap (as the planner does).
+
+    Raises :class:`ScenarioError` naming the first robot without a start or the first overlapping pair.
+    """
+    from .collision import pairwise_overlaps
+
+    starts = scenario.starts
+    for i, j, depth in pairwise_overlaps(starts, scenario.lengths_um, scenario.widths_um, tol_um=1e-6):
+        a, b = scenario.robots[i], scenario.robots[j]
+        raise ScenarioError(
+            f"the start bodies of {a.name} and {b.name} overlap by {depth:.1f} um; robots must start apart",
+            source=source or scenario.source,
+            field=f"robots[{j}] ({b.name}).start",
+        )
+    return starts
 
 
 def loads(text: str, *, source: str | None = None) -> Scenario:
