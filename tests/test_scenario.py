@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from hypothesis import given
@@ -137,3 +138,39 @@ def test_builtin_demo_scenario_is_the_example():
 
     builtin, example = load_builtin(), load(EXAMPLES / "four-robots.toml")
     assert replace(builtin, source=None) == replace(example, source=None)
+
+
+def test_readme_lists_every_accepted_range():
+    """The README's table of accepted values is stressbots.scenario.LIMITS, row for row."""
+    import re
+
+    from stressbots.scenario import LIMITS
+
+    readme = (EXAMPLES.parent / "README.md").read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `([^`]+)` \| ([\[(][^|]+?) \|", readme, re.M))
+    for key, rng in LIMITS.items():
+        assert rows.get(key) == rng.text(), (key, rows.get(key), rng.text())
+
+
+@pytest.mark.parametrize("key", ["speed_um_s", "snap_down_V", "camera_dropout", "replan_interval_s"])
+def test_every_range_is_enforced_at_both_ends(key):
+    """Values at the ends of a range load; values just outside are refused, naming the range."""
+    from stressbots.scenario import LIMITS
+
+    rng = LIMITS[key]
+    where = {"speed_um_s": "[[robots]]", "snap_down_V": "[[robots]]", "camera_dropout": "[noise]", "replan_interval_s": "[control]"}[key]
+    base = '[[robots]]\nname = "a"\nsnap_down_V = 120.0\nrelease_V = 0.0\n'
+
+    def doc(value: float) -> str:
+        if where == "[[robots]]":
+            text = base.replace("snap_down_V = 120.0", f"snap_down_V = {value!r}") if key == "snap_down_V" else base + f"{key} = {value!r}\n"
+            return text.replace("release_V = 0.0", "release_V = 0.0") if key != "snap_down_V" or value > 0 else text
+        return f"{where}\n{key} = {value!r}\n" + base
+
+    for ok in (rng.high, rng.low if not rng.open_low else rng.low + 1e-9):
+        if key == "snap_down_V" and ok == 0.0:
+            continue  # release_V (0) must stay below it
+        loads(doc(float(ok)))
+    for bad in (rng.high * (1 + 1e-9) + 1e-12, rng.low - 1e-6):
+        with pytest.raises(ScenarioError, match=re.escape(rng.text())):
+            loads(doc(bad))

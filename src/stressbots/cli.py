@@ -861,8 +861,9 @@ def montecarlo(
     from .viz import plot_montecarlo, plot_sweep
 
     factors = mc.parse_sweep(sweep) if sweep is not None else None
-    if time_budget_s is not None and not (time_budget_s > 0 and time_budget_s < float("inf")):
-        raise StressbotsError(f"must be a finite number > 0 s, got {time_budget_s:g}", source="--time-budget-s")
+    from .pipeline import finite_budget
+
+    finite_budget(time_budget_s)
     scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
     for name in ("summary.json", "montecarlo.png", "sweep.png"):
@@ -978,6 +979,8 @@ def main(argv: Optional[list[str]] = None) -> None:
         if os.environ.get("STRESSBOTS_DEBUG"):
             raise
         _fail(f"internal error: {type(exc).__name__}: {exc} (please report it; STRESSBOTS_DEBUG=1 shows the traceback)", 1)
+    if code == 130:  # Typer turns Ctrl-C into exit status 130
+        _fail("interrupted", 130)
     if isinstance(code, int) and code != 0:
         sys.exit(code)
 

@@ -436,10 +436,15 @@ def _report_html(scenario, analysis, plan_result, wf, wsum, run: ClosedLoop, doc
     )
 
 
+#: Largest simulated time budget a command accepts (s): five times the controller's default, far beyond
+#: any assembly that will still finish; it bounds the wall time of a run that never assembles.
+MAX_TIME_BUDGET_S = 20_000.0
+
+
 def finite_budget(value: float | None, option: str = "--time-budget-s") -> float | None:
-    """Validate a time budget given on the command line."""
+    """Validate a time budget given on the command line: a number of seconds in (0, MAX_TIME_BUDGET_S]."""
     if value is None:
         return None
-    if not (math.isfinite(value) and value > 0):
-        raise StressbotsError(f"must be a finite number > 0 s, got {value:g}", source=option)
+    if not (math.isfinite(value) and 0 < value <= MAX_TIME_BUDGET_S):
+        raise StressbotsError(f"must be a number of seconds in (0, {MAX_TIME_BUDGET_S:g}], got {value:g}", source=option)
     return float(value)

@@ -193,7 +193,8 @@ class _PlanFile(_Model):
 def _where(loc: tuple) -> str:
     out = ""
     for item in loc:
-        out += f"[{item}]" if isinstance(item, int) else (("." if out else "") + str(item))
+        key = str(item) if str(item).isprintable() and len(str(item)) <= 64 else _short(item)
+        out += f"[{item}]" if isinstance(item, int) else (("." if out else "") + key)
     return out
 
 

@@ -433,7 +433,7 @@ def _field_path(loc: tuple, data: Any) -> str:
             else:
                 parts.append(label)
         else:
-            parts.append(str(item))
+            parts.append(str(item) if str(item).isprintable() and len(str(item)) <= 64 else _show(item))
             node = node.get(item) if isinstance(node, dict) else None
     return ".".join(parts)
 
