@@ -42,6 +42,30 @@ def run_cli(capsys):
     return _run
 
 
+@pytest.fixture(scope="session")
+def main_job(tmp_path_factory):
+    """One run of the main job, shared by the report, CLI and browser tests: ``stressbots run`` on the
+    example without noise, seed 3, in-process. Returns ``(CliResult, out_dir)``.
+
+    Tests that use it carry ``@pytest.mark.xdist_group("main_job")`` so that one worker runs them all
+    (with ``--dist loadgroup``, see pyproject) and the job runs once per test session.
+    """
+    import contextlib
+    import io
+
+    from stressbots.cli import main
+
+    out_dir = tmp_path_factory.mktemp("main-job") / "run"
+    stdout, stderr = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(stdout), contextlib.redirect_stderr(stderr):
+        try:
+            main(["run", str(EXAMPLES / "four-robots.toml"), "--out", str(out_dir), "--noise", "none", "--seed", "3"])
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    return CliResult(code, stdout.getvalue(), stderr.getvalue()), out_dir
+
+
 def assert_user_error(result: CliResult, *needles: str) -> None:
     """A user error: exit 2, exactly one stderr line starting 'error:', naming what is wrong."""
     assert result.code == 2, (result.code, result.out, result.err)

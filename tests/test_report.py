@@ -67,9 +67,9 @@ def _result(out):
 # stressbots run
 
 
-def test_run_assembles_without_noise_and_writes_the_report(run_cli, tmp_path):
-    out = tmp_path / "run"
-    r = run_cli("run", EXAMPLE, "--out", out, "--noise", "none", "--seed", "3")
+@pytest.mark.xdist_group("main_job")
+def test_run_assembles_without_noise_and_writes_the_report(main_job):
+    r, out = main_job  # `stressbots run EXAMPLE --noise none --seed 3`, shared with the other main-job tests
     assert r.code == 0, r.err
     assert "assembled" in r.out and "not assembled" not in r.out and "report.html" in r.out
     assert "B, D, A, C" in r.out  # the analysis summary
@@ -236,3 +236,39 @@ def test_animation_data_resamples_uniformly_and_keeps_headings_continuous():
     page = animation_page(d, title="t <b>")
     assert "x</script>" not in page and "t &lt;b&gt;" in page
     check_self_contained(page)
+
+
+@pytest.mark.xdist_group("main_job")
+def test_animation_draws_planned_slots_and_retargeted_slots_only_from_g1(main_job):
+    """The animation names the two kinds of slot apart: the planned slots (result.json `goal`) from the
+    start, the re-targeted ones (`goal_after_G1`) only from the time G_1 formed (the controller's event)."""
+    _, out = main_job
+    res = _result(out)
+    html = (out / "report.html").read_text(encoding="utf-8")
+    m = re.search(r'<script type="application/json" id="run-animation-data">(.*?)</script>', html, re.S)
+    data = json.loads(m.group(1).replace("<\\/", "</"))
+    planned = np.array([x["goal"] for x in res["robots"]], dtype=float)
+    got = np.array(data["goals"], dtype=float)
+    assert np.allclose(got[:, :2], planned[:, :2], atol=1e-3)
+    assert np.allclose(np.degrees(got[:, 2]) % 360, planned[:, 2] % 360, atol=0.05)  # rounded to 1e-3 rad
+    g1 = [e["t_s"] for e in res["events"] if e["kind"] in ("G_1", "retarget")]
+    if data["retargeted"] is not None:
+        assert g1 and data["retarget_t"] == pytest.approx(g1[0])
+        after = np.array([x["goal_after_G1"] for x in res["robots"]], dtype=float)
+        assert np.allclose(np.array(data["retargeted"])[:, :2], after[:, :2], atol=1e-3)
+    assert "planned slot (x, y, heading)" in html and "re-targeted slot (x, y, heading)" in html
+    assert "d.t[frame] >= d.retarget_t" in html  # drawn only from the moment G_1 formed
+
+
+def test_animation_data_keeps_retargeted_slots_apart():
+    from stressbots.scenario import load
+
+    scn = load(EXAMPLE)
+    t = np.array([0.0, 10.0])
+    p = np.repeat(scn.starts[None], 2, axis=0)
+    goals = scn.starts + np.array([100.0, 0.0, 0.0])
+    moved = goals + np.array([5.0, 3.0, 0.01])
+    d = animation_data(scn, t, p, goals, retargeted=moved, retarget_time_s=4.0)
+    assert d["retarget_t"] == 4.0 and np.allclose(d["retargeted"], np.round(moved, 3))
+    assert animation_data(scn, t, p, goals, retargeted=moved)["retargeted"] is None  # no time: not drawn
+    assert animation_data(scn, t, p, goals, retargeted=goals, retarget_time_s=4.0)["retargeted"] is None  # same as planned

@@ -223,14 +223,26 @@ def run_pictures(scenario, run: ClosedLoop, *, label: str = "closed loop") -> tu
     verdict = "assembled" if res.success else "not assembled"
     title = (f"{scenario.name}: {label}, seed {res.seed} - {verdict}, {int(np.sum(res.docked))}/{scenario.n} docked, "
              f"shape error {res.shape_error_rms_um:.3g} um RMS")
+    t_g1 = retarget_time_s(res)
     figs = {
-        "run": figure_bytes(plot_run(scenario, times, poses, res.goals, plant.events, title=title)),
+        "run": figure_bytes(plot_run(scenario, times, poses, res.nominal_goals, plant.events, title=title,
+                                     retargeted=res.goals if t_g1 is not None else None)),
         "structure": figure_bytes(plot_final_structure(
             scenario, final, res.nominal_goals, res.docked,
             title=f"{verdict}: shape error {res.shape_error_rms_um:.3g} um RMS, alignment rotation {res.shape_rotation_deg:.1f} deg")),
     }
-    anim = animation_data(scenario, times, poses, res.goals, merged_events(res, plant), title=title)
+    anim = animation_data(scenario, times, poses, res.nominal_goals, merged_events(res, plant), title=title,
+                          retargeted=res.goals, retarget_time_s=t_g1)
     return figs, anim
+
+
+def retarget_time_s(result) -> float | None:
+    """When the controller re-targeted the remaining slots (s, simulated): the time G_1 formed, from its
+    event log; None when G_1 never formed (then the re-targeted slots are the planned ones)."""
+    for ev in result.events:
+        if ev.get("kind") in ("G_1", "retarget") and ev.get("t_s") is not None:
+            return float(ev["t_s"])
+    return None
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -386,7 +398,7 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     from .viz import plot_plan, plot_plan_waveform
     from .waveform import excerpt, export, to_json
 
-    res, s = run.result, plan_result.summary
+    s = plan_result.summary
     obs.stage("pictures and report", total=5)
     figs: dict[str, bytes] = {"plan": figure_bytes(plot_plan(scenario, plan_result))}
     obs.stage("pictures and report", advance=1)

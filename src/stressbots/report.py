@@ -112,13 +112,18 @@ def animation_data(
     *,
     max_frames: int = 480,
     title: str = "",
+    retargeted=None,
+    retarget_time_s: float | None = None,
 ) -> dict[str, Any]:
     """The data of an animation: poses resampled at uniform times, bodies, colours, arena, events.
 
     ``times`` ``(M,)`` (s) and ``poses`` ``(M, n, 3)`` (um, rad) are a sampled trajectory (e.g.
-    :meth:`stressbots.sim.SimulatedPlant.trace`); ``goals`` ``(n, 3)`` the slots drawn as outlines;
-    ``events`` dicts with ``t_s``, ``robot``, ``kind``, ``detail``. Poses between samples are
-    interpolated linearly (headings unwrapped), so the size does not depend on the run's length.
+    :meth:`stressbots.sim.SimulatedPlant.trace`); ``goals`` ``(n, 3)`` the planned slots, drawn as
+    outlines from the start; ``retargeted`` ``(n, 3)`` the re-targeted slots (moved with G_1 as it
+    really formed), drawn only from ``retarget_time_s`` on, when the controller knew them (not drawn
+    when that time is unknown); ``events`` dicts with ``t_s``, ``robot``, ``kind``, ``detail``. Poses
+    between samples are interpolated linearly (headings unwrapped), so the size does not depend on the
+    run's length.
     """
     from .viz import robot_colours
 
@@ -145,6 +150,12 @@ def animation_data(
         if np.isfinite(garr).all():
             g = garr
             pts.append(g[:, :2])
+    rt = None
+    if retargeted is not None and retarget_time_s is not None and math.isfinite(float(retarget_time_s)):
+        rarr = np.asarray(retargeted, dtype=np.float64).reshape(scenario.n, 3)
+        if np.isfinite(rarr).all() and (g is None or not np.allclose(rarr, g, atol=0.05)):
+            rt = rarr
+            pts.append(rt[:, :2])
     allp = np.vstack(pts)
     allp = allp[np.isfinite(allp).all(axis=1)]
     if scenario.arena_um is not None:
@@ -171,6 +182,8 @@ def animation_data(
         "t": [round(float(x), 3) for x in grid],
         "poses": np.round(out, 2).reshape(frames, -1).tolist(),
         "goals": None if g is None else np.round(g, 3).tolist(),
+        "retargeted": None if rt is None else np.round(rt, 3).tolist(),
+        "retarget_t": None if rt is None else round(float(retarget_time_s), 3),
         "events": evs,
     }
 
@@ -195,18 +208,45 @@ _ANIM_JS = r"""
     var log = root.querySelector(".anim-events");
     var ctx = canvas.getContext("2d");
     var n = d.names.length, F = d.t.length;
-    var box = d.box, pad = 20;
+    var box = d.box, pad = 20, padL = 58, padB = 34;
     var cssW = Math.min(root.clientWidth || 760, 760);
     var bw = box[2] - box[0], bh = box[3] - box[1];
-    var s = (cssW - 2 * pad) / bw;
-    var cssH = Math.min(bh * s + 2 * pad, 760);
-    s = Math.min(s, (cssH - 2 * pad) / bh);
+    var s = (cssW - padL - pad) / bw;
+    var cssH = Math.min(bh * s + pad + padB, 760);
+    s = Math.min(s, (cssH - pad - padB) / bh);
     var ratio = window.devicePixelRatio || 1;
     canvas.width = Math.round(cssW * ratio);
     canvas.height = Math.round(cssH * ratio);
     canvas.style.width = cssW + "px";
     canvas.style.height = cssH + "px";
-    function px(x, y) { return [pad + (x - box[0]) * s, cssH - pad - (y - box[1]) * s]; }
+    function px(x, y) { return [padL + (x - box[0]) * s, cssH - padB - (y - box[1]) * s]; }
+    function niceStep(span, count) {
+      var raw = span / count, mag = Math.pow(10, Math.floor(Math.log10(raw))), f = raw / mag;
+      return (f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10) * mag;
+    }
+    function axes() {
+      var step = niceStep(Math.max(bw, bh), 6), v, q;
+      ctx.strokeStyle = "#999999"; ctx.fillStyle = "#444444"; ctx.lineWidth = 1; ctx.font = "11px sans-serif";
+      ctx.textAlign = "center"; ctx.textBaseline = "top";
+      for (v = Math.ceil(box[0] / step) * step; v <= box[2] + 1e-9; v += step) {
+        q = px(v, box[1]); ctx.beginPath(); ctx.moveTo(q[0], q[1]); ctx.lineTo(q[0], q[1] + 5); ctx.stroke();
+        ctx.fillText(String(Math.round(v)), q[0], q[1] + 7);
+      }
+      ctx.textAlign = "right"; ctx.textBaseline = "middle";
+      for (v = Math.ceil(box[1] / step) * step; v <= box[3] + 1e-9; v += step) {
+        q = px(box[0], v); ctx.beginPath(); ctx.moveTo(q[0], q[1]); ctx.lineTo(q[0] - 5, q[1]); ctx.stroke();
+        ctx.fillText(String(Math.round(v)), q[0] - 7, q[1]);
+      }
+      ctx.save(); ctx.translate(12, (pad + cssH - padB) / 2); ctx.rotate(-Math.PI / 2);
+      ctx.textAlign = "center"; ctx.fillText("y (um)", 0, 0); ctx.restore();
+      ctx.textAlign = "right"; ctx.textBaseline = "bottom"; ctx.fillText("x (um)", cssW - pad, cssH - 1);
+      var bar = niceStep(bw, 5), a = px(box[0] + 0.04 * bw, box[1] + 0.04 * bh), b = px(box[0] + 0.04 * bw + bar, box[1] + 0.04 * bh);
+      ctx.strokeStyle = "#222222"; ctx.lineWidth = 3; ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
+      ctx.lineWidth = 1; ctx.beginPath(); ctx.moveTo(a[0], a[1] - 4); ctx.lineTo(a[0], a[1] + 4); ctx.moveTo(b[0], b[1] - 4); ctx.lineTo(b[0], b[1] + 4); ctx.stroke();
+      ctx.fillStyle = "#222222"; ctx.textAlign = "center"; ctx.textBaseline = "bottom";
+      ctx.fillText(String(bar) + " um", (a[0] + b[0]) / 2, a[1] - 5);
+      ctx.textAlign = "start"; ctx.textBaseline = "alphabetic";
+    }
     function pose(f, i) { var r = d.poses[f]; return [r[3 * i], r[3 * i + 1], r[3 * i + 2]]; }
     function poly(c, fill, stroke, width, dash) {
       ctx.beginPath();
@@ -225,9 +265,13 @@ _ANIM_JS = r"""
       ctx.fillStyle = "#ffffff";
       ctx.fillRect(0, 0, cssW, cssH);
       if (d.arena) { poly([[box[0], box[1]], [box[2], box[1]], [box[2], box[3]], [box[0], box[3]]], "#fbfbf8", "#555555", 1.2); }
+      axes();
       var i, f, p, c;
       if (d.goals) {
         for (i = 0; i < n; i++) { c = corners(d.goals[i][0], d.goals[i][1], d.goals[i][2], d.lengths[i], d.widths[i]); poly(c, null, "#888888", 1, [4, 3]); }
+      }
+      if (d.retargeted && d.t[frame] >= d.retarget_t - 1e-9) {
+        for (i = 0; i < n; i++) { c = corners(d.retargeted[i][0], d.retargeted[i][1], d.retargeted[i][2], d.lengths[i], d.widths[i]); poly(c, null, alpha(d.colours[i], 0.9), 1, [1.5, 2.5]); }
       }
       for (i = 0; i < n; i++) {
         ctx.beginPath();
@@ -489,8 +533,8 @@ def _plan_section(plan_summary: Mapping[str, Any], plan_steps: Sequence[tuple[st
     note_html = "".join(f"<li>{_e(n)}</li>" for n in notes)
     return (
         "<p>The nominal plan the controller follows: D<sub>n</sub> and D<sub>n-1</sub> form the pair G<sub>1</sub> "
-        "while the others orbit in place, then D<sub>n-2</sub>..D<sub>1</sub> dock one at a time (seed Appendix 2). "
-        "Lines: planned trajectories; dashed discs: orbits; faint bodies: starts; filled bodies: slots.</p>"
+        "while the others orbit in place, then D<sub>n-2</sub>..D<sub>1</sub> dock one at a time (the paper's Appendix 2). "
+        "Lines: planned trajectories; dashed discs: orbits; faint bodies: starts; filled bodies: the planned slots.</p>"
         + _img(figures, "plan", "nominal plan")
         + _kv(kv)
         + (f"<p>Planner notes:</p><ul>{note_html}</ul>" if note_html else "")
@@ -539,7 +583,7 @@ def _metrics_section(result: Mapping[str, Any], comparisons: Sequence[Mapping[st
     for x in robots:
         rows.append([
             _e(x.get("name")), "yes" if x.get("docked") else "<b>no</b>", _pose(x.get("final")), _pose(x.get("goal")),
-            _fmt(x.get("position_error_um")), _fmt(x.get("heading_error_deg")),
+            _pose(x.get("goal_after_G1", x.get("goal"))), _fmt(x.get("position_error_um")), _fmt(x.get("heading_error_deg")),
         ])
     comp = ""
     if comparisons:
@@ -549,10 +593,12 @@ def _metrics_section(result: Mapping[str, Any], comparisons: Sequence[Mapping[st
             ["run", "success", "docked", "shape error RMS (um)", "largest placement error (um)", "note"], crow, left=(0, 5)))
     return (
         _kv(kv)
-        + "<h3>Per robot</h3><p class=\"note\">final: true pose at the end; slot: the target slot the controller aimed at "
-        "(after G<sub>1</sub> formed, later slots follow the pair as it really lies); errors are absolute, against the "
-        "planned slot.</p>"
-        + _table(["robot", "docked", "final (x, y, heading)", "slot (x, y, heading)", "placement error (um)", "heading error (deg)"], rows)
+        + "<h3>Per robot</h3><p class=\"note\">final: true pose at the end; planned slot: the slot of the nominal plan; "
+        "re-targeted slot: where the controller aimed once G<sub>1</sub> had formed (the planned slots moved with the pair "
+        "as it really lies; the same as planned for a run that never formed G<sub>1</sub>). The placement and heading "
+        "errors are absolute, against the planned slot.</p>"
+        + _table(["robot", "docked", "final (x, y, heading)", "planned slot (x, y, heading)", "re-targeted slot (x, y, heading)",
+                  "placement error (um)", "heading error (deg)"], rows)
         + comp
     )
 
@@ -568,7 +614,9 @@ def _events_section(events: Sequence[Mapping[str, Any]]) -> str:
     more = len(events) - len(rows)
     return (
         f"<p>{len(events)} events: <i>controller</i> (re-plans, docking decisions, recoveries, the reason it stopped) and "
-        "<i>plant</i> (contacts and compliance outcomes of the simulator: docking, self-alignment, stuck, arena edge).</p>"
+        "<i>plant</i> (contacts and compliance outcomes of the simulator: docking, self-alignment, stuck, arena edge). "
+        "A <i>retarget</i> event marks the moment the planned slots of the robots still to dock became their "
+        "re-targeted slots (moved with G<sub>1</sub> as it really formed).</p>"
         + '<div class="scroll">' + _table(["t (s)", "source", "robot", "kind", "detail"], rows, left=(1, 2, 3, 4)) + "</div>"
         + (f'<p class="note">... {more} more in result.json.</p>' if more > 0 else "")
     )
@@ -649,8 +697,10 @@ def build_report(
     sec["plan"] = _plan_section(plan_summary, plan_steps, plan_notes, figures)
     sec["run"] = (
         "<p>The closed-loop run on the simulated plant: true poses (not the camera's), resampled at uniform times. "
-        "Dashed outlines: the planned slots; faint outlines: the start poses; the thick edge is each robot's front. "
-        "Press Play or drag the slider; the latest events are listed under the picture.</p>"
+        "Grey dashed outlines: the planned slots; dotted outlines in a robot's colour: its re-targeted slot, drawn from "
+        "the moment G<sub>1</sub> formed (when the controller learnt it); faint outlines: the start poses; the thick "
+        "edge is each robot's front. Axes in um, with a scale bar. Press Play or drag the slider; the latest events "
+        "are listed under the picture.</p>"
         + animation_html(animation, element_id="run-animation")
         + "<h3>Trajectories</h3>"
         + _img(figures, "run", "closed-loop trajectories")

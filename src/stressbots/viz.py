@@ -31,15 +31,16 @@ def robot_colours(n: int) -> list:
     return [cmap(i % cmap.N) for i in range(n)]
 
 
-def draw_bodies(ax, poses, lengths, widths, colours, *, fill_alpha=0.0, edge_alpha=1.0, lw=1.0, front=True, zorder=3):
-    """Draw body rectangles (and a mark on each front edge) for ``poses`` (N, 3)."""
+def draw_bodies(ax, poses, lengths, widths, colours, *, fill_alpha=0.0, edge_alpha=1.0, lw=1.0, front=True, zorder=3, ls="-"):
+    """Draw body rectangles (and a mark on each front edge) for ``poses`` (N, 3); ``ls`` the outline's line style."""
     from matplotlib.patches import Polygon as MplPolygon
 
     corners = body_corners(poses, lengths, widths)
     for k, c in enumerate(corners):
         col = colours[k]
         ax.add_patch(
-            MplPolygon(c, closed=True, facecolor=(*col[:3], fill_alpha), edgecolor=(*col[:3], edge_alpha), lw=lw, zorder=zorder)
+            MplPolygon(c, closed=True, facecolor=(*col[:3], fill_alpha), edgecolor=(*col[:3], edge_alpha), lw=lw, ls=ls,
+                       zorder=zorder)
         )
         if front:
             ax.plot(c[:2, 0], c[:2, 1], color=col, lw=lw * 2.5, alpha=edge_alpha, zorder=zorder + 0.1, solid_capstyle="butt")
@@ -133,13 +134,15 @@ _EVENT_MARKS = {
 }
 
 
-def plot_run(scenario, times, poses, goals, events=(), *, title: str = ""):
+def plot_run(scenario, times, poses, goals, events=(), *, title: str = "", retargeted=None):
     """A simulated run: trajectories coloured by robot, start bodies (faint), final bodies (filled),
-    target slots (grey outlines) and contact events marked where the robot was when they happened.
+    planned slots (grey outlines), re-targeted slots (dotted, in the robot's colour) and contact events
+    marked where the robot was when they happened.
 
     ``times`` (M,) and ``poses`` (M, n, 3) are a sampled trajectory (e.g.
-    :meth:`stressbots.sim.SimulatedPlant.trace`); ``goals`` (n, 3) the slots; ``events`` the plant's
-    :class:`stressbots.sim.SimEvent` log.
+    :meth:`stressbots.sim.SimulatedPlant.trace`); ``goals`` (n, 3) the planned slots; ``retargeted``
+    (n, 3) the slots the controller aimed at once G_1 had formed (drawn where they differ from the
+    planned ones); ``events`` the plant's :class:`stressbots.sim.SimEvent` log.
     """
     plt = _plt()
     n = scenario.n
@@ -152,8 +155,15 @@ def plot_run(scenario, times, poses, goals, events=(), *, title: str = ""):
     for i in range(n):
         ax.plot(poses[:, i, 0], poses[:, i, 1], color=cols[i], lw=1.1, alpha=0.9, zorder=2)
     draw_bodies(ax, poses[0], L, W, cols, fill_alpha=0.1, edge_alpha=0.5)
+    slots = []
     if not np.isnan(goals).any():
         draw_bodies(ax, goals, L, W, [(0.45, 0.45, 0.45)] * n, fill_alpha=0.0, lw=0.8, front=False, zorder=2.5)
+        slots.append(("planned slot", {"ls": "-", "color": "0.45"}))
+    if retargeted is not None:
+        rt = np.asarray(retargeted, dtype=np.float64)
+        if np.isfinite(rt).all() and (np.isnan(goals).any() or not np.allclose(rt, goals, atol=0.05)):
+            draw_bodies(ax, rt, L, W, cols, fill_alpha=0.0, lw=0.9, front=False, zorder=2.6, ls=":")
+            slots.append(("re-targeted slot (after G_1)", {"ls": ":", "color": "0.2"}))
     draw_bodies(ax, poses[-1], L, W, cols, fill_alpha=0.55)
     index = {name: k for k, name in enumerate(scenario.names)}
     seen = set()
@@ -169,8 +179,10 @@ def plot_run(scenario, times, poses, goals, events=(), *, title: str = ""):
         ax.annotate(name, poses[0, i, :2], xytext=(6, 6), textcoords="offset points", fontsize=8, color=cols[i], zorder=5)
     pts = np.vstack([poses[:, :, :2].reshape(-1, 2)] + ([goals[:, :2]] if not np.isnan(goals).any() else []))
     _frame(ax, scenario, pts)
-    if seen:
-        ax.legend(loc="upper right", fontsize=8, title="events", title_fontsize=8)
+    for label, style in slots:
+        ax.plot([], [], lw=0.9, label=label, **style)
+    if seen or slots:
+        ax.legend(loc="upper right", fontsize=8)
     ax.set_title(title or f"{scenario.name}: simulated run, {times[-1]:.1f} s", fontsize=10)
     return fig
 
