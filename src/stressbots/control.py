@@ -1,4 +1,4 @@
-"""Control of the group through a plant: the Plant protocol (SPEC 6/7) and closed-loop assembly.
+"""Control of the group through a plant: the Plant protocol and closed-loop assembly.
 
 A *plant* is whatever the voltage signal drives and the camera watches: the built-in simulator
 (:class:`stressbots.sim.SimulatedPlant`) or lab hardware (a waveform generator and a microscope camera).
@@ -37,9 +37,9 @@ class Plant(Protocol):
     def apply(self, waveform: Sequence[Segment]) -> None: ...
 
 
-# The closed-loop EDR controller (seed Appendix 3) lives in :mod:`stressbots.edr`; SPEC 7 names it here.
-# Work in progress (issue 6): it assembles the example without control error; with the literature's
-# error levels the G_1 pair does not yet form reliably.
+# The closed-loop EDR controller (the paper's Appendix 3) lives in :mod:`stressbots.edr` and is
+# re-exported here, beside the Plant protocol it drives. Its measured success rates and known limits
+# are in docs/design.md (section 3.9) and the README's Status section.
 from .edr import AssemblyResult, ControllerOptions, assemble, nominal_plan  # noqa: E402
 
 __all__ += ["AssemblyResult", "ControllerOptions", "assemble", "nominal_plan"]
