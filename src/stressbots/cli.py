@@ -298,9 +298,9 @@ def waveform(
 
     if (steps is None) == (plan is None):
         raise StressbotsError("give exactly one of --steps or --plan", source="stressbots waveform")
+    prepare_file(out_file, inputs=[scenario, plan])
     if out_file.suffix.lower() not in (".npy", ".csv", ".json"):
         raise StressbotsError(f"unsupported output {out_file.name!r}: use a .json, .npy or .csv file", source="--out")
-    prepare_file(out_file, inputs=[scenario, plan])
     sc = scenario_arg(scenario)
     analysis = analyse_scenario(sc)
     step_list = _waveform_steps(analysis, steps, plan)

@@ -75,6 +75,9 @@ class PlannerOptions:
         Seed of the roadmap's random waypoints (the plan is a deterministic function of it).
     time_budget_s:
         Wall time after which no further structure variant is tried.
+    max_candidates:
+        Most structure variants tried (None: all). A deterministic budget: unlike ``time_budget_s`` it
+        gives the same result on a loaded machine, so tests use it.
     """
 
     clearance_um: float = 10.0
@@ -85,6 +88,7 @@ class PlannerOptions:
     max_pieces: int = 6
     seed: int = 0
     time_budget_s: float = 120.0
+    max_candidates: int | None = None
 
 
 @dataclass(frozen=True)
@@ -1035,7 +1039,10 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
     t_start = time.perf_counter()
-    for lb, _, st in scored:
+    for tried, (lb, _, st) in enumerate(scored):
+        if opts.max_candidates is not None and tried >= opts.max_candidates:
+            failures.append(f"no plan within the first {opts.max_candidates} candidate structures")
+            break
         if failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
