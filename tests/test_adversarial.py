@@ -103,7 +103,8 @@ def _movable_limit_scenario(n: int) -> str:
     for i in range(n):
         rows.append(f'[[robots]]\nname = "R{i}"\nsnap_down_V = {120 + 2 * i}.0\nrelease_V = {5 + 2 * i}.0\n'
                     f"start = [{300 + 400 * (i % 7)}.0, {300 + 400 * (i // 7)}.0, 0.0]\n")
-    return 'arena_um = [4000.0, 4000.0]\n[electrodes]\nmargin_V = 0.5\n[structure]\nshape = "line"\nat = [2000.0, 2000.0, 0.0]\n' + "".join(rows)
+    head = 'arena_um = [4000.0, 4000.0]\n[electrodes]\nmargin_V = 0.5\n[structure]\nshape = "line"\nat = [2000.0, 2000.0, 0.0]\n'
+    return head + "".join(rows)
 
 
 @pytest.mark.parametrize("n", [MAX_MOVING_ROBOTS + 1, 40])

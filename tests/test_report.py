@@ -116,7 +116,7 @@ def cached_plan():
 def test_a_run_that_does_not_assemble_still_gets_the_full_report(run_cli, tmp_path, monkeypatch, cached_plan):
     import stressbots.control
 
-    monkeypatch.setattr(stressbots.control, "nominal_plan", lambda scenario, **kw: cached_plan)
+    monkeypatch.setattr(stressbots.control, "nominal_plan", lambda _scenario, **_kw: cached_plan)
     out = tmp_path / "short"
     r = run_cli("run", EXAMPLE, "--out", out, "--noise", "none", "--time-budget-s", "20", "--quiet")
     assert r.code == 0, r.err  # the job ran; the run failed
@@ -144,7 +144,7 @@ def test_a_controller_that_raises_is_an_internal_error(run_cli, tmp_path, monkey
         plant.observe()
         raise RuntimeError("controller exploded on purpose")
 
-    monkeypatch.setattr(stressbots.control, "nominal_plan", lambda scenario, **kw: cached_plan)
+    monkeypatch.setattr(stressbots.control, "nominal_plan", lambda _scenario, **_kw: cached_plan)
     monkeypatch.setattr(stressbots.control, "assemble", broken)
     monkeypatch.delenv("STRESSBOTS_DEBUG", raising=False)
     for cmd in ("run", "simulate"):
@@ -229,7 +229,7 @@ def test_animation_data_resamples_uniformly_and_keeps_headings_continuous():
     xs = [row[0] for row in d["poses"]]
     assert xs[2] == pytest.approx(12.0) and xs[-1] == pytest.approx(32.0)  # the repeated time keeps its last sample
     th = [row[2] for row in d["poses"]]
-    assert max(abs(b - a) for a, b in zip(th, th[1:])) < 0.1
+    assert max(abs(b - a) for a, b in zip(th[:-1], th[1:], strict=True)) < 0.1
     assert d["goals"] is None and d["events"][0]["t"] == 2.0
     from stressbots.report import animation_page
 

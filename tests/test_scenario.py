@@ -163,8 +163,9 @@ def test_every_range_is_enforced_at_both_ends(key):
 
     def doc(value: float) -> str:
         if where == "[[robots]]":
-            text = base.replace("snap_down_V = 120.0", f"snap_down_V = {value!r}") if key == "snap_down_V" else base + f"{key} = {value!r}\n"
-            return text.replace("release_V = 0.0", "release_V = 0.0") if key != "snap_down_V" or value > 0 else text
+            if key == "snap_down_V":
+                return base.replace("snap_down_V = 120.0", f"snap_down_V = {value!r}")
+            return base + f"{key} = {value!r}\n"
         return f"{where}\n{key} = {value!r}\n" + base
 
     for ok in (rng.high, rng.low if not rng.open_low else rng.low + 1e-9):

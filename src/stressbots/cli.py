@@ -677,8 +677,8 @@ def _check_structure_in_arena(scn, source: str) -> None:
     analysis = analyse_scenario(scn)
     if not analysis.is_string or scn.n < 2:
         return  # the command itself explains why it cannot go on
-    robots = [scn.robots[i] for i in analysis.order_index]
-    worst = None
+    robots = [scn.robots[i] for i in analysis.order_index or ()]
+    worst: tuple[str, float] | None = None
     for st in target_structures(robots, scn.structure):
         goals = st.goal_poses(scn.names)
         over = outside_arena(goals, scn.lengths_um, scn.widths_um, scn.arena_um)

@@ -9,11 +9,12 @@ import it, so the flow is cli -> demo -> pipeline -> library, with this module b
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from rich.console import Console
+
+from .pipeline import JobObserver
 
 __all__ = ["render_analysis", "render_waveform", "robot_table", "verdict_text", "RichJobObserver"]
 
@@ -24,19 +25,10 @@ def _bits(state, n: int) -> str:
 
 def render_analysis(analysis, console: Console, *, title: str | None = None, max_rows: int = 32) -> None:
     """Print a control analysis as rich tables: robots, verdict, states, control matrix, primitives."""
-    from rich.table import Table
-
     a = analysis
-    n = a.n
-    e = a.electrodes
     head = f"{title}: " if title else ""
-    def line(text: str) -> None:
-        console.print(text, soft_wrap=True, highlight=False)
-
-    def heading(text: str) -> None:
-        console.print()
-        console.print(f"[bold]{text}[/bold]", soft_wrap=True, highlight=False)
-
+    n = a.n
+    line = _liner(console)
     if a.is_string:
         line(f"[bold]{head}{n} robot{'s' if n != 1 else ''}, STRING[/bold]: order D_1..D_{n} = {', '.join(a.order)}")
         line(f"Lemma 1: {a.count} accessible control states, the primitives P_0..P_{n} (P_k: D_1..D_k arm down).")
@@ -45,76 +37,111 @@ def render_analysis(analysis, console: Console, *, title: str | None = None, max
         for r in a.reasons:
             line(f"  - {r}")
         line(f"{a.count} accessible control states (exhaustive search); each one is a primitive, P0 = all arms up.")
+    e = a.electrodes
     line(
         f"Limits: levels in [0, {e.max_V:g}] V, margin_V {e.margin_V:g} V; drive band [{e.drive_low_V:g}, "
         f"{e.drive_high_V:g}] V at {e.drive_frequency_hz:g} Hz; {len(a.levels)} admissible level cells."
     )
+    _heading(console, "Robots (scenario order)")
+    console.print(_robots_table(a, max_rows))
+    _heading(console, f"Accessible control states: {a.count} (1 = arm down = turning; robots in scenario order)")
+    console.print(_states_table(a, max_rows))
+    if n <= max_rows:
+        _heading(
+            console,
+            "Control matrix M (1 = the robot turns under the primitive"
+            + ("; rows D_1..D_n)" if a.is_string else "; rows in scenario order)"),
+        )
+        console.print(_matrix_table(a))
+    _heading(console, "Primitives (reach the arm state with Holds, then Drive)")
+    console.print(_primitives_table(a, max_rows))
+
+
+def _liner(console: Console):
+    def line(text: str) -> None:
+        console.print(text, soft_wrap=True, highlight=False)
+
+    return line
+
+
+def _heading(console: Console, text: str) -> None:
+    console.print()
+    console.print(f"[bold]{text}[/bold]", soft_wrap=True, highlight=False)
+
+
+def _robots_table(a, max_rows: int):
+    from rich.table import Table
 
     rank = {i: k for k, i in enumerate(a.order_index)} if a.is_string else {}
-    heading("Robots (scenario order)")
-    robots = Table()
-    robots.add_column("robot")
-    robots.add_column("snap-down V_d (V)", justify="right")
-    robots.add_column("release V_u (V)", justify="right")
+    t = Table()
+    t.add_column("robot")
+    t.add_column("snap-down V_d (V)", justify="right")
+    t.add_column("release V_u (V)", justify="right")
     if a.is_string:
-        robots.add_column("order", justify="right")
+        t.add_column("order", justify="right")
     for i, nm in enumerate(a.names[:max_rows]):
         row = [nm, f"{a.snap_down_V[i]:g}", f"{a.release_V[i]:g}"]
         if a.is_string:
             row.append(f"D_{rank[i] + 1}")
-        robots.add_row(*row)
-    if n > max_rows:
-        robots.add_row(f"... {n - max_rows} more", "", "", *([""] if a.is_string else []))
-    console.print(robots)
+        t.add_row(*row)
+    if a.n > max_rows:
+        t.add_row(f"... {a.n - max_rows} more", "", "", *([""] if a.is_string else []))
+    return t
 
-    heading(f"Accessible control states: {a.count} (1 = arm down = turning; robots in scenario order)")
-    states = Table()
-    states.add_column("#", justify="right")
-    states.add_column(" ".join(a.names) if n <= 16 else "arm states", no_wrap=True)
-    states.add_column("primitive")
+
+def _states_table(a, max_rows: int):
+    from rich.table import Table
+
+    t = Table()
+    t.add_column("#", justify="right")
+    t.add_column(" ".join(a.names) if a.n <= 16 else "arm states", no_wrap=True)
+    t.add_column("primitive")
     for k, row in enumerate(a.accessible_states[:max_rows]):
         # STRING: the state with j arms down is P_j; otherwise the sorted states are P0, P1, ...
-        states.add_row(str(k + 1), _bits(row, n), f"P{int(row.sum())}" if a.is_string else f"P{k}")
+        t.add_row(str(k + 1), _bits(row, a.n), f"P{int(row.sum())}" if a.is_string else f"P{k}")
     if a.count > max_rows:
-        states.add_row("...", f"{a.count - max_rows} more (see --json)", "")
-    console.print(states)
+        t.add_row("...", f"{a.count - max_rows} more (see --json)", "")
+    return t
+
+
+def _matrix_table(a):
+    from rich.table import Table
 
     n_prims = a.primitive_states.shape[0]
     k_cols = min(n_prims, 24)
-    if n <= max_rows:
-        rows_lbl = [f"D_{i + 1} {a.order[i]}" for i in range(n)] if a.is_string else list(a.names)
-        heading(
-            "Control matrix M (1 = the robot turns under the primitive"
-            + ("; rows D_1..D_n)" if a.is_string else "; rows in scenario order)")
-        )
-        m = Table()
-        m.add_column("")
-        for k in range(k_cols):
-            m.add_column(f"P{k}", justify="right")
-        if n_prims > k_cols:
-            m.add_column("...")
-        for i in range(n):
-            cells = [str(int(x)) for x in a.control_matrix[i, :k_cols]]
-            m.add_row(rows_lbl[i], *cells, *(["..."] if n_prims > k_cols else []))
-        console.print(m)
+    more = ["..."] if n_prims > k_cols else []
+    rows_lbl = [f"D_{i + 1} {a.order[i]}" for i in range(a.n)] if a.is_string else list(a.names)
+    t = Table()
+    t.add_column("")
+    for k in range(k_cols):
+        t.add_column(f"P{k}", justify="right")
+    if more:
+        t.add_column("...")
+    for i in range(a.n):
+        t.add_row(rows_lbl[i], *[str(int(x)) for x in a.control_matrix[i, :k_cols]], *more)
+    return t
 
-    heading("Primitives (reach the arm state with Holds, then Drive)")
-    prims = Table()
-    prims.add_column("primitive")
-    prims.add_column("turning (arm down)")
+
+def _primitives_table(a, max_rows: int):
+    from rich.table import Table
+
+    n, n_prims = a.n, a.primitive_states.shape[0]
+    t = Table()
+    t.add_column("primitive")
+    t.add_column("turning (arm down)")
     if a.is_string:
-        prims.add_column("Hold from below (V)", justify="right")
-        prims.add_column("Hold from above (V)", justify="right")
+        t.add_column("Hold from below (V)", justify="right")
+        t.add_column("Hold from above (V)", justify="right")
     for p in (a.primitive_at(k) for k in range(min(n_prims, max_rows))):
         row = [p.name, ", ".join(p.turning) or "none (all straight)"]
         if a.is_string:
             up, down = a.raise_levels_V[p.index], a.release_levels_V[p.index]
             row += [f"{up:g}" if np.isfinite(up) else ("-" if p.index == 0 else "2 levels (tie)"),
                     f"{down:g}" if np.isfinite(down) else ("-" if p.index == n else "2 levels (tie)")]
-        prims.add_row(*row)
+        t.add_row(*row)
     if n_prims > max_rows:
-        prims.add_row(f"... {n_prims - max_rows} more", "", *(["", ""] if a.is_string else []))
-    console.print(prims)
+        t.add_row(f"... {n_prims - max_rows} more", "", *(["", ""] if a.is_string else []))
+    return t
 
 
 def render_waveform(waveform, console: Console, *, title: str = "Waveform") -> None:
@@ -156,7 +183,7 @@ def verdict_text(result_doc: dict[str, Any]) -> str:
     return outcome_text(result_doc)
 
 
-class RichJobObserver:
+class RichJobObserver(JobObserver):
     """Shows the main job on a console: the analysis tables, progress bars (stderr, on a terminal) and
     the readable summary (stdout). ``quiet`` shows nothing: only errors reach the user.
 
@@ -178,7 +205,7 @@ class RichJobObserver:
             render_analysis(analysis, self.console, title=f"{scenario.name}" + (f" ({source})" if source else ""))
             self.console.print()
 
-    def __enter__(self) -> "RichJobObserver":
+    def __enter__(self) -> RichJobObserver:
         from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
         self._bar = Progress(

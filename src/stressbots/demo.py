@@ -66,7 +66,7 @@ def _figure(waveform, decoded, analysis, steps):
         else:
             ax.fill_between([t, t1], seg.low_V, seg.high_V, color="tab:orange", alpha=0.35, linewidth=0)
         t = t1
-    for d, (name, _) in zip(decoded.drives, steps):
+    for d, (name, _) in zip(decoded.drives, steps, strict=True):
         ax.text(d.t_start_s + 0.5 * d.duration_s, analysis.electrodes.drive_high_V + 3, name, ha="center", fontsize=8)
     for i, nm in enumerate(analysis.names):
         ax.axhline(analysis.snap_down_V[i], color="tab:red", linestyle=":", linewidth=0.8)
@@ -125,13 +125,13 @@ def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_
     if not quiet:
         console.print()
         console.print("[bold]Tour[/bold] " + " -> ".join(name for name, _ in steps), highlight=False)
-        for d, (name, _) in zip(decoded.drives, steps):
+        for d, (name, _) in zip(decoded.drives, steps, strict=True):
             turning = [analysis.names[i] for i in np.flatnonzero(d.states)]
             console.print(
                 f"  t = {d.t_start_s:7.3f} s  {name}: decoded turning {', '.join(turning) or 'none'} (as intended)",
                 highlight=False,
             )
-        verdict = f"STRING, order {', '.join(analysis.order)}" if analysis.is_string else "not STRING"
+        verdict = f"STRING, order {', '.join(analysis.order or ())}" if analysis.is_string else "not STRING"
         console.print(
             f"tour: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; {len(steps)} primitives, "
             f"{summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V within "

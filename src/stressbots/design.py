@@ -36,7 +36,10 @@ import numpy as np
 from .electrostatics import TOLERANCE_V, ControlAnalysis, Electrodes, analyse_thresholds, apply_level
 from .errors import DesignError
 
-__all__ = ["StringDesign", "YieldEstimate", "side_clearance", "max_robots", "design_string", "estimate_yield", "works", "check_limits", "round_design", "DEFAULT_RESOLUTION_V"]
+__all__ = [
+    "StringDesign", "YieldEstimate", "side_clearance", "max_robots", "design_string", "estimate_yield", "works", "check_limits",
+    "round_design", "DEFAULT_RESOLUTION_V",
+]
 
 #: Largest design produced (the check analyses it, with O(N^2) memory); a margin of 0 fits any N.
 MAX_DESIGN_ROBOTS = 2000
@@ -172,7 +175,7 @@ class StringDesign:
             "electrodes": dict(e.__dict__),
             "robots": [
                 {"name": nm, "snap_down_V": vd, "release_V": vu}
-                for nm, vd, vu in zip(self.names, self.snap_down_V, self.release_V)
+                for nm, vd, vu in zip(self.names, self.snap_down_V, self.release_V, strict=True)
             ],
             "levels": {
                 "raise_to_P_k_V": {f"P{k}": v for k, v in enumerate(self.raise_levels_V) if math.isfinite(v)},
@@ -213,12 +216,12 @@ class StringDesign:
         lines += ["# Add start = [x_um, y_um, heading_deg] (and goals) to each robot to plan with it.", "", "[electrodes]"]
         for key in ("max_V", "margin_V", "drive_low_V", "drive_high_V", "drive_frequency_hz", "hold_s"):
             lines.append(f"{key} = {num(getattr(e, key))}")
-        for nm, vd, vu in zip(self.names, self.snap_down_V, self.release_V):
+        for nm, vd, vu in zip(self.names, self.snap_down_V, self.release_V, strict=True):
             lines += ["", "[[robots]]", f'name = "{nm}"', f"snap_down_V = {num(vd)}", f"release_V = {num(vu)}"]
         return "\n".join(lines) + "\n"
 
 
-def _staircase(n: int, k_d: int, k_u: int) -> tuple[np.ndarray, np.ndarray]:
+def _staircase(n: int, k_d: int, _k_u: int) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the distinct ``V_d`` / ``V_u`` value of each of ``n = k_d + k_u - 1`` robots.
 
     Each step to the next robot raises exactly one of the two (a monotone lattice path), so consecutive
@@ -292,6 +295,7 @@ def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> Stri
     a = draft.analysis()
     if not a.is_string:  # pragma: no cover - guarded by max_robots; a bug if it happens
         raise DesignError("internal error: the design is not STRING: " + "; ".join(a.reasons))
+    assert a.raise_levels_V is not None and a.release_levels_V is not None  # a STRING analysis has both
     return replace(
         draft,
         raise_levels_V=tuple(float(x) for x in a.raise_levels_V),
@@ -346,7 +350,7 @@ def round_design(design: StringDesign, resolution_V: float = DEFAULT_RESOLUTION_
             f"than margin_V {e.margin_V:g} V; use a finer resolution",
             source="--resolution-V",
         )
-    gaps = [b - c for side in (sorted(set(vd)), sorted(set(vu))) for c, b in zip(side, side[1:])]
+    gaps = [b - c for side in (sorted(set(vd)), sorted(set(vu))) for c, b in zip(side[:-1], side[1:], strict=True)]
 
     def rounded_levels(vals) -> tuple[float, ...]:
         return tuple(_on_grid([v], resolution_V)[0] if math.isfinite(v) else math.nan for v in vals)

@@ -21,9 +21,10 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -170,10 +171,10 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
         "time_budget_s": run.time_budget_s,
         "shape_tol_um": _shape_tol(),
         "plant": {
-            "speed_factors": dict(zip(scenario.names, plant.speed_factors.tolist())),
-            "radius_factors": dict(zip(scenario.names, plant.radius_factors.tolist())),
-            "docked": dict(zip(scenario.names, plant.docked.tolist())),
-            "stuck": dict(zip(scenario.names, plant.stuck.tolist())),
+            "speed_factors": dict(zip(scenario.names, plant.speed_factors.tolist(), strict=True)),
+            "radius_factors": dict(zip(scenario.names, plant.radius_factors.tolist(), strict=True)),
+            "docked": dict(zip(scenario.names, plant.docked.tolist(), strict=True)),
+            "stuck": dict(zip(scenario.names, plant.stuck.tolist(), strict=True)),
             "time_s": plant.time_s,
         },
         "plant_events": [e.as_dict() for e in plant.events],
@@ -301,10 +302,10 @@ class JobObserver:
               advance: float | None = None) -> None:
         """Stage ``name`` started (first call) or progressed."""
 
-    def finished(self, summary: "JobSummary") -> None:
+    def finished(self, summary: JobSummary) -> None:
         """The job is done and its files are written."""
 
-    def __enter__(self) -> "JobObserver":
+    def __enter__(self) -> JobObserver:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -415,7 +416,8 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     for key in ("waveform", "plan", "run", "structure"):
         write_bytes(out / f"{key}.png", figs[key])
     doc = result_document(scenario, run, source=source, extra={
-        "plan": {"file": "plan.json", **{k: s.get(k) for k in ("structure", "variant", "duration_s", "steps", "lower_bound_s", "efficiency")}},
+        "plan": {"file": "plan.json",
+                 **{k: s.get(k) for k in ("structure", "variant", "duration_s", "steps", "lower_bound_s", "efficiency")}},
         **({"comparisons": more.comparisons} if more.comparisons else {}),
     })
     write_json(out / "result.json", doc)

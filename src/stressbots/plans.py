@@ -17,10 +17,10 @@ stressbots also writes ``"goals"`` (the slot of every robot, ``[x_um, y_um, head
 from __future__ import annotations
 
 import json
-import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Any, Literal, Mapping, Sequence
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StringConstraints, ValidationError
@@ -198,7 +198,7 @@ def _where(loc: tuple) -> str:
     return out
 
 
-def _problem(err: dict) -> str:
+def _problem(err: Mapping[str, Any]) -> str:
     kind, inp = err.get("type", ""), err.get("input")
     if kind == "missing":
         return "missing: this field is required"

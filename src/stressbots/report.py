@@ -23,7 +23,8 @@ import base64
 import html
 import json
 import math
-from typing import Any, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -164,12 +165,13 @@ def animation_data(
     else:
         lo, hi = allp.min(axis=0) - 300.0, allp.max(axis=0) + 300.0
         box = [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
-    evs = []
+    evs: list[dict[str, Any]] = []
     for ev in events:
         tt = ev.get("t_s", ev.get("time_s"))
         if tt is None or not math.isfinite(float(tt)):
             continue
-        evs.append({"t": round(float(tt), 3), "robot": ev.get("robot"), "kind": str(ev.get("kind", "")), "detail": str(ev.get("detail", ""))})
+        evs.append({"t": round(float(tt), 3), "robot": ev.get("robot"), "kind": str(ev.get("kind", "")),
+                    "detail": str(ev.get("detail", ""))})
     evs.sort(key=lambda e: e["t"])
     return {
         "title": title,
@@ -183,7 +185,7 @@ def animation_data(
         "poses": np.round(out, 2).reshape(frames, -1).tolist(),
         "goals": None if g is None else np.round(g, 3).tolist(),
         "retargeted": None if rt is None else np.round(rt, 3).tolist(),
-        "retarget_t": None if rt is None else round(float(retarget_time_s), 3),
+        "retarget_t": None if rt is None or retarget_time_s is None else round(float(retarget_time_s), 3),
         "events": evs,
     }
 
@@ -242,7 +244,8 @@ _ANIM_JS = r"""
       ctx.textAlign = "right"; ctx.textBaseline = "bottom"; ctx.fillText("x (um)", cssW - pad, cssH - 1);
       var bar = niceStep(bw, 5), a = px(box[0] + 0.04 * bw, box[1] + 0.04 * bh), b = px(box[0] + 0.04 * bw + bar, box[1] + 0.04 * bh);
       ctx.strokeStyle = "#222222"; ctx.lineWidth = 3; ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
-      ctx.lineWidth = 1; ctx.beginPath(); ctx.moveTo(a[0], a[1] - 4); ctx.lineTo(a[0], a[1] + 4); ctx.moveTo(b[0], b[1] - 4); ctx.lineTo(b[0], b[1] + 4); ctx.stroke();
+      ctx.lineWidth = 1; ctx.beginPath();
+      ctx.moveTo(a[0], a[1] - 4); ctx.lineTo(a[0], a[1] + 4); ctx.moveTo(b[0], b[1] - 4); ctx.lineTo(b[0], b[1] + 4); ctx.stroke();
       ctx.fillStyle = "#222222"; ctx.textAlign = "center"; ctx.textBaseline = "bottom";
       ctx.fillText(String(bar) + " um", (a[0] + b[0]) / 2, a[1] - 5);
       ctx.textAlign = "start"; ctx.textBaseline = "alphabetic";
@@ -250,7 +253,10 @@ _ANIM_JS = r"""
     function pose(f, i) { var r = d.poses[f]; return [r[3 * i], r[3 * i + 1], r[3 * i + 2]]; }
     function poly(c, fill, stroke, width, dash) {
       ctx.beginPath();
-      for (var k = 0; k < c.length; k++) { var q = px(c[k][0], c[k][1]); if (k === 0) { ctx.moveTo(q[0], q[1]); } else { ctx.lineTo(q[0], q[1]); } }
+      for (var k = 0; k < c.length; k++) {
+        var q = px(c[k][0], c[k][1]);
+        if (k === 0) { ctx.moveTo(q[0], q[1]); } else { ctx.lineTo(q[0], q[1]); }
+      }
       ctx.closePath();
       if (fill) { ctx.fillStyle = fill; ctx.fill(); }
       if (stroke) { ctx.setLineDash(dash || []); ctx.strokeStyle = stroke; ctx.lineWidth = width || 1; ctx.stroke(); ctx.setLineDash([]); }
@@ -268,14 +274,23 @@ _ANIM_JS = r"""
       axes();
       var i, f, p, c;
       if (d.goals) {
-        for (i = 0; i < n; i++) { c = corners(d.goals[i][0], d.goals[i][1], d.goals[i][2], d.lengths[i], d.widths[i]); poly(c, null, "#888888", 1, [4, 3]); }
+        for (i = 0; i < n; i++) {
+          c = corners(d.goals[i][0], d.goals[i][1], d.goals[i][2], d.lengths[i], d.widths[i]);
+          poly(c, null, "#888888", 1, [4, 3]);
+        }
       }
       if (d.retargeted && d.t[frame] >= d.retarget_t - 1e-9) {
-        for (i = 0; i < n; i++) { c = corners(d.retargeted[i][0], d.retargeted[i][1], d.retargeted[i][2], d.lengths[i], d.widths[i]); poly(c, null, alpha(d.colours[i], 0.9), 1, [1.5, 2.5]); }
+        for (i = 0; i < n; i++) {
+          c = corners(d.retargeted[i][0], d.retargeted[i][1], d.retargeted[i][2], d.lengths[i], d.widths[i]);
+          poly(c, null, alpha(d.colours[i], 0.9), 1, [1.5, 2.5]);
+        }
       }
       for (i = 0; i < n; i++) {
         ctx.beginPath();
-        for (f = 0; f <= frame; f++) { p = pose(f, i); var q = px(p[0], p[1]); if (f === 0) { ctx.moveTo(q[0], q[1]); } else { ctx.lineTo(q[0], q[1]); } }
+        for (f = 0; f <= frame; f++) {
+          p = pose(f, i); var q = px(p[0], p[1]);
+          if (f === 0) { ctx.moveTo(q[0], q[1]); } else { ctx.lineTo(q[0], q[1]); }
+        }
         ctx.strokeStyle = alpha(d.colours[i], 0.7); ctx.lineWidth = 1.2; ctx.stroke();
         p = pose(0, i);
         poly(corners(p[0], p[1], p[2], d.lengths[i], d.widths[i]), null, alpha(d.colours[i], 0.35), 1);
@@ -294,7 +309,9 @@ _ANIM_JS = r"""
       var recent = [];
       for (var k = 0; k < d.events.length && d.events[k].t <= t + 1e-9; k++) { recent.push(d.events[k]); }
       recent = recent.slice(-4);
-      log.textContent = recent.length ? recent.map(function (e) { return e.t.toFixed(1) + " s  " + (e.robot ? e.robot + "  " : "") + e.kind + ": " + e.detail; }).join("\n") : "(no events yet)";
+      log.textContent = recent.length ? recent.map(function (e) {
+        return e.t.toFixed(1) + " s  " + (e.robot ? e.robot + "  " : "") + e.kind + ": " + e.detail;
+      }).join("\n") : "(no events yet)";
       slider.value = String(frame);
     }
     function step(now) {
@@ -317,7 +334,9 @@ _ANIM_JS = r"""
     slider.max = String(F - 1);
     slider.addEventListener("input", function () { frame = parseInt(slider.value, 10) || 0; draw(); });
     var total = d.t[F - 1] - d.t[0], best = speedSel.options[0].value;
-    for (var o = 0; o < speedSel.options.length; o++) { if (total / parseFloat(speedSel.options[o].value) >= 15) { best = speedSel.options[o].value; } }
+    for (var o = 0; o < speedSel.options.length; o++) {
+      if (total / parseFloat(speedSel.options[o].value) >= 15) { best = speedSel.options[o].value; }
+    }
     speedSel.value = best;
     draw();
   }
@@ -459,7 +478,8 @@ def _design_section(scenario, analysis, goals) -> str:
         )
     else:
         reasons = "".join(f"<li>{_e(r)}</li>" for r in a.reasons)
-        parts.append(f"<p><b>{a.n} robots, not STRING</b>:</p><ul>{reasons}</ul><p>{a.count} accessible control states (exhaustive search).</p>")
+        parts.append(f"<p><b>{a.n} robots, not STRING</b>:</p><ul>{reasons}</ul>"
+                     f"<p>{a.count} accessible control states (exhaustive search).</p>")
     parts.append(
         f"<p>Limits: every level in [0, {e.max_V:g}] V and at least {e.margin_V:g} V from every threshold; drive band "
         f"[{e.drive_low_V:g}, {e.drive_high_V:g}] V at {e.drive_frequency_hz:g} Hz; setting levels held {e.hold_s * 1e3:g} ms.</p>"

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, NamedTuple
@@ -81,7 +82,7 @@ class Noise:
             "camera_dropout": self.camera_dropout,
         }
 
-    def scaled(self, factor: float) -> "Noise":
+    def scaled(self, factor: float) -> Noise:
         """Every error level multiplied by ``factor`` (dropout capped below 1)."""
         return Noise(
             speed_rel_sd=self.speed_rel_sd * factor,
@@ -187,10 +188,10 @@ class Scenario:
             rows.append(p)
         return np.array(rows, dtype=np.float64).reshape(len(rows), 3)
 
-    def with_noise(self, noise: Noise) -> "Scenario":
+    def with_noise(self, noise: Noise) -> Scenario:
         return replace(self, noise=noise)
 
-    def with_robots(self, robots) -> "Scenario":
+    def with_robots(self, robots) -> Scenario:
         return replace(self, robots=tuple(robots))
 
 
@@ -322,7 +323,7 @@ def _pose_list(v: Any) -> Any:
     if len(v) != 3:
         raise ValueError(f"must have 3 numbers [x_um, y_um, heading_deg], got {len(v)}")
     out = []
-    for k, (x, key) in enumerate(zip(v, ("x_um, y_um", "x_um, y_um", "heading_deg"))):
+    for k, (x, key) in enumerate(zip(v, ("x_um, y_um", "x_um, y_um", "heading_deg"), strict=True)):
         try:
             out.append(number_in(key, x))
         except ValueError as exc:
@@ -438,7 +439,7 @@ def _field_path(loc: tuple, data: Any) -> str:
     return ".".join(parts)
 
 
-def _friendly(err: dict) -> str:
+def _friendly(err: Mapping[str, Any]) -> str:
     kind = err.get("type", "")
     inp = err.get("input")
     if kind == "missing":
@@ -461,94 +462,13 @@ def from_dict(data: dict, *, source: str | None = None) -> Scenario:
     except ValidationError as exc:
         err = exc.errors()[0]
         raise ScenarioError(_friendly(err), source=source, field=_field_path(err["loc"], data)) from None
-
-    d = model.robot_defaults
-    robots: list[Robot] = []
-    seen: dict[str, int] = {}
-    for i, rf in enumerate(model.robots):
-        where = f"robots[{i}] ({rf.name})"
-        if rf.name in seen:
-            raise ScenarioError(
-                f"duplicate robot name (also robots[{seen[rf.name]}])", source=source, field=f"{where}.name"
-            )
-        seen[rf.name] = i
-
-        def pick(key: str, default: float | None) -> float:
-            own = getattr(rf, key)
-            if own is not None:
-                return float(own)
-            shared = getattr(d, key)
-            if shared is not None:
-                return float(shared)
-            if default is None:
-                raise ScenarioError(
-                    "missing: give it per robot or in [robot_defaults]", source=source, field=f"{where}.{key}"
-                )
-            return default
-
-        v_d = pick("snap_down_V", None)
-        v_u = pick("release_V", None)
-        if v_u >= v_d:
-            raise ScenarioError(
-                f"must be below snap_down_V ({v_d:g} V), got {v_u:g} V (V_u < V_d is required for hysteresis)",
-                source=source,
-                field=f"{where}.release_V",
-            )
-        robots.append(
-            Robot(
-                name=rf.name,
-                snap_down_V=v_d,
-                release_V=v_u,
-                length_um=pick("length_um", 260.0),
-                width_um=pick("width_um", 60.0),
-                speed_um_s=pick("speed_um_s", 100.0),
-                turn_radius_um=pick("turn_radius_um", 200.0),
-                start=Pose.from_degrees(*rf.start) if rf.start is not None else None,
-                goal=Pose.from_degrees(*rf.goal) if rf.goal is not None else None,
-            )
-        )
-
-    e = model.electrodes
-    if e.drive_low_V >= e.drive_high_V:
-        raise ScenarioError(
-            f"must be below drive_high_V ({e.drive_high_V:g} V), got {e.drive_low_V:g} V",
-            source=source,
-            field="electrodes.drive_low_V",
-        )
-    if e.drive_high_V > e.max_V:
-        raise ScenarioError(
-            f"must not exceed max_V ({e.max_V:g} V), got {e.drive_high_V:g} V",
-            source=source,
-            field="electrodes.drive_high_V",
-        )
-    electrodes = Electrodes(**e.model_dump())
-
-    arena = tuple(float(a) for a in model.arena_um) if model.arena_um is not None else None
+    robots = _robots(model, source)
+    electrodes = _electrodes(model.electrodes, source)
+    arena = (float(model.arena_um[0]), float(model.arena_um[1])) if model.arena_um is not None else None
     if arena is not None:
-        for i, r in enumerate(robots):
-            for which in ("start", "goal"):
-                p = getattr(r, which)
-                if p is not None and not (0.0 <= p.x <= arena[0] and 0.0 <= p.y <= arena[1]):
-                    raise ScenarioError(
-                        f"({p.x:g}, {p.y:g}) is outside the arena [0, {arena[0]:g}] x [0, {arena[1]:g}] um",
-                        source=source,
-                        field=f"robots[{i}] ({r.name}).{which}",
-                    )
-
+        _check_in_arena(robots, arena, source)
     _check_crossing(robots, arena, source)
-
-    structure = None
-    if model.structure is not None:
-        structure = StructureSpec(shape=model.structure.shape, at=Pose.from_degrees(*model.structure.at))
-        with_goals = [i for i, r in enumerate(robots) if r.goal is not None]
-        if with_goals:
-            i = with_goals[0]
-            raise ScenarioError(
-                "conflicts with [structure]: give either per-robot goals or a named structure, not both",
-                source=source,
-                field=f"robots[{i}] ({robots[i].name}).goal",
-            )
-
+    structure = _structure(model.structure, robots, source)
     nf = model.noise
     noise = Noise(
         speed_rel_sd=nf.speed_rel_sd,
@@ -562,12 +482,98 @@ def from_dict(data: dict, *, source: str | None = None) -> Scenario:
         name=model.name,
         robots=tuple(robots),
         electrodes=electrodes,
-        arena_um=arena,  # type: ignore[arg-type]
+        arena_um=arena,
         structure=structure,
         noise=noise,
         control=ControlSettings(replan_interval_s=model.control.replan_interval_s),
         source=source,
     )
+
+
+def _pick(rf: _RobotFile, defaults: _RobotDefaults, key: str, default: float | None, where: str, source: str | None) -> float:
+    """A robot's value: its own, else ``[robot_defaults]``'s, else ``default`` (None: required)."""
+    for holder in (rf, defaults):
+        value = getattr(holder, key)
+        if value is not None:
+            return float(value)
+    if default is None:
+        raise ScenarioError("missing: give it per robot or in [robot_defaults]", source=source, field=f"{where}.{key}")
+    return default
+
+
+def _robots(model: _ScenarioFile, source: str | None) -> list[Robot]:
+    robots: list[Robot] = []
+    seen: dict[str, int] = {}
+    d = model.robot_defaults
+    for i, rf in enumerate(model.robots):
+        where = f"robots[{i}] ({rf.name})"
+        if rf.name in seen:
+            raise ScenarioError(f"duplicate robot name (also robots[{seen[rf.name]}])", source=source, field=f"{where}.name")
+        seen[rf.name] = i
+        v_d = _pick(rf, d, "snap_down_V", None, where, source)
+        v_u = _pick(rf, d, "release_V", None, where, source)
+        if v_u >= v_d:
+            raise ScenarioError(
+                f"must be below snap_down_V ({v_d:g} V), got {v_u:g} V (V_u < V_d is required for hysteresis)",
+                source=source,
+                field=f"{where}.release_V",
+            )
+        robots.append(
+            Robot(
+                name=rf.name,
+                snap_down_V=v_d,
+                release_V=v_u,
+                length_um=_pick(rf, d, "length_um", 260.0, where, source),
+                width_um=_pick(rf, d, "width_um", 60.0, where, source),
+                speed_um_s=_pick(rf, d, "speed_um_s", 100.0, where, source),
+                turn_radius_um=_pick(rf, d, "turn_radius_um", 200.0, where, source),
+                start=Pose.from_degrees(*rf.start) if rf.start is not None else None,
+                goal=Pose.from_degrees(*rf.goal) if rf.goal is not None else None,
+            )
+        )
+    return robots
+
+
+def _electrodes(e: _ElectrodesFile, source: str | None) -> Electrodes:
+    if e.drive_low_V >= e.drive_high_V:
+        raise ScenarioError(
+            f"must be below drive_high_V ({e.drive_high_V:g} V), got {e.drive_low_V:g} V",
+            source=source,
+            field="electrodes.drive_low_V",
+        )
+    if e.drive_high_V > e.max_V:
+        raise ScenarioError(
+            f"must not exceed max_V ({e.max_V:g} V), got {e.drive_high_V:g} V",
+            source=source,
+            field="electrodes.drive_high_V",
+        )
+    return Electrodes(**e.model_dump())
+
+
+def _check_in_arena(robots: list[Robot], arena: tuple[float, float], source: str | None) -> None:
+    for i, r in enumerate(robots):
+        for which in ("start", "goal"):
+            p = getattr(r, which)
+            if p is not None and not (0.0 <= p.x <= arena[0] and 0.0 <= p.y <= arena[1]):
+                raise ScenarioError(
+                    f"({p.x:g}, {p.y:g}) is outside the arena [0, {arena[0]:g}] x [0, {arena[1]:g}] um",
+                    source=source,
+                    field=f"robots[{i}] ({r.name}).{which}",
+                )
+
+
+def _structure(sf: _StructureFile | None, robots: list[Robot], source: str | None) -> StructureSpec | None:
+    if sf is None:
+        return None
+    with_goals = [i for i, r in enumerate(robots) if r.goal is not None]
+    if with_goals:
+        i = with_goals[0]
+        raise ScenarioError(
+            "conflicts with [structure]: give either per-robot goals or a named structure, not both",
+            source=source,
+            field=f"robots[{i}] ({robots[i].name}).goal",
+        )
+    return StructureSpec(shape=sf.shape, at=Pose.from_degrees(*sf.at))
 
 
 def _check_crossing(robots: list[Robot], arena: tuple[float, ...] | None, source: str | None) -> None:
@@ -582,7 +588,7 @@ def _check_crossing(robots: list[Robot], arena: tuple[float, ...] | None, source
         pts = [(p.x, p.y) for r in robots for p in (r.start, r.goal) if p is not None]
         if len(pts) < 2:
             return
-        xs, ys = zip(*pts)
+        xs, ys = zip(*pts, strict=True)
         extent, what = math.hypot(max(xs) - min(xs), max(ys) - min(ys)), "the spread of the start and goal poses"
     i = min(range(len(robots)), key=lambda k: robots[k].speed_um_s)
     r = robots[i]

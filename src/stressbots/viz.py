@@ -8,7 +8,8 @@ that pictures work on machines without a screen.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -88,33 +89,17 @@ def plot_plan(scenario, result, *, title: str | None = None):
     draw_bodies(ax, starts, L, W, cols, fill_alpha=0.15)
     draw_bodies(ax, goals, L, W, cols, fill_alpha=0.55, lw=0.8)
     for i, name in enumerate(scenario.names):
-        ax.annotate(f"{name} (D{rank[name]})", starts[i, :2], xytext=(6, 6), textcoords="offset points", fontsize=8, color=cols[i], zorder=5)
+        ax.annotate(f"{name} (D{rank[name]})", starts[i, :2], xytext=(6, 6), textcoords="offset points", fontsize=8,
+                    color=cols[i], zorder=5)
     pts = np.vstack([starts[:, :2], goals[:, :2], centres + rstar[:, None], centres - rstar[:, None]])
     _frame(ax, scenario, pts)
     s = result.summary
     ax.set_title(
         title
-        or f"{scenario.name}: {s['structure']} by {n} robots - {s['duration_s']:.1f} s, {s['steps']} steps, efficiency {s['efficiency']:.2f}",
+        or (f"{scenario.name}: {s['structure']} by {n} robots - {s['duration_s']:.1f} s, {s['steps']} steps, "
+            f"efficiency {s['efficiency']:.2f}"),
         fontsize=10,
     )
-    return fig
-
-
-def plot_structure(scenario, poses, goals, *, title: str = "", labels: Sequence[str] | None = None):
-    """Final bodies (filled) over the target slots (outlined)."""
-    plt = _plt()
-    n = scenario.n
-    cols = robot_colours(n)
-    fig, ax = plt.subplots(figsize=(5, 5))
-    draw_bodies(ax, goals, scenario.lengths_um, scenario.widths_um, ["0.4"] * n, fill_alpha=0.0, lw=1.0, front=False)
-    draw_bodies(ax, poses, scenario.lengths_um, scenario.widths_um, cols, fill_alpha=0.5)
-    pts = np.vstack([poses[:, :2], goals[:, :2]])
-    lo, hi = np.nanmin(pts, axis=0) - 250, np.nanmax(pts, axis=0) + 250
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal")
-    ax.grid(True, lw=0.3, alpha=0.5)
-    ax.set_title(title, fontsize=10)
     return fig
 
 
@@ -299,7 +284,7 @@ def plot_bounds(scenario, report):
     ax_map.set_title(f"A_i* (solid), preimage of G_i* outside C_O (faint), C_O (dashed)\nguaranteed: {verdicts}", fontsize=8)
 
     # reachable cones
-    by_label = {}
+    by_label: dict[str, Any] = {}
     for cone in report.cones:
         by_label.setdefault(cone.label, cone)
     panels = [by_label.get("S_2f"), by_label.get("S_3f D_n-1"), by_label.get("S_3f D_n")]
