@@ -34,6 +34,13 @@ app = typer.Typer(
     rich_markup_mode="markdown",
 )
 
+#: Most threshold pairs `design --sd-V` draws (trials x robots): a few seconds of work on one core.
+MAX_YIELD_DRAWS = 20_000_000
+
+#: Largest --seed accepted: seeds are recorded in JSON outputs and fed to numpy's SeedSequence; 2^63 - 1
+#: keeps them ordinary 64-bit integers everywhere.
+MAX_SEED = 2**63 - 1
+
 # Results go to stdout; progress and notes to stderr so that `--json` output stays clean.
 out = Console()
 err = Console(stderr=True)
@@ -79,7 +86,7 @@ def _root(
 @app.command()
 def demo(
     out_dir: Path = typer.Option(Path("stressbots-demo"), "--out", help="Folder for the demo's outputs."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulated plant (same seed, same run)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the simulated plant (same seed, same run)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
 ) -> None:
     """Run the main job end to end on the built-in 4-robot scenario and write its report.
@@ -102,7 +109,7 @@ def demo(
 def run(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the simulated plant (same seed, same run)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the simulated plant (same seed, same run)."),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
@@ -210,7 +217,7 @@ def design(
         help="Round every voltage to this step (V): the resolution of the instrument that sets the levels; 0 = exact.",
     ),
     trials: int = typer.Option(10000, "--trials", min=1, max=10_000_000, help="Monte Carlo trials for the yield."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed for the yield (same seed, same estimate)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Random seed for the yield (same seed, same estimate)."),
     as_json: bool = typer.Option(False, "--json", help="Write JSON instead of a TOML scenario fragment."),
     out_file: Optional[Path] = typer.Option(
         None, "--out", help="Write to this file (atomically) instead of stdout; .json implies --json.", show_default=False
@@ -246,6 +253,12 @@ def design(
         d = round_design(d, resolution_v)
     if sd_v is not None and not (0 <= sd_v <= 100):
         raise StressbotsError(f"must be a number in [0, 100] V, got {sd_v:g}", source="--sd-V")
+    if sd_v is not None and trials * d.n > MAX_YIELD_DRAWS:
+        raise StressbotsError(
+            f"{trials} trials of {d.n} robots draw {trials * d.n:,} threshold pairs; at most {MAX_YIELD_DRAWS:,} "
+            f"(at most {MAX_YIELD_DRAWS // d.n:,} trials for {d.n} robots)",
+            source="--trials",
+        )
     y = estimate_yield(d, sd_v, trials=trials, seed=seed) if sd_v is not None else None
     use_json = as_json or (out_file is not None and out_file.suffix.lower() == ".json")
     text = to_json(d.to_json_dict(y)) if use_json else d.to_toml(y)
@@ -366,7 +379,7 @@ def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bo
 def plan(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) with start poses and goals or a [structure].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for plan.json, plan.png and summary.json.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the route search's random waypoints (recorded in plan.json)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the route search's random waypoints (recorded in plan.json)."),
     clearance_um: Optional[float] = typer.Option(
         None, "--clearance-um", min=0.0, max=1000.0,
         help="Distance kept from orbits, the structure and the arena edge (um); default the controller's setting.", show_default=False,
@@ -490,7 +503,7 @@ def _noise_dict(noise) -> dict[str, float]:
 def simulate(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and the pictures.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of every random draw of the simulated plant (same seed, same run)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of every random draw of the simulated plant (same seed, same run)."),
     plan: Optional[Path] = typer.Option(
         None, "--plan", help="Execute this plan.json open loop instead of the closed-loop controller.", show_default=False
     ),
@@ -715,7 +728,7 @@ def bounds(
     coverage_trials: int = typer.Option(
         0, "--coverage-trials", min=0, max=10_000, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the coverage runs."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
 ) -> None:
     """Error bounds of the EDR strategy (the paper's App. 3.4): delta(t), C_alpha,i, A_i* and a verdict per robot.
@@ -832,7 +845,7 @@ def bounds(
 def montecarlo(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, target and [noise].", show_default=False),
     trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
     workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
     sweep: Optional[str] = typer.Option(

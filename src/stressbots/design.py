@@ -340,11 +340,17 @@ def round_design(design: StringDesign, resolution_V: float = DEFAULT_RESOLUTION_
     vu = _on_grid(design.release_V, resolution_V)
     a = analyse_thresholds(vd, vu, design.electrodes, names=design.names)
     e = design.electrodes
+    if not a.is_string or a.raise_levels_V is None or a.release_levels_V is None:
+        raise DesignError(
+            f"rounding the design to {resolution_V:g} V makes it not STRING (thresholds closer than the resolution); "
+            f"use a finer --resolution-V, or 0 for exact values",
+            source="--resolution-V",
+        )
     levels = _on_grid([v for v in np.r_[a.raise_levels_V, a.release_levels_V] if math.isfinite(v)], resolution_V)
     used = np.array([*levels, 0.0, e.drive_low_V, e.drive_high_V, e.max_V])
     th = np.array(vd + vu)
     clearance = float(np.min(np.abs(th[:, None] - used[None, :])))
-    if not a.is_string or clearance < e.margin_V - 1e-9:
+    if clearance < e.margin_V - 1e-9:
         raise DesignError(
             f"rounding the design to {resolution_V:g} V leaves {clearance:.3g} V between a threshold and a level, less "
             f"than margin_V {e.margin_V:g} V; use a finer resolution",
