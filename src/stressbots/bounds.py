@@ -1322,7 +1322,7 @@ class BoundsReport:
             "error_model": self.model.to_dict(),
             "model": (
                 "delta(t): worst deviation from nominal motion over a grid of constant speed, radius and drift "
-                "errors in the k-sigma box, closed-form arcs (SPEC 3/8), running maximum; C_alpha,i = delta(t_2pi) "
+                "errors in the k-sigma box, closed-form straight runs and clockwise arcs, running maximum; C_alpha,i = delta(t_2pi) "
                 "over turning/straight/S_2f sequences plus the camera bound; A_i*: nominal fine-motion preimage of "
                 "G_i* outside C_O, eroded by the cylinder (D_n: by its timed forward projection)"
             ),

@@ -991,7 +991,7 @@ class _Planner:
             self.notes.append(
                 f"G_1: {self.lab(M)}'s route was cut into {pieces} pieces; {self.lab(N)} ran "
                 f"{'on a parking track, then ' if parked else ''}a final corridor of {runs[-1].length:.0f} um "
-                f"(the seed's two-stage scheme would need {vN * sum(durs):.0f} um)"
+                f"(the paper's two-stage scheme would need {vN * sum(durs):.0f} um)"
             )
         self.tl.dock(N, self.goals[N], self.lab(N))
         self.tl.dock(M, self.goals[M], self.lab(M))
