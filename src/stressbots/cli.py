@@ -114,7 +114,8 @@ def run(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
     time_budget_s: Optional[float] = typer.Option(
-        None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default the controller's.", show_default=False
+        None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default from the layout (a few crossings).",
+        show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
 ) -> None:
@@ -511,7 +512,8 @@ def simulate(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
     time_budget_s: Optional[float] = typer.Option(
-        None, "--time-budget-s", help="Closed loop: simulated time budget (s); default the controller's.", show_default=False
+        None, "--time-budget-s", help="Closed loop: simulated time budget (s); default from the layout (a few crossings).",
+        show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
@@ -627,7 +629,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
     from .console import robot_table, verdict_text
-    from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, run_pictures
+    from .pipeline import closed_loop, finite_budget, layout_time_budget_s, merged_events, plan_for, result_document, run_pictures
     from .report import animation_page
     from .scenario import check_starts
 
@@ -646,6 +648,8 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         on_time = (lambda t: status.update(f"closed loop: {t:.0f} s simulated...")) if show else None
         if show:
             status.update("closed loop...")
+        if budget is None:
+            budget = layout_time_budget_s(scn)
         run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
         if show:
             status.update("pictures...")

@@ -99,6 +99,25 @@ def default_time_budget_s() -> float | None:
         return None
 
 
+#: The default simulated time budget of a closed-loop run scales with its layout (s): a base plus a
+#: number of crossings (:func:`stressbots.scenario.crossing_s`), and at most a number of measurements
+#: (re-plans); never above the controller's own default. The example: 300 + 10 x 42 s = 724 s, where
+#: runs take 110-180 s. It bounds the wall time of a run that never assembles.
+BUDGET_BASE_S = 300.0
+BUDGET_CROSSINGS = 10.0
+BUDGET_MEASUREMENTS = 1000
+
+
+def layout_time_budget_s(scenario) -> float | None:
+    """The default simulated time budget of a closed-loop run of ``scenario`` (s); see :data:`BUDGET_BASE_S`."""
+    from .scenario import crossing_s
+
+    own = default_time_budget_s()
+    layout = min(BUDGET_BASE_S + BUDGET_CROSSINGS * crossing_s(scenario),
+                 BUDGET_MEASUREMENTS * scenario.control.replan_interval_s)
+    return layout if own is None else min(own, layout)
+
+
 def plan_for(scenario, source: str | None = None, *, seed: int = 0, options=None):
     """The nominal plan the controller follows (:func:`stressbots.control.nominal_plan`).
 
@@ -360,7 +379,7 @@ def run_job(
         raise StressbotsError("every robot needs a start pose for the job (robots[].start)", source=source, field="robots")
     check_movable(scenario, source=source)
     check_starts(scenario, source=source)
-    budget = time_budget_s if time_budget_s is not None else default_time_budget_s()
+    budget = time_budget_s if time_budget_s is not None else layout_time_budget_s(scenario)
     analysis = analyse_scenario(scenario)
     obs.analysed(scenario, analysis, source)
     with obs:
@@ -374,7 +393,7 @@ def run_job(
         def on_time(t: float) -> None:
             obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time)
+        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
         res = run.result
         obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
                   info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")

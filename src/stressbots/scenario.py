@@ -46,6 +46,7 @@ __all__ = [
     "loads",
     "from_dict",
     "check_movable",
+    "crossing_s",
     "check_starts",
     "LIMITS",
     "Range",
@@ -232,9 +233,12 @@ MAX_ROBOTS = 100
 MAX_MOVING_ROBOTS = 8
 #: Largest scenario file read (bytes): a scenario of MAX_ROBOTS robots is a few kB.
 MAX_FILE_BYTES = 1_000_000
-#: Longest straight travel a run may need at the slowest robot's speed (s): the arena's diagonal divided
-#: by the smallest speed. Keeps every closed-loop run within a few minutes of wall time.
-MAX_CROSSING_S = 600.0
+#: Longest crossing of the layout at the slowest robot's speed (s, :func:`crossing_s`) that the commands
+#: moving robots accept: a run lasts a few crossings, so this bounds its simulated time (the example: 42 s).
+MAX_CROSSING_S = 100.0
+#: Most camera measurements (re-plans) per crossing (crossing / replan_interval_s; the example: 42): the
+#: controller's work grows with them.
+MAX_MEASUREMENTS_PER_CROSSING = 200
 
 #: The accepted range of every numeric field, by its name in the file (``x``/``y``/``heading`` are the
 #: items of the start, goal and ``[structure] at`` poses).
@@ -260,7 +264,7 @@ LIMITS: dict[str, Range] = {
     "camera_position_sd_um": Range(0.0, 100.0, "um"),
     "camera_heading_sd_deg": Range(0.0, 30.0, "deg"),
     "camera_dropout": Range(0.0, 0.9, ""),
-    "replan_interval_s": Range(0.05, 60.0, "s"),
+    "replan_interval_s": Range(0.25, 60.0, "s"),
 }
 
 
@@ -467,7 +471,6 @@ def from_dict(data: dict, *, source: str | None = None) -> Scenario:
     arena = (float(model.arena_um[0]), float(model.arena_um[1])) if model.arena_um is not None else None
     if arena is not None:
         _check_in_arena(robots, arena, source)
-    _check_crossing(robots, arena, source)
     structure = _structure(model.structure, robots, source)
     nf = model.noise
     noise = Noise(
@@ -576,40 +579,59 @@ def _structure(sf: _StructureFile | None, robots: list[Robot], source: str | Non
     return StructureSpec(shape=sf.shape, at=Pose.from_degrees(*sf.at))
 
 
-def _check_crossing(robots: list[Robot], arena: tuple[float, ...] | None, source: str | None) -> None:
-    """Refuse a layout whose straight crossing at the slowest speed exceeds :data:`MAX_CROSSING_S`.
+def crossing_s(scenario: Scenario) -> float:
+    """How long (s) the slowest robot takes to cross the layout in a straight line: the arena's diagonal,
+    or without an arena the diagonal of the box around every start and goal, over the smallest speed.
 
-    The extent is the arena's diagonal, or without an arena the diagonal of the box around every
-    start and goal; a run's simulated time (and so its wall time) grows with it.
+    A closed-loop run lasts a few crossings (the example: 42 s crossing, about 110-180 s runs), so this
+    is the measure of a run's length that the limits below bound.
     """
-    if arena is not None:
-        extent, what = math.hypot(*arena), "the arena's diagonal"
+    if scenario.arena_um is not None:
+        extent = math.hypot(*scenario.arena_um)
     else:
-        pts = [(p.x, p.y) for r in robots for p in (r.start, r.goal) if p is not None]
+        pts = [(p.x, p.y) for r in scenario.robots for p in (r.start, r.goal) if p is not None]
+        if scenario.structure is not None:
+            pts.append((scenario.structure.at.x, scenario.structure.at.y))
         if len(pts) < 2:
-            return
+            return 0.0
         xs, ys = zip(*pts, strict=True)
-        extent, what = math.hypot(max(xs) - min(xs), max(ys) - min(ys)), "the spread of the start and goal poses"
-    i = min(range(len(robots)), key=lambda k: robots[k].speed_um_s)
-    r = robots[i]
-    if extent / r.speed_um_s > MAX_CROSSING_S:
-        raise ScenarioError(
-            f"{r.speed_um_s:g} um/s is too slow for {what} ({extent:.0f} um): crossing it would take "
-            f"{extent / r.speed_um_s:.0f} s, the limit is {MAX_CROSSING_S:g} s (speed >= {extent / MAX_CROSSING_S:.0f} um/s "
-            f"or a smaller arena)",
-            source=source,
-            field=f"robots[{i}] ({r.name}).speed_um_s",
-        )
+        extent = math.hypot(max(xs) - min(xs), max(ys) - min(ys)) + 2.0 * max(r.length_um for r in scenario.robots)
+    return extent / min(r.speed_um_s for r in scenario.robots)
 
 
 def check_movable(scenario: Scenario, *, source: str | None = None) -> Scenario:
-    """Refuse, before any computation, a scenario too large to plan and simulate (:data:`MAX_MOVING_ROBOTS`)."""
+    """Refuse, before any computation, a scenario too large to plan and simulate in reasonable time.
+
+    Checks :data:`MAX_MOVING_ROBOTS`, the crossing time at the slowest speed (:func:`crossing_s`,
+    at most :data:`MAX_CROSSING_S`) and the measurements per crossing (crossing / replan_interval_s,
+    at most :data:`MAX_MEASUREMENTS_PER_CROSSING`), and says which limit is exceeded.
+    """
+    where = source or scenario.source
     if scenario.n > MAX_MOVING_ROBOTS:
         raise ScenarioError(
             f"{scenario.n} robots: planning and simulating take at most {MAX_MOVING_ROBOTS} robots "
             f"(`stressbots states` analyses up to {MAX_ROBOTS})",
-            source=source or scenario.source,
+            source=where,
             field="robots",
+        )
+    cross = crossing_s(scenario)
+    if cross > MAX_CROSSING_S:
+        i = min(range(scenario.n), key=lambda k: scenario.robots[k].speed_um_s)
+        r = scenario.robots[i]
+        what = "the arena's diagonal" if scenario.arena_um is not None else "the spread of the start and goal poses"
+        raise ScenarioError(
+            f"{r.speed_um_s:g} um/s is too slow for {what}: crossing it takes {cross:.0f} s, at most {MAX_CROSSING_S:g} s "
+            f"are accepted (a faster robot, at least {r.speed_um_s * cross / MAX_CROSSING_S:.0f} um/s, or a smaller layout)",
+            source=where,
+            field=f"robots[{i}] ({r.name}).speed_um_s",
+        )
+    t_x = scenario.control.replan_interval_s
+    if cross / t_x > MAX_MEASUREMENTS_PER_CROSSING:
+        raise ScenarioError(
+            f"{t_x:g} s is too short for this layout: {cross / t_x:.0f} measurements per crossing of {cross:.0f} s, at most "
+            f"{MAX_MEASUREMENTS_PER_CROSSING} (use at least {cross / MAX_MEASUREMENTS_PER_CROSSING:.2g} s)",
+            source=where,
+            field="control.replan_interval_s",
         )
     return scenario
 
