@@ -83,7 +83,7 @@ ROBOT = '[[robots]]\nname = "a"\nsnap_down_V = 120.0\nrelease_V = 30.0\n'
         ("", "robots", "missing"),
         ("arena_um = [100.0]\n" + ROBOT, "arena_um", "width_um"),
         ("arena_um = [300.0, 300.0]\n" + ROBOT + "start = [500.0, 50.0, 0.0]", "robots[0] (a).start", "outside the arena"),
-        ("[noise]\ncamera_dropout = 1.5\n" + ROBOT, "noise.camera_dropout", "in [0, 0.9]"),
+        ("[noise]\ncamera_dropout = 1.5\n" + ROBOT, "noise.camera_dropout", "in [0, 0.5]"),
         ("[control]\nreplan_interval_s = 0\n" + ROBOT, "control.replan_interval_s", "in [0.25, 60] s"),
         ('[structure]\nshape = "tee"\n' + ROBOT + "goal = [1.0, 2.0, 3.0]", "robots[0] (a).goal", "structure"),
         ('[[robots]]\nname = "a"\nrelease_V = 30.0', "robots[0] (a).snap_down_V", "missing"),
