@@ -627,9 +627,17 @@ def simulate(
 
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
-    from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
     from .console import robot_table, verdict_text
-    from .pipeline import closed_loop, finite_budget, layout_time_budget_s, merged_events, plan_for, result_document, run_pictures
+    from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
+    from .pipeline import (
+        closed_loop,
+        finite_budget,
+        layout_time_budget_s,
+        merged_events,
+        plan_for,
+        result_document,
+        run_pictures,
+    )
     from .report import animation_page
     from .scenario import check_starts
 
