@@ -298,15 +298,17 @@ def test_outputs_refuse_a_read_only_folder_via_the_probe(tmp_path, monkeypatch):
 def test_stale_temporaries_of_a_killed_run_are_cleaned(run_cli, tmp_path):
     out = tmp_path / "w"
     out.mkdir()
-    dead = out / ".wf.json.999999999.abcd1234.tmp"  # no such process
+    dead = out / ".wf.json.stressbots-999999999.abcd1234.tmp"  # written by a killed run: no such process
     dead.write_text("half")
-    mine = out / f".wf.json.{os.getpid()}.abcd1234.tmp"  # a live writer (this process): kept
+    mine = out / f".wf.json.stressbots-{os.getpid()}.abcd1234.tmp"  # a live writer (this process): kept
     mine.write_text("in progress")
-    keep = out / ".hidden-user-file"
-    keep.write_text("user")
+    users = [out / ".hidden-user-file", out / ".notes.999999999.abcd1234.tmp", out / ".x.stressbots-1x.y.tmp"]
+    for f in users:  # the user's own hidden files, even look-alikes, are never touched
+        f.write_text("user")
     r = run_cli("waveform", EXAMPLE, "--steps", "P1:1", "--out", out / "wf.json")
     assert r.code == 0, r.err
-    assert not dead.exists() and mine.exists() and keep.read_text() == "user"
+    assert not dead.exists() and mine.exists() and all(f.read_text() == "user" for f in users)
+    assert not [f for f in out.iterdir() if f.name.startswith(".wf.json") and f != mine]  # no leftovers of this run
 
 
 def test_ctrl_c_says_interrupted_and_exits_130(run_cli, monkeypatch):
@@ -420,8 +422,13 @@ scalars = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=80),
     st.sampled_from([0, -1, 1e-300, 1e308, -1e308, 10**400, "", "\n", "A\x00", "160", "true"]),
 )
-values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=4),
-                                                       st.dictionaries(st.text(max_size=8), inner, max_size=3)), max_leaves=8)
+
+
+def _containers(inner: st.SearchStrategy) -> st.SearchStrategy:
+    return st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=3))
+
+
+values = st.recursive(scalars, _containers, max_leaves=8)
 
 
 def _set(doc, path, value):

@@ -10,6 +10,7 @@ import json
 import math
 import os
 import platform
+import re
 import tempfile
 from collections.abc import Iterable
 from pathlib import Path
@@ -107,7 +108,7 @@ def _file_ancestor(path: Path) -> Path | None:
 
 def _probe_writable(folder: Path, option: str) -> None:
     try:
-        fd, probe = tempfile.mkstemp(prefix=f".stressbots-probe.{os.getpid()}.", suffix=".tmp", dir=folder)
+        fd, probe = tempfile.mkstemp(prefix=f".probe.{_TMP_TAG}{os.getpid()}.", suffix=".tmp", dir=folder)
     except OSError as exc:
         raise StressbotsError(f"cannot write into folder {folder}: {exc.strerror or exc}", source=option) from None
     os.close(fd)
@@ -117,35 +118,28 @@ def _probe_writable(folder: Path, option: str) -> None:
         pass
 
 
-#: Temporary files older than this (s) whose writer cannot be identified are stale.
-STALE_TMP_S = 600.0
+#: Marks stressbots' temporary files: ``.NAME.stressbots-PID.XXXXXXXX.tmp`` (PID of the writer).
+_TMP_TAG = "stressbots-"
+_TMP_NAME = re.compile(r"^\..+\.stressbots-(\d+)\.[A-Za-z0-9_]+\.tmp$")
 
 
 def clean_stale_temporaries(folder: Path) -> list[Path]:
-    """Remove hidden ``.NAME.PID.XXXX.tmp`` files of :func:`write_bytes` whose writer is gone.
+    """Remove hidden temporary files of :func:`write_bytes` whose writer is gone.
 
     A process killed with SIGKILL cannot remove its temporary file; the next run in the same folder
-    does. A file whose process id is still alive (another run writing now) is kept; one without a
-    readable id is removed only when older than :data:`STALE_TMP_S`.
+    does. Only files named like stressbots' own (``.NAME.stressbots-PID.XXXXXXXX.tmp``) are touched,
+    and only when no process with that id is alive (another run may be writing right now).
     """
-    import time
-
     removed: list[Path] = []
     try:
-        entries = list(folder.glob(".*.tmp"))
+        entries = list(folder.glob(f".*.{_TMP_TAG}*.tmp"))
     except OSError:
         return removed
     for f in entries:
-        parts = f.name.split(".")
-        pid = int(parts[-3]) if len(parts) >= 4 and parts[-3].isdigit() else None
+        m = _TMP_NAME.match(f.name)
+        if m is None or _alive(int(m.group(1))):
+            continue
         try:
-            if pid is not None:
-                if pid != os.getpid() and _alive(pid):
-                    continue
-                if pid == os.getpid():
-                    continue
-            elif time.time() - f.stat().st_mtime < STALE_TMP_S:
-                continue
             f.unlink()
             removed.append(f)
         except OSError:
@@ -166,8 +160,8 @@ def _alive(pid: int) -> bool:
 def write_bytes(path: Path | str, data: bytes) -> Path:
     """Write ``data`` to ``path`` atomically (temporary file in the same folder, then rename).
 
-    The temporary file is hidden and carries the writer's process id (``.NAME.PID.XXXX.tmp``) so that a
-    later run can remove it if this process is killed. A failure to write is a :class:`StressbotsError`
+    The temporary file is hidden and carries the writer's process id (``.NAME.stressbots-PID.XXXXXXXX.tmp``)
+    so that a later run can remove it if this process is killed. A failure to write is a :class:`StressbotsError`
     naming the path.
     """
     target = Path(path)
@@ -175,7 +169,7 @@ def write_bytes(path: Path | str, data: bytes) -> Path:
         target.parent.mkdir(parents=True, exist_ok=True)
         if target.is_dir():
             raise StressbotsError(f"{target} is a folder; cannot write a file there", source="--out")
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{os.getpid()}.", suffix=".tmp", dir=target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.{_TMP_TAG}{os.getpid()}.", suffix=".tmp", dir=target.parent)
     except OSError as exc:
         raise StressbotsError(f"cannot write {target}: {exc.strerror or exc}", source="--out") from None
     try:
