@@ -629,6 +629,8 @@ def simulate(
 
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
+    import time
+
     from .console import robot_table, verdict_text
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
     from .pipeline import (
@@ -642,8 +644,6 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     )
     from .report import animation_page
     from .scenario import check_starts
-
-    import time
 
     t_command = time.perf_counter()
     budget = finite_budget(time_budget_s)
@@ -889,11 +889,10 @@ def montecarlo(
     """
     from . import montecarlo as mc
     from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
+    from .pipeline import finite_budget
     from .viz import plot_montecarlo, plot_sweep
 
     factors = mc.parse_sweep(sweep) if sweep is not None else None
-    from .pipeline import finite_budget
-
     finite_budget(time_budget_s)
     scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
