@@ -380,7 +380,10 @@ def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bo
 def plan(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) with start poses and goals or a [structure].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for plan.json, plan.png and summary.json.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the route search's random waypoints (recorded in plan.json)."),
+    seed: int = typer.Option(
+        0, "--seed", min=0, max=MAX_SEED,
+        help="Seed of the route search's random waypoints (recorded in plan.json); `run`, `simulate` and `demo` plan with 0.",
+    ),
     clearance_um: Optional[float] = typer.Option(
         None, "--clearance-um", min=0.0, max=1000.0,
         help="Distance kept from orbits, the structure and the arena edge (um); default the controller's setting.", show_default=False,
