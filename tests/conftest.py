@@ -37,6 +37,15 @@ SLOW_TESTS = {
 }
 
 
+def pytest_configure(config):
+    """With pytest-xdist's default distribution, keep each xdist_group on one worker (``--dist loadgroup``),
+    so the tests that share the session's main-job run (:func:`main_job`) run it once."""
+    if hasattr(config, "workerinput"):  # an xdist worker: report grouped node ids (it re-parses the plain args)
+        config.option.loadgroup = True
+    elif getattr(config.option, "dist", None) == "load":  # the xdist controller: schedule by group
+        config.option.dist = "loadgroup"
+
+
 def pytest_collection_modifyitems(items):
     for item in items:
         if getattr(item, "originalname", item.name) in SLOW_TESTS:
@@ -74,7 +83,7 @@ def main_job(tmp_path_factory):
     example without noise, seed 3, in-process. Returns ``(CliResult, out_dir)``.
 
     Tests that use it carry ``@pytest.mark.xdist_group("main_job")`` so that one worker runs them all
-    (with ``--dist loadgroup``, see pyproject) and the job runs once per test session.
+    (``--dist loadgroup``, set by :func:`pytest_configure`) and the job runs once per test session.
     """
     import contextlib
     import io
