@@ -12,7 +12,7 @@ import contextlib
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 import typer
@@ -962,7 +962,7 @@ def montecarlo(
     line("wrote " + ", ".join(str(folder / f) for f in files))
 
 
-def _click_base(name: str) -> type[BaseException]:
+def _click_base(name: str) -> Any:
     """The click exception class ``name`` as used by this Typer (newer Typers vendor their own click)."""
     for cls in typer.BadParameter.__mro__:
         if cls.__name__ == name:
@@ -1042,8 +1042,8 @@ def _plain_flags(command):
                 opt.metavar = ""
             return opt
 
-        cls.get_help_option = get_help_option  # type: ignore[method-assign]
-        cls._stressbots_plain_help = True  # type: ignore[attr-defined]
+        cls.get_help_option = get_help_option
+        cls._stressbots_plain_help = True
     return command
 
 
