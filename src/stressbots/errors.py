@@ -28,6 +28,9 @@ class StressbotsError(Exception):
         self.field = field
         super().__init__(self.message)
 
+    def __str__(self) -> str:  # current even when ``source`` is filled in later (e.g. by the CLI)
+        return self.message
+
     @property
     def message(self) -> str:
         parts = [p for p in (self.source, self.field) if p]
