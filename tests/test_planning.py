@@ -28,7 +28,7 @@ from .conftest import EXAMPLES, assert_user_error
 
 #: A deterministic planning budget (structure variants tried) instead of wall time, so that a loaded
 #: machine cannot change a test's outcome.
-DETERMINISTIC = PlannerOptions(time_budget_s=float("inf"), max_candidates=3)
+DETERMINISTIC = PlannerOptions(time_budget_s=float("inf"), max_candidates=2)
 
 
 def _independent_checks(scn, result) -> None:
