@@ -1,0 +1,543 @@
+"""The seed's two-step EDR strategy as written (seed App. 3.2-3.5), selectable as ``--strategy seed``.
+
+This is a faithful implementation of the paper's control strategy, not a tuned one: it exists so the
+project's own controller (``rendezvous``, :func:`stressbots.control.assemble`) can be compared with what
+the seed describes, on the same plants. It talks to the robots only through the
+:class:`~stressbots.control.Plant` protocol and returns the same
+:class:`~stressbots.control.AssemblyResult`.
+
+The strategy (reachability ``R_i --sigma_1--> A_i --sigma_2--> G_i``):
+
+- **C_O** (App. 3.2): the docking object O (the partner's slot body for the G_1 pair, the structure built
+  so far for a docking robot) expanded by ``2 r*`` (:meth:`stressbots.structures.Structure.proximity_region`).
+- **A_i**: a region around a nominal intermediate configuration ``a_i`` outside C_O, from which fine
+  motion reaches the goal: ``a_i`` lies back along a clockwise arc of radius ``r'`` that ends in the slot
+  (S_2f(sym), ``r' = 2 r``, first; flatter duties when that arc's swept bodies hit the structure). A
+  measured pose is *in A_i* when it is within :attr:`SeedSettings.region_um` / ``region_deg`` of ``a_i``,
+  outside C_O, and its eq. (1) arc through the docking point is realisable (``r' >= r``) and arrives
+  within the compliance cone (:func:`intermediate_reason`).
+- **sigma_1** (gross motion, App. 3.3): every ``t_x`` (``replan_interval_s``) measure the poses and
+  re-plan the shortest one-way path (:func:`stressbots.paths.shortest_path`) toward ``a_i`` (through the
+  nominal plan's route waypoints outside C_O), execute ``t_x`` of it; the last leg runs whole.
+- **sigma_2** (fine motion, App. 3.1): from the measured pose, eq. (1) gives ``r'`` through the docking
+  point ``p_g,i`` and the corrected duty ``rho_a = r / r'`` gives S_2f; ``r'`` is re-computed every ``t_x``
+  (the seed's "reducing or increasing r'"); at the end the robot pushes straight and docking compliance
+  takes the last angle error. Leaving the preimage sends it back to sigma_1.
+- **G_1** (App. 3.3, :mod:`stressbots.seed_pair`): stage 1 drives D_n to ``A_n'`` while D_(n-1) orbits and
+  comes back to its departure pose; stage 2 re-plans D_(n-1) to ``A_(n-1)`` while D_n drives straight to
+  ``A_n``; when one robot enters its region and the other does not, sigma_1 is re-planned from the
+  measured poses; from ``A_n x A_(n-1)`` both fly S_3f arcs and self-aligning compliance forms the pair.
+- **H**: a robot that stops anywhere but in its goal is in the failure region; as in the seed, the
+  assembly then terminates, and the result says which robot and where.
+
+Region sizes: the seed bounds A_i by the cylinder ``C_alpha,i`` (:func:`stressbots.bounds.cylinder`). That
+bound is a worst case without credit for re-planning, and at the literature's noise it is wider than the
+compliance cones (no ``A_i*`` exists: ``stressbots bounds`` says "not guaranteed"), so the regions used
+are the cylinder clipped to :attr:`SeedSettings.region_um` / ``region_deg`` (and floored by
+``min_region_um`` / ``min_region_deg``, the camera's share); the cylinder is logged with each target.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+import shapely
+
+from . import paths
+from .assessment import shape_error
+from .bounds import ErrorModel, cylinder
+from .collision import arena_gap, bodies_hit_discs, penetration_depth
+from .control import AssemblyResult, ControllerOptions, nominal_plan
+from .electrostatics import analyse_scenario
+from .errors import PlanningError
+from .estimation import Estimator
+from .robots import TWO_PI, angle_difference, orbit_radii, turning_centres
+from .seed_fine_motion import arc_back, s2f_duty, s2f_steps
+from .waveform import synthesize
+
+__all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity", "nominal_intermediate"]
+
+
+@dataclass(frozen=True)
+class SeedSettings:
+    """Numbers of the seed's strategy that the paper leaves open (um, s, deg), each with its reason.
+
+    Attributes
+    ----------
+    region_um, region_deg:
+        Largest radius / half-height of the regions A_i, A_n', A_n used (the cylinder C_alpha of
+        :mod:`stressbots.bounds` clipped to this: beyond it the region is useless as a target).
+    min_region_um, min_region_deg:
+        Smallest region: the camera's error (2 um / 1 deg at the literature's level) with a margin.
+    co_margin_um:
+        How far outside C_O the nominal a_i is placed (the region around it must stay outside too).
+    s2f_duties:
+        Turning fractions rho_a tried, in order, for the nominal S_2f arc into a slot (S_2f(sym) first).
+    s3f_duties:
+        Duty triples tried for the pair's nominal S_3f arcs (S_3f(sym) first; App. 3.1's cones).
+    sticking_cone_deg:
+        Docking compliance (App. 3.5): the arrival heading must be within this of the slot's.
+    self_align_deg, self_align_um:
+        Self-aligning compliance limits for the pair (App. 3.5: |alpha| < 60 deg, |w_y| < 80 um).
+    switch_period_s:
+        Period of the primitive alternation in S_2f / S_3f (shorter = closer to the ideal arc).
+    push_s:
+        Straight push after a fine motion, for compliance to act.
+    dock_tol_um, dock_tol_deg:
+        A robot that stopped this close to its slot (measured) is docked; elsewhere it is in H.
+    clearance_um:
+        Clearance of re-planned paths from orbits, the structure and the arena edge in the checks.
+    fine_attempts:
+        How often a single robot may return from fine motion to gross motion (left the preimage).
+    pair_replans:
+        How often sigma_1 of the pair may be re-planned (App. 3.3) before giving up.
+    max_cycles:
+        Re-planning cycles per gross-motion leg before it is declared stuck.
+    """
+
+    region_um: float = 60.0
+    region_deg: float = 10.0
+    min_region_um: float = 20.0
+    min_region_deg: float = 5.0
+    co_margin_um: float = 10.0
+    s2f_duties: tuple[float, ...] = (0.5, 1.0 / 3.0, 0.25, 0.15)
+    s3f_duties: tuple[tuple[float, float, float], ...] = (
+        (1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0),
+        (1.0 / 3.0, 0.5, 1.0 / 6.0),
+        (1.0 / 6.0, 1.0 / 2.0, 1.0 / 3.0),
+        (0.25, 0.25, 0.5),
+    )
+    sticking_cone_deg: float = 45.0
+    self_align_deg: float = 60.0
+    self_align_um: float = 80.0
+    switch_period_s: float = 0.2
+    push_s: float = 2.0
+    dock_tol_um: float = 30.0
+    dock_tol_deg: float = 15.0
+    clearance_um: float = 10.0
+    fine_attempts: int = 4
+    pair_replans: int = 6
+    max_cycles: int = 200
+
+
+class SeedStop(Exception):
+    """The seed's strategy ends here (goal reached elsewhere, H, budget); ``reason`` says why."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
+
+
+# -- regions (pure) ----------------------------------------------------------------------------------
+
+
+def in_proximity(co, xy) -> np.ndarray:
+    """Whether points ``xy`` (..., 2) lie in the proximity region ``co`` (a shapely geometry, C_O)."""
+    xy = np.asarray(xy, dtype=np.float64)
+    return shapely.contains_xy(co, xy[..., 0], xy[..., 1]) | shapely.intersects_xy(co.boundary, xy[..., 0], xy[..., 1])
+
+
+def intermediate_reason(pose, a_pose, goal, radius_um: float, co, *, region_um: float, region_rad: float, cone_rad: float) -> str | None:
+    """Why the measured ``pose`` is not in A_i (None when it is).
+
+    A_i (seed App. 3.2) = the ball ``region_um`` x ``+-region_rad`` around ``a_pose``, outside C_O (``co``),
+    intersected with the preimage of the goal under fine motion: the eq. (1) arc from the pose through the
+    goal's reference point needs ``r' >= r`` and must arrive within ``cone_rad`` of the goal heading.
+    """
+    pose = np.asarray(pose, dtype=np.float64)
+    d = float(np.hypot(*(pose[:2] - np.asarray(a_pose)[:2])))
+    if d > region_um:
+        return f"{d:.0f} um from a_i"
+    dth = abs(float(angle_difference(pose[2], a_pose[2])))
+    if dth > region_rad:
+        return f"{math.degrees(dth):.0f} deg from a_i's heading"
+    if co is not None and bool(in_proximity(co, pose[:2])):
+        return "inside C_O"
+    fine = s2f_duty(pose, np.asarray(goal)[:2], radius_um)
+    if fine is None:
+        return "no clockwise arc of radius >= r through the docking point"
+    miss = abs(float(angle_difference(fine.arrival_rad, goal[2])))
+    if miss > cone_rad:
+        return f"the arc arrives {math.degrees(miss):.0f} deg off (compliance cone {math.degrees(cone_rad):.0f} deg)"
+    return None
+
+
+def nominal_intermediate(goal, radius_um: float, co, rho_a: float, *, margin_um: float, step_um: float = 10.0, max_um: float = 4000.0):
+    """``(a_i, s)``: the pose back along the S_2f(rho_a) arc into ``goal`` just outside C_O (+ margin).
+
+    ``s`` is the arc length (um). None when no point of the arc within ``max_um`` leaves C_O.
+    """
+    r_prime = radius_um / rho_a if rho_a > 0 else math.inf
+    s = np.arange(step_um, max_um, step_um)
+    poses = arc_back(goal, s, r_prime)
+    grown = co.buffer(margin_um) if margin_um > 0 else co
+    out = np.flatnonzero(~in_proximity(grown, poses[:, :2]))  # the arc's circle may come back: first exit
+    if out.size == 0:
+        return None
+    k = int(out[0])
+    return poses[k], float(s[k])
+
+
+# -- the plant loop --------------------------------------------------------------------------------
+
+
+class SeedLoop:
+    """The only code of the seed's strategy that calls ``plant.apply`` / ``plant.observe``.
+
+    Holds the estimates (:class:`stressbots.estimation.Estimator`), the arm state, simulated time, the
+    event log and the trace; refuses steps beyond the time budget (:class:`SeedStop`).
+    """
+
+    def __init__(self, scenario, plant, *, tx: float, budget_s: float, settings: SeedSettings):
+        self.scn, self.plant, self.tx, self.budget_s, self.cfg = scenario, plant, float(tx), float(budget_s), settings
+        self.analysis = analyse_scenario(scenario)
+        if not self.analysis.is_string:
+            raise PlanningError("the seed's strategy needs a STRING design: " + "; ".join(self.analysis.reasons))
+        n = scenario.n
+        self.n = n
+        self.rank = np.empty(n, dtype=int)
+        for k, i in enumerate(self.analysis.order_index):
+            self.rank[i] = k + 1
+        self.by_rank = {int(self.rank[i]): i for i in range(n)}
+        self.L, self.W = scenario.lengths_um, scenario.widths_um
+        self.v_nom, self.r_nom = scenario.speeds_um_s, scenario.turn_radii_um
+        self.docked = np.zeros(n, dtype=bool)
+        self.state = np.zeros(n, dtype=np.uint8)
+        self.t = 0.0
+        self.replans = 0
+        self.events: list[dict] = []
+        self.estimator = Estimator(np.asarray(plant.observe(), dtype=np.float64), scenario.starts, self.v_nom, self.r_nom)
+        self.trace_t = [0.0]
+        self.trace_p = [self.est.copy()]
+        model = ErrorModel.from_noise(scenario.noise)
+        self.cylinders = tuple(cylinder(float(self.v_nom[i]), float(self.r_nom[i]), model, robot=scenario.names[i]) for i in range(n))
+
+    def name(self, i: int) -> str:
+        return self.scn.names[i]
+
+    def label(self, i: int) -> str:
+        """``name (D_k)``: the robot's name and its place in the voltage order."""
+        return f"{self.scn.names[i]} (D_{int(self.rank[i])})"
+
+    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None:
+        self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.name(robot), "detail": detail})
+
+    @property
+    def est(self) -> np.ndarray:
+        return self.estimator.pose
+
+    @property
+    def v_hat(self) -> np.ndarray:
+        return self.estimator.speed
+
+    @property
+    def r_hat(self) -> np.ndarray:
+        return self.estimator.radius
+
+    @property
+    def omega_hat(self) -> np.ndarray:
+        return self.estimator.turn_rate
+
+    @property
+    def rstar(self) -> np.ndarray:
+        return orbit_radii(self.L, self.W, self.r_hat)
+
+    def drive(self, steps: Sequence[tuple[int, float]]) -> None:
+        """Apply primitive steps ``(k, duration_s)`` and take the next frame."""
+        steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]
+        if not steps:
+            return
+        total = math.fsum(d for _, d in steps)
+        if self.t + total > self.budget_s + 1e-9:
+            raise SeedStop(f"not assembled within the time budget of {self.budget_s:g} s (simulated)")
+        self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state))
+        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), self.plant.observe())
+        self.t += total
+        self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
+        self.trace_t.append(self.t)
+        self.trace_p.append(self.est.copy())
+
+    def path_steps(self, path: paths.Path, i: int, turn_k: int, straight_k: int, limit_s: float | None = None):
+        """The first ``limit_s`` seconds of robot ``i``'s ``path`` as primitive steps (all when None)."""
+        out, left, v = [], math.inf if limit_s is None else limit_s, float(self.v_hat[i])
+        for kind, ell in path.segments:
+            d = min(ell / v, left)
+            out.append((turn_k if kind == "R" else straight_k, d))
+            left -= d
+            if left <= 1e-12:
+                break
+        return out
+
+    def hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, discs=(), clearance: float | None = None) -> str | None:
+        """What robot ``i``'s body along ``samples`` would hit (an orbit, a docked robot, the arena edge), or None."""
+        c = self.cfg.clearance_um if clearance is None else clearance
+        orbiting = [j for j in orbiting if j != i and not self.docked[j]]
+        centres = [*turning_centres(self.est[orbiting], self.r_hat[orbiting])] if orbiting else []
+        radii = list(self.rstar[orbiting]) if orbiting else []
+        labels = [f"the orbit of {self.name(j)}" for j in orbiting]
+        for cc, rr, lab in discs:
+            centres.append(cc)
+            radii.append(rr)
+            labels.append(lab)
+        if centres:
+            hits = bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii) + c).any(axis=0)
+            if hits.any():
+                return labels[int(np.argmax(hits))]
+        for j in np.flatnonzero(self.docked):
+            if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c).any():
+                return f"docked {self.name(j)}"
+        if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
+            return "the arena edge"
+        return None
+
+    def region(self, i: int) -> tuple[float, float]:
+        """``(radius_um, half_height_rad)`` of robot ``i``'s regions: C_alpha (bounds) clipped (see module notes)."""
+        cyl, cfg = self.cylinders[i], self.cfg
+        rad = min(max(cyl.radius_um, cfg.min_region_um), cfg.region_um)
+        hgt = min(max(cyl.height_rad, math.radians(cfg.min_region_deg)), math.radians(cfg.region_deg))
+        return rad, hgt
+
+    def cylinder_note(self, i: int) -> str:
+        cyl = self.cylinders[i]
+        return f"C_alpha (bounds) {cyl.radius_um:.0f} um / {math.degrees(cyl.height_rad):.0f} deg"
+
+    def stalled(self, i: int, before: np.ndarray, duration_s: float) -> bool:
+        """Whether robot ``i`` moved less than 15 % of what ``duration_s`` of driving should give."""
+        return float(np.hypot(*(self.est[i, :2] - before[:2]))) < 0.15 * float(self.v_hat[i]) * duration_s
+
+
+# -- single robots: sigma_1 then sigma_2 ------------------------------------------------------------
+
+
+def _intermediate_for(loop: SeedLoop, i: int, goal, co, orbiting) -> tuple[np.ndarray, float]:
+    """The nominal a_i and its S_2f duty: the first duty whose arc is clear (else S_2f(sym), logged)."""
+    cfg = loop.cfg
+    first = None
+    for rho in cfg.s2f_duties:
+        found = nominal_intermediate(goal, float(loop.r_nom[i]), co, rho, margin_um=cfg.co_margin_um + loop.region(i)[0])
+        if found is None:
+            continue
+        a_pose, s = found
+        first = first or (a_pose, rho)
+        arc = arc_back(goal, np.linspace(0.0, s, max(8, int(s / 10.0))), float(loop.r_nom[i]) / rho)
+        near = arc[:, :2] - np.asarray(goal)[:2]
+        far = arc[np.hypot(*near.T) > 0.5 * loop.L[i] + 5.0]  # the slot itself touches its neighbours
+        if loop.hit(far, i, orbiting) is None:
+            return a_pose, rho
+    if first is None:
+        raise SeedStop(f"{loop.name(i)}: no intermediate configuration a_i outside C_O (App. 3.2: A_i* is empty)")
+    loop.log("a_i", i, "no S_2f arc into the slot clears the obstacles; using S_2f(sym) anyway")
+    return first
+
+
+def gross_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, targets: list, inside, orbiting) -> bool:
+    """sigma_1: re-plan the shortest path to the next target every t_x; True once ``inside()``.
+
+    ``targets`` are poses (route waypoints, then a_i); a waypoint within the region radius counts as
+    passed. A robot that has not left its orbit yet waits (orbits) while its direct path is blocked, for
+    at most one period. False when the last target was reached but ``inside()`` is not true.
+    """
+    targets = list(targets)
+    waited, stalls = 0.0, 0
+    rad, _ = loop.region(i)
+    for _ in range(loop.cfg.max_cycles):
+        if inside():
+            return True
+        p = loop.est[i]
+        while len(targets) > 1 and np.hypot(*(p[:2] - targets[0][:2])) <= max(rad, 40.0):
+            targets.pop(0)
+        path = paths.shortest_path(p, targets[0], float(loop.r_hat[i]))
+        blocked = loop.hit(path.sample(10.0), i, orbiting)
+        period = TWO_PI / float(loop.omega_hat[i])
+        if blocked is not None and len(targets) > 1 and waited == 0.0:
+            path = paths.shortest_path(p, targets[1], float(loop.r_hat[i]))  # skip ahead if that is clear
+            if loop.hit(path.sample(10.0), i, orbiting) is None:
+                targets.pop(0)
+                blocked = None
+        if blocked is not None and waited < period:
+            loop.log("wait", i, f"path blocked by {blocked}: orbits for t_x")
+            loop.drive([(turn_k, loop.tx)])
+            waited += loop.tx
+            continue
+        loop.replans += 1
+        whole = path.length / float(loop.v_hat[i]) <= 1.6 * loop.tx
+        steps = loop.path_steps(path, i, turn_k, straight_k, None if whole else loop.tx)
+        before = loop.est[i].copy()
+        loop.drive(steps)
+        duration = math.fsum(d for _, d in steps)
+        stalls = stalls + 1 if loop.stalled(i, before, duration) else 0
+        if stalls >= 3:
+            raise SeedStop(f"{loop.name(i)} stopped during gross motion at ({loop.est[i, 0]:.0f}, {loop.est[i, 1]:.0f}) um (failure region H)")
+        if whole:
+            if len(targets) == 1:
+                return bool(inside())
+            targets.pop(0)
+    raise SeedStop(f"{loop.name(i)}: gross motion did not reach A_i in {loop.cfg.max_cycles} re-plans")
+
+
+def check_docked(loop: SeedLoop, i: int, straight_k: int, goal) -> None:
+    """Push until robot ``i`` stops; docked if at its slot, else the strategy ends in H."""
+    cfg = loop.cfg
+    for _ in range(6):
+        before = loop.est[i].copy()
+        loop.drive([(straight_k, loop.tx)])
+        if loop.stalled(i, before, loop.tx):
+            dpos = float(np.hypot(*(loop.est[i, :2] - goal[:2])))
+            dth = abs(float(angle_difference(loop.est[i, 2], goal[2])))
+            if dpos <= cfg.dock_tol_um and dth <= math.radians(cfg.dock_tol_deg):
+                loop.docked[i] = True
+                loop.log("docked", i, f"{dpos:.1f} um, {math.degrees(dth):.1f} deg from the slot")
+                return
+            raise SeedStop(f"{loop.name(i)} stopped {dpos:.0f} um / {math.degrees(dth):.0f} deg from its slot (failure region H)")
+    raise SeedStop(f"{loop.name(i)} kept moving after its fine motion: it missed its slot")
+
+
+def fine_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, goal) -> bool:
+    """sigma_2: S_2f arcs through the docking point, ``r'`` re-computed every t_x; False if it left the preimage."""
+    cfg = loop.cfg
+    cone = math.radians(cfg.sticking_cone_deg)
+    for _ in range(loop.cfg.max_cycles):
+        fine = s2f_duty(loop.est[i], goal[:2], float(loop.r_hat[i]))
+        if fine is None or abs(float(angle_difference(fine.arrival_rad, goal[2]))) > cone:
+            near = float(np.hypot(*(loop.est[i, :2] - goal[:2]))) <= cfg.dock_tol_um
+            if near:  # at the structure already: push and let compliance act
+                check_docked(loop, i, straight_k, goal)
+                return True
+            why = "no arc of radius >= r" if fine is None else f"arrival {math.degrees(abs(float(angle_difference(fine.arrival_rad, goal[2])))):.0f} deg off"
+            loop.log("preimage", i, f"left the fine-motion preimage ({why}): back to gross motion")
+            return False
+        loop.replans += 1
+        t_arc = fine.length_um / float(loop.v_hat[i])
+        if t_arc <= 1.6 * loop.tx:
+            loop.drive(s2f_steps(fine.rho_a, t_arc, cfg.switch_period_s, turn_k, straight_k) + [(straight_k, cfg.push_s)])
+            check_docked(loop, i, straight_k, goal)
+            return True
+        loop.drive(s2f_steps(fine.rho_a, loop.tx, cfg.switch_period_s, turn_k, straight_k))
+    return False
+
+
+def dock_single(loop: SeedLoop, k: int, goal, co, waypoints) -> None:
+    """Dock D_k (k <= n-2): sigma_1 into A_k outside C_O, then sigma_2 (S_2f) and docking compliance."""
+    i = loop.by_rank[k]
+    cfg = loop.cfg
+    orbiting = [loop.by_rank[j] for j in range(1, k)]
+    a_pose, rho = _intermediate_for(loop, i, goal, co, orbiting)
+    rad, hgt = loop.region(i)
+    loop.log("a_i", i, f"a_i = ({a_pose[0]:.0f}, {a_pose[1]:.0f}, {math.degrees(a_pose[2]) % 360:.0f} deg), S_2f rho_a {rho:.2f}; A_i: {rad:.0f} um / {math.degrees(hgt):.0f} deg ({loop.cylinder_note(i)})")
+    cone = math.radians(cfg.sticking_cone_deg)
+    route = [np.asarray(w, float) for w in waypoints if not bool(in_proximity(co, np.asarray(w)[:2]))]
+
+    def inside() -> bool:
+        return intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone) is None
+
+    for attempt in range(cfg.fine_attempts):
+        if not gross_motion(loop, i, k, k - 1, route + [a_pose], inside, orbiting):
+            why = intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone)
+            loop.log("retry", i, f"ended outside A_i ({why}): re-plans to a_i")
+            route = []
+            continue
+        loop.log("A_i", i, "entered A_i: fine motion (S_2f)")
+        if fine_motion(loop, i, k, k - 1, goal):
+            return
+        route = []
+    raise SeedStop(f"{loop.name(i)} did not dock: {cfg.fine_attempts} times in A_i without a fine motion into its slot")
+
+
+# -- the whole assembly ----------------------------------------------------------------------------
+
+
+def _rigid_goals(goals: np.ndarray, nominal: np.ndarray, N: int, M: int, measured: np.ndarray):
+    """``(phi, c_nom, c_meas)``: the rigid motion that takes the pair's nominal slots onto the measured pair."""
+    nom_axis = nominal[M, :2] - nominal[N, :2]
+    meas_axis = measured[M, :2] - measured[N, :2]
+    phi = math.atan2(meas_axis[0], meas_axis[1]) - math.atan2(nom_axis[0], nom_axis[1])  # clockwise
+    return phi, 0.5 * (nominal[M, :2] + nominal[N, :2]), 0.5 * (measured[M, :2] + measured[N, :2])
+
+
+def _run(loop: SeedLoop, plan) -> np.ndarray:
+    """Form G_1, then dock D_(n-2)..D_1; returns the goals aimed at (after the pair formed)."""
+    from .seed_pair import form_pair
+
+    n = loop.n
+    structure = plan.structure
+    nominal = plan.plan.goal_array()
+    N, M = loop.by_rank[n], loop.by_rank[n - 1]
+    form_pair(loop, structure, nominal)
+    phi, c_nom, c_meas = _rigid_goals(nominal, nominal, N, M, loop.est)
+    moved = structure.moved(phi, c_meas - c_nom, c_nom)
+    goals = moved.goal_poses(loop.scn.names)
+    goals[N], goals[M] = loop.est[N], loop.est[M]
+    if abs(math.degrees(phi)) > 0.5 or np.hypot(*(c_meas - c_nom)) > 5.0:
+        loop.log("retarget", None, f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
+    for k in range(n - 2, 0, -1):
+        i = loop.by_rank[k]
+        route = next((p for p in plan.phases if p.kind == "route" and p.mover == i), None)
+        waypoints = [] if route is None else [_moved_pose(w, phi, c_nom, c_meas) for w in route.waypoints[:-1]]
+        dock_single(loop, k, goals[i], moved.proximity_region(loop.name(i), float(loop.rstar[i])), waypoints)
+    return goals
+
+
+def _moved_pose(pose, phi: float, c_nom, c_meas) -> np.ndarray:
+    d = np.asarray(pose[:2], float) - c_nom
+    c, s = math.cos(phi), math.sin(phi)
+    return np.array([c_meas[0] + d[0] * c + d[1] * s, c_meas[1] - d[0] * s + d[1] * c, float(np.mod(pose[2] + phi, TWO_PI))])
+
+
+def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options: ControllerOptions | None = None, settings: SeedSettings | None = None) -> AssemblyResult:
+    """Assemble ``scenario``'s structure through ``plant`` with the seed's two-step EDR strategy.
+
+    Same interface and result as :func:`stressbots.control.assemble` (``options`` gives t_x, the time
+    budget and the success threshold; ``settings`` the strategy's own numbers). A run that cannot go on
+    returns ``success=False`` with the reason in ``failure``; it raises only for bad input (a non-STRING
+    design, a plan that is not a ``PlanResult``).
+    """
+    from .planning import PlanResult
+
+    opts = options or ControllerOptions()
+    if time_budget_s is not None:
+        opts = replace(opts, time_budget_s=float(time_budget_s))
+    cfg = settings or SeedSettings()
+    if plan is None:
+        plan = nominal_plan(scenario)
+    if not isinstance(plan, PlanResult):
+        raise TypeError("plan must be a PlanResult from stressbots.planning.plan_assembly")
+    tx = float(opts.replan_interval_s or scenario.control.replan_interval_s)
+    loop = SeedLoop(scenario, plant, tx=tx, budget_s=opts.time_budget_s, settings=cfg)
+    nominal = plan.plan.goal_array()
+    goals = nominal.copy()
+    failure = None
+    try:
+        goals = _run(loop, plan)
+    except SeedStop as stop:
+        failure = stop.reason
+    if failure is not None:
+        loop.log("failure", None, failure)
+    true = plant.true_poses() if hasattr(plant, "true_poses") else None
+    final = np.asarray(true if true is not None else loop.est, dtype=np.float64)
+    shape = shape_error(final, nominal, scenario.lengths_um, scenario.widths_um)
+    success = failure is None and bool(loop.docked.all()) and shape.rms_um <= opts.shape_tol_um
+    if failure is None and not success:
+        failure = f"shape error {shape.rms_um:.1f} um RMS exceeds {opts.shape_tol_um:g} um"
+    return AssemblyResult(
+        success=success,
+        seed=seed,
+        names=scenario.names,
+        final_true=None if true is None else np.asarray(true, dtype=np.float64),
+        final_observed=loop.est.copy(),
+        goals=np.asarray(goals, dtype=np.float64).copy(),
+        nominal_goals=nominal.copy(),
+        docked=loop.docked.copy(),
+        shape_error_rms_um=float(shape.rms_um),
+        shape_rotation_deg=float(shape.rotation_deg),
+        placement_error_um=np.hypot(*(final[:, :2] - nominal[:, :2]).T),
+        heading_error_deg=np.degrees(np.abs(angle_difference(final[:, 2], nominal[:, 2]))),
+        duration_s=loop.t,
+        replans=loop.replans,
+        events=tuple(loop.events),
+        failure=failure,
+        trace_t=np.asarray(loop.trace_t),
+        trace_poses=np.asarray(loop.trace_p),
+    )
