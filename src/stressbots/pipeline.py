@@ -86,6 +86,7 @@ class ClosedLoop:
     wall_s: float
     time_budget_s: float | None
     error: str | None = None  # traceback of an exception the controller raised
+    strategy: str = "rendezvous"  # stressbots.strategies.STRATEGIES key
 
 
 def default_time_budget_s() -> float | None:
@@ -112,10 +113,13 @@ def plan_for(scenario, source: str | None = None):
 
 
 def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None = None,
-                on_time: Callable[[float], None] | None = None) -> ClosedLoop:
-    """Run :func:`stressbots.control.assemble` on a recording :class:`~stressbots.sim.SimulatedPlant`."""
-    from .control import assemble
+                on_time: Callable[[float], None] | None = None, strategy: str = "rendezvous") -> ClosedLoop:
+    """Run the ``strategy``'s assembly (:mod:`stressbots.strategies`; default :func:`stressbots.control.assemble`)
+    on a recording :class:`~stressbots.sim.SimulatedPlant`."""
     from .sim import SimulatedPlant
+    from .strategies import strategy_function
+
+    assemble = strategy_function(strategy)
 
     plant = SimulatedPlant(scenario, seed=seed, record=True)
     kwargs: dict[str, Any] = {"seed": seed, "plan": plan_result}
@@ -130,7 +134,7 @@ def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None
     except Exception as exc:  # noqa: BLE001 - a controller crash is the run's outcome; the report shows it
         error = traceback.format_exc()
         res = _crashed_result(scenario, plant, plan_result, seed, f"controller error: {type(exc).__name__}: {exc}")
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error)
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error, strategy)
 
 
 def _crashed_result(scenario, plant, plan_result, seed, reason: str):
@@ -180,6 +184,7 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
     plant = run.plant
     more: dict[str, Any] = {
         "mode": "closed-loop",
+        "strategy": run.strategy,
         "scenario": source,
         "noise": scenario.noise.to_file_units(),
         "time_budget_s": run.time_budget_s,
@@ -315,6 +320,7 @@ def run_job(
     title: str | None = None,
     extra: Callable[[JobContext], Extra] | None = None,
     show_analysis: bool = True,
+    strategy: str = "rendezvous",
 ) -> JobResult:
     """Analyse, plan, run closed loop on the simulator and write the report and its files into ``out_dir``.
 
@@ -364,7 +370,7 @@ def run_job(
         def on_time(t: float) -> None:
             bar.update(t_run, completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time)
+        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time, strategy=strategy)
         res = run.result
         bar.update(t_run, total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
                    info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
