@@ -103,7 +103,7 @@ def _kind(reason: str | None) -> str:
     import re
 
     text = re.sub(r"\b[A-Z]\w* \(D_\d+\)", "<robot>", reason or "")
-    text = re.sub(r"-?\d+(\.\d+)?", "#", text)
+    text = re.sub(r"(?<![\w.-])-?\d+(?:\.\d+)?", "#", text)  # numbers, not the digits of G_1 or D_(n-1)
     return text
 
 

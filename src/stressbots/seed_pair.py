@@ -62,6 +62,7 @@ class Departure(NamedTuple):
     path: paths.Path
     t2_s: float
     a_n_prime: np.ndarray
+    wait_s: float = 0.0
 
 
 def _sweeps_clear(loop: SeedLoop, N: int, M: int, gN, gM, rN: float, rM: float, T: float, lower) -> bool:
@@ -99,7 +100,8 @@ def _pose_on_orbit(centre, radius_um: float, theta: float) -> np.ndarray:
 
 
 def departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure | None:
-    """The departure of D_(n-1) from its measured orbit with the shortest clear stage 2 (None if none)."""
+    """The departure of D_(n-1) from its measured orbit with the shortest clear stage 2 that D_n can reach
+    in time (the first clear one when D_n reaches none: stage 1 then says so); None if none is clear."""
     N, M = loop.by_rank[loop.n], loop.by_rank[loop.n - 1]
     c = loop.cfg.clearance_um
     rM, vM, vN = float(loop.r_hat[M]), float(loop.v_hat[M]), float(loop.v_hat[N])
@@ -107,17 +109,17 @@ def departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure | None:
     orbit_disc = [(cM, float(loop.rstar[M]), f"the orbit of {loop.name(M)}")]
     th_n = float(nominal.a_n[2])
     h = np.array([math.sin(th_n), math.cos(th_n)])
-    best = None
+    clear = []
     for th in np.linspace(0.0, TWO_PI, DEPARTURE_PHASES, endpoint=False):
         q = _pose_on_orbit(cM, rM, float(th))
         path = paths.shortest_path(q, nominal.a_m, rM)
         t2 = path.length / vM
-        if best is not None and t2 >= best.t2_s:
-            continue
         a_np = np.array([*(nominal.a_n[:2] - vN * t2 * h), th_n])
         run = move(a_np, np.linspace(0.0, vN * t2, max(2, int(vN * t2 / 10.0))), 0.0)
         if loop.hit(run, N, lower) is not None or loop.hit(run[:1], N, [], discs=orbit_disc) is not None:
             continue
+        if not _orbit_free(loop, N, turning_centres(a_np, loop.r_hat[N])[0], lower, [cM], [float(loop.rstar[M])]):
+            continue  # D_n arrives at a_n' on a turn: that circle must be free
         if loop.hit(path.sample(10.0), M, lower) is not None:
             continue
         times = np.linspace(0.0, t2, max(2, int(t2 * 10)))
@@ -125,8 +127,23 @@ def departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure | None:
         pN = move(a_np, vN * times, 0.0)
         if (penetration_depth(pN, loop.L[N], loop.W[N], pM, loop.L[M], loop.W[M]) > -c)[:-1].any():
             continue
-        best = Departure(float(th), q, path, t2, a_np)
-    return best
+        clear.append(Departure(float(th), q, path, t2, a_np))
+    clear.sort(key=lambda d: d.t2_s)
+    for dep in clear:
+        if _reachable(loop, dep, lower):
+            return dep
+    return clear[0] if clear else None
+
+
+def _reachable(loop: SeedLoop, dep: Departure, lower) -> bool:
+    """Whether D_n has a clear stage-1 path to ``dep.a_n_prime`` timed to D_(n-1)'s departure, from now."""
+    N, M = loop.by_rank[loop.n], loop.by_rank[loop.n - 1]
+    w = float(loop.omega_hat[M])
+    t_wait = float(np.mod(dep.heading - loop.est[M, 2], TWO_PI)) / w
+    durations = [t_wait + k * TWO_PI / w for k in range(MAX_PERIODS)]
+    disc = [(turning_centres(loop.est[M], loop.r_hat[M])[0], float(loop.rstar[M]), "")]
+    return orbit_then_go(loop, N, dep.a_n_prime, durations, lower, disc) is not None or \
+        timed_path(loop, N, dep.a_n_prime, durations, lower, disc) is not None
 
 
 def _clear_time(loop: SeedLoop, N: int, M: int, track: np.ndarray, path: paths.Path, t_max: float, lower) -> float:
@@ -141,25 +158,28 @@ def _clear_time(loop: SeedLoop, N: int, M: int, track: np.ndarray, path: paths.P
     pN = move(track, vN * times, 0.0)
     pM = path.pose_at(np.minimum(vM * times, path.length))
     bad = penetration_depth(pN, loop.L[N], loop.W[N], pM, loop.L[M], loop.W[M]) > -c
-    for k in range(times.size):  # the first time something is hit (samples checked one by one, cheaply)
-        if bad[k] or loop.hit(pN[k : k + 1], N, lower) or loop.hit(pM[k : k + 1], M, lower):
-            break
-    else:
-        k = times.size
-    lower_c = turning_centres(loop.est[lower], loop.r_hat[lower]) if lower else np.zeros((0, 2))
-    lower_r = loop.rstar[lower] if lower else np.zeros(0)
+    bad |= loop.hit_mask(pN, N, lower) | loop.hit_mask(pM, M, lower)
+    k = int(np.argmax(bad)) if bad.any() else times.size  # the first time something is hit
     while k > 1:
         cM = turning_centres(pM[k - 1], loop.r_hat[M])[0]
         cN = turning_centres(pN[k - 1], loop.r_hat[N])[0]
         disc = [(cM, float(loop.rstar[M]), "")]
-        centres = np.vstack([lower_c, cM[None, :]])
-        radii = np.append(lower_r, loop.rstar[M])
         # D_n orbits where its run ends during the next stage 1: that orbit must be free too
-        free = (np.hypot(*(centres - cN).T) >= radii + loop.rstar[N] + c).all() and _inside_arena(loop, cN, float(loop.rstar[N]) + c)
+        free = _orbit_free(loop, N, cN, lower, [cM], [float(loop.rstar[M])])
         if free and loop.hit(pN[k - 1 : k], N, [], discs=disc) is None and loop.hit(pM[k - 1 : k], M, lower, clearance=0.0) is None:
             return float(times[k - 1])
-        k -= 1
+        k -= 2  # back in 0.5 s steps
     return 0.0
+
+
+def _orbit_free(loop: SeedLoop, i: int, centre, lower, centres=(), radii=()) -> bool:
+    """Whether robot ``i``'s orbit disc about ``centre`` clears the lower orbits, the given discs and the arena."""
+    c = loop.cfg.clearance_um
+    cs = [*turning_centres(loop.est[lower], loop.r_hat[lower])] if lower else []
+    rs = list(loop.rstar[lower]) if lower else []
+    cs, rs = np.array(cs + list(centres)).reshape(-1, 2), np.array(rs + list(radii))
+    clear = (np.hypot(*(cs - centre).T) >= rs + loop.rstar[i] + c).all() if cs.size else True
+    return bool(clear) and _inside_arena(loop, centre, float(loop.rstar[i]) + c)
 
 
 def _inside_arena(loop: SeedLoop, centre, radius_um: float) -> bool:
@@ -169,43 +189,64 @@ def _inside_arena(loop: SeedLoop, centre, radius_um: float) -> bool:
     return bool(radius_um <= centre[0] <= w - radius_um and radius_um <= centre[1] <= h - radius_um)
 
 
+PARTIAL_TURNS = 3
+"""Extra whole turns D_n may orbit before a partial stage 2, to meet D_(n-1) at a better departure phase."""
+
+PARTIAL_PHASES = 24
+"""Run headings of D_n tried for a partial stage 2 (every 15 deg)."""
+
+
 def partial_departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure | None:
     """A partial stage 2 when the whole one has no clear run: D_(n-1) gets as close to ``a_(n-1)`` as a
     clear straight run of D_n allows; sigma_1 is then re-planned from the measured poses (App. 3.3's
     re-planning used as a plan: SPEC 5's multi-phase G_1).
 
-    D_n's run starts on its own orbit (it orbits under P_n until it heads along the run, 24 choices);
-    D_(n-1) departs from wherever it then is on its orbit. Returns a :class:`Departure` whose ``heading``
-    is D_n's run heading, ``t2_s`` the partial duration and ``a_n_prime`` the run's start.
+    D_n's run starts on its own orbit: it orbits under P_n (with D_(n-1)) for part of a turn plus up to
+    :data:`PARTIAL_TURNS` whole turns, then both go (24 x 4 choices); D_(n-1) departs from wherever it
+    then is on its orbit. The best choice leaves D_(n-1) the shortest path to ``a_(n-1)`` afterwards.
+    Returns a :class:`Departure` whose ``heading`` is D_n's run heading, ``t2_s`` the partial duration,
+    ``a_n_prime`` the run's start and ``wait_s`` D_n's orbiting before it.
     """
     N, M = loop.by_rank[loop.n], loop.by_rank[loop.n - 1]
     rM, rN, vM = float(loop.r_hat[M]), float(loop.r_hat[N]), float(loop.v_hat[M])
+    wN, wM = float(loop.omega_hat[N]), float(loop.omega_hat[M])
     cM = turning_centres(loop.est[M], rM)[0]
     cN = turning_centres(loop.est[N], rN)[0]
     best, best_left = None, math.inf
-    for tn in np.linspace(0.0, TWO_PI, DEPARTURE_PHASES, endpoint=False):
-        t_reach = float(np.mod(tn - loop.est[N, 2], TWO_PI)) / float(loop.omega_hat[N])
-        q = _pose_on_orbit(cM, rM, float(loop.est[M, 2] + loop.omega_hat[M] * t_reach))
-        path = paths.shortest_path(q, nominal.a_m, rM)
+    for tn in np.linspace(0.0, TWO_PI, PARTIAL_PHASES, endpoint=False):
         track = _pose_on_orbit(cN, rN, float(tn))
-        t_p = _clear_time(loop, N, M, track, path, path.length / vM, lower)
-        left = path.length - vM * t_p
-        if t_p >= 2.0 and left < best_left - 1.0:
-            best, best_left = Departure(float(tn), q, path, t_p, track), left
+        for turns in range(PARTIAL_TURNS + 1):
+            t_reach = (float(np.mod(tn - loop.est[N, 2], TWO_PI)) + TWO_PI * turns) / wN
+            q = _pose_on_orbit(cM, rM, float(loop.est[M, 2] + wM * t_reach))
+            path = paths.shortest_path(q, nominal.a_m, rM)
+            t_p = _clear_time(loop, N, M, track, path, path.length / vM, lower)
+            if t_p < 2.0:
+                continue
+            left = paths.shortest_path(path.pose_at(vM * t_p), nominal.a_m, rM).length
+            if left < best_left - 1.0:
+                best, best_left = Departure(float(tn), q, path, t_p, track, t_reach), left
     return best
 
 
 def stage1_partial(loop: SeedLoop, dep: Departure) -> None:
-    """Before a partial stage 2: D_n orbits (P_n, D_(n-1) orbiting too) until it heads along its run."""
+    """Before a partial stage 2: D_n orbits (P_n, D_(n-1) orbiting too) for ``dep.wait_s``, until it heads
+    along its run."""
     n = loop.n
     N = loop.by_rank[n]
+    tol = loop.region(N)[1]
+    t_end = loop.t + dep.wait_s
     for _ in range(loop.cfg.max_cycles):
         w = float(loop.omega_hat[N])
-        left = float(np.mod(dep.heading - loop.est[N, 2], TWO_PI)) / w
-        if left < 0.02 or left > TWO_PI / w - 0.05:
+        off = float(np.mod(dep.heading - loop.est[N, 2], TWO_PI))
+        left = max(t_end - loop.t, off / w if off > tol and off < TWO_PI - tol else 0.0)
+        if left < 0.02:
             return
-        loop.drive([(n, min(loop.tx, left))])
-    raise SeedStop(f"G_1: {loop.label(loop.by_rank[n])} did not reach the start of its run")
+        step = min(loop.tx, left)
+        before = loop.est[N].copy()
+        loop.drive([(n, step)])
+        if step >= 0.5 and abs(float(angle_difference(loop.est[N, 2], before[2]))) < 0.15 * w * step:
+            raise SeedStop(f"{loop.label(N)} stopped turning toward its run (failure region H)")
+    raise SeedStop(f"G_1: {loop.label(N)} did not reach the start of its run")
 
 
 def _in_ball(loop: SeedLoop, i: int, target) -> bool:
@@ -284,7 +325,7 @@ def stage1(loop: SeedLoop, dep: Departure, lower) -> None:
         if _in_ball(loop, N, dep.a_n_prime):
             return
         if departed:
-            path = paths.shortest_path(loop.est[N], dep.a_n_prime, float(loop.r_hat[N]))
+            path = loop.path_into_region(N, dep.a_n_prime)
         else:
             w = float(loop.omega_hat[M])
             t_wait = float(np.mod(dep.heading - loop.est[M, 2], TWO_PI)) / w
@@ -340,7 +381,7 @@ def stage2(loop: SeedLoop, nominal: PairNominal) -> bool:
     rad_N = loop.region(N)[0]
     stalls = 0
     for _ in range(loop.cfg.max_cycles):
-        path = paths.shortest_path(loop.est[M], nominal.a_m, float(loop.r_hat[M]))
+        path = loop.path_into_region(M, nominal.a_m)
         loop.replans += 1
         whole = path.length / float(loop.v_hat[M]) <= 1.6 * loop.tx
         steps = loop.path_steps(path, M, n - 1, n - 2, None if whole else loop.tx)
@@ -370,7 +411,7 @@ def partial_stage2(loop: SeedLoop, nominal: PairNominal, duration_s: float) -> N
     N, M = loop.by_rank[n], loop.by_rank[n - 1]
     left = duration_s
     while left > 1e-9:
-        path = paths.shortest_path(loop.est[M], nominal.a_m, float(loop.r_hat[M]))
+        path = loop.path_into_region(M, nominal.a_m)
         loop.replans += 1
         steps = loop.path_steps(path, M, n - 1, n - 2, min(loop.tx, left))
         before = loop.est.copy()
@@ -442,12 +483,16 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
     if nominal is None:
         raise SeedStop(f"G_1: no S_3f arcs into the slots of {loop.label(N)} and {loop.label(M)} start outside C_O and clear of the other robots (A_n* empty)")
     loop.log("a_n", None, f"S_3f{tuple(round(r, 2) for r in nominal.rhos)}, {nominal.duration_s:.1f} s; a_n = ({nominal.a_n[0]:.0f}, {nominal.a_n[1]:.0f}), a_(n-1) = ({nominal.a_m[0]:.0f}, {nominal.a_m[1]:.0f}); {loop.cylinder_note(N)}")
-    for attempt in range(cfg.pair_replans + 1):
+    replans = partials = 0
+    while True:
         dep = departure(loop, nominal, lower)
         if dep is None:
+            if partials >= cfg.partial_stages:
+                raise SeedStop(f"G_1 did not form: no clear straight stage-2 run for {loop.label(N)} after {partials} partial stages (the seed's two-stage scheme; SPEC 5's known limit)")
             dep = partial_departure(loop, nominal, lower)
             if dep is None:
                 raise SeedStop(f"G_1: no departure of {loop.label(M)} from its orbit gives {loop.label(N)} a clear straight stage-2 run (the seed's two-stage scheme; SPEC 5's known limit)")
+            partials += 1
             loop.log("sigma_1", N, f"no clear straight run to A_n: partial stage 2 ({dep.t2_s:.1f} s of {loop.label(M)}'s path) from a run at ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f})")
             stage1_partial(loop, dep)
             partial_stage2(loop, nominal, dep.t2_s)
@@ -458,4 +503,6 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
             loop.log("A_n", None, "both in A_n x A_(n-1): fine motion (S_3f)")
             if fine_pair(loop, gN, gM):
                 return
-    raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine motion")
+        replans += 1
+        if replans > cfg.pair_replans:
+            raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine motion")

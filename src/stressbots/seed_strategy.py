@@ -94,6 +94,9 @@ class SeedSettings:
         How often a single robot may return from fine motion to gross motion (left the preimage).
     pair_replans:
         How often sigma_1 of the pair may be re-planned (App. 3.3) before giving up.
+    partial_stages:
+        How many partial stage-2 moves of D_(n-1) (when no straight run of D_n covers the whole stage 2,
+        SPEC 5's known limit) are allowed before giving up.
     max_cycles:
         Re-planning cycles per gross-motion leg before it is declared stuck.
     """
@@ -120,6 +123,7 @@ class SeedSettings:
     clearance_um: float = 10.0
     fine_attempts: int = 4
     pair_replans: int = 6
+    partial_stages: int = 8
     max_cycles: int = 200
 
 
@@ -293,6 +297,21 @@ class SeedLoop:
             return "the arena edge"
         return None
 
+    def hit_mask(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, clearance: float | None = None) -> np.ndarray:
+        """Per sample of robot ``i``'s body: whether it hits an orbit, a docked robot or the arena edge, (M,)."""
+        c = self.cfg.clearance_um if clearance is None else clearance
+        samples = np.atleast_2d(samples)
+        out = np.zeros(samples.shape[0], dtype=bool)
+        orbiting = [j for j in orbiting if j != i and not self.docked[j]]
+        if orbiting:
+            centres = turning_centres(self.est[orbiting], self.r_hat[orbiting])
+            out |= bodies_hit_discs(samples, self.L[i], self.W[i], centres, self.rstar[orbiting] + c).any(axis=1)
+        for j in np.flatnonzero(self.docked):
+            out |= penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c
+        if self.scn.arena_um is not None:
+            out |= arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c
+        return out
+
     def region(self, i: int) -> tuple[float, float]:
         """``(radius_um, half_height_rad)`` of robot ``i``'s regions: C_alpha (bounds) clipped (see module notes)."""
         cyl, cfg = self.cylinders[i], self.cfg
@@ -303,6 +322,26 @@ class SeedLoop:
     def cylinder_note(self, i: int) -> str:
         cyl = self.cylinders[i]
         return f"C_alpha (bounds) {cyl.radius_um:.0f} um / {math.degrees(cyl.height_rad):.0f} deg"
+
+    def path_into_region(self, i: int, a_pose) -> paths.Path:
+        """The shortest path from robot ``i``'s estimate into the region around ``a_pose`` (A_i, A_n', ...).
+
+        sigma_1's goal is a region, not the pose: the path goes to the nominal pose unless that needs a loop
+        (a path longer by more than half a turn than into one of 26 poses at half the region's radius and
+        half-height around it; then the shortest of those). A one-way robot that drifted a hair to the right
+        of a straight into the exact pose would otherwise loop (2 pi r, App. 3.4) at every re-plan; the
+        margin of half the region keeps the arrival inside it.
+        """
+        rad, hgt = self.region(i)
+        a = np.asarray(a_pose, dtype=np.float64)
+        th = float(a[2])
+        h, right = np.array([math.sin(th), math.cos(th)]), np.array([math.cos(th), -math.sin(th)])
+        g = np.array(np.meshgrid([-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], indexing="ij")).reshape(3, -1).T
+        cand = np.column_stack([a[0] + rad * (g[:, 0] * h[0] + g[:, 1] * right[0]), a[1] + rad * (g[:, 0] * h[1] + g[:, 1] * right[1]), th + hgt * g[:, 2]])
+        r = float(self.r_hat[i])
+        lengths = paths.shortest_path_lengths(np.broadcast_to(self.est[i], cand.shape), cand, r)
+        best = 13 if lengths[13] <= lengths.min() + math.pi * r else int(np.argmin(lengths))  # 13: the nominal pose
+        return paths.shortest_path(self.est[i], cand[best], r)
 
     def stalled(self, i: int, before: np.ndarray, duration_s: float) -> bool:
         """Whether robot ``i`` moved less than 15 % of what ``duration_s`` of driving should give."""
@@ -349,11 +388,11 @@ def gross_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, targets: 
         p = loop.est[i]
         while len(targets) > 1 and np.hypot(*(p[:2] - targets[0][:2])) <= max(rad, 40.0):
             targets.pop(0)
-        path = paths.shortest_path(p, targets[0], float(loop.r_hat[i]))
+        path = loop.path_into_region(i, targets[0]) if len(targets) == 1 else paths.shortest_path(p, targets[0], float(loop.r_hat[i]))
         blocked = loop.hit(path.sample(10.0), i, orbiting)
         period = TWO_PI / float(loop.omega_hat[i])
         if blocked is not None and len(targets) > 1 and waited == 0.0:
-            path = paths.shortest_path(p, targets[1], float(loop.r_hat[i]))  # skip ahead if that is clear
+            path = loop.path_into_region(i, targets[1]) if len(targets) == 2 else paths.shortest_path(p, targets[1], float(loop.r_hat[i]))  # skip ahead if clear
             if loop.hit(path.sample(10.0), i, orbiting) is None:
                 targets.pop(0)
                 blocked = None
