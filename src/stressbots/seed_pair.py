@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import paths
-from .collision import bodies_hit_discs, penetration_depth
+from .collision import penetration_depth
 from .kinematics import move
 from .robots import TWO_PI, angle_difference, front_midpoints, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s3f_duty, s3f_radii, s3f_steps
@@ -112,7 +112,7 @@ def departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure | None:
     clear = []
     for th in np.linspace(0.0, TWO_PI, DEPARTURE_PHASES, endpoint=False):
         q = _pose_on_orbit(cM, rM, float(th))
-        path = paths.shortest_path(q, nominal.a_m, rM)
+        path = loop.path_into_region(M, nominal.a_m, q)
         t2 = path.length / vM
         a_np = np.array([*(nominal.a_n[:2] - vN * t2 * h), th_n])
         run = move(a_np, np.linspace(0.0, vN * t2, max(2, int(vN * t2 / 10.0))), 0.0)
@@ -218,11 +218,11 @@ def partial_departure(loop: SeedLoop, nominal: PairNominal, lower) -> Departure 
         for turns in range(PARTIAL_TURNS + 1):
             t_reach = (float(np.mod(tn - loop.est[N, 2], TWO_PI)) + TWO_PI * turns) / wN
             q = _pose_on_orbit(cM, rM, float(loop.est[M, 2] + wM * t_reach))
-            path = paths.shortest_path(q, nominal.a_m, rM)
+            path = loop.path_into_region(M, nominal.a_m, q)
             t_p = _clear_time(loop, N, M, track, path, path.length / vM, lower)
             if t_p < 2.0:
                 continue
-            left = paths.shortest_path(path.pose_at(vM * t_p), nominal.a_m, rM).length
+            left = loop.path_into_region(M, nominal.a_m, path.pose_at(vM * t_p)).length
             if left < best_left - 1.0:
                 best, best_left = Departure(float(tn), q, path, t_p, track, t_reach), left
     return best

@@ -58,7 +58,7 @@ from .robots import TWO_PI, angle_difference, orbit_radii, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s2f_steps
 from .waveform import synthesize
 
-__all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity", "nominal_intermediate"]
+__all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity", "nominal_intermediate", "region_path"]
 
 
 @dataclass(frozen=True)
@@ -183,6 +183,30 @@ def nominal_intermediate(goal, radius_um: float, co, rho_a: float, *, margin_um:
         return None
     k = int(out[0])
     return poses[k], float(s[k])
+
+
+def region_path(start, a_pose, radius_um: float, height_rad: float, turn_radius_um: float) -> paths.Path:
+    """The shortest one-way path from ``start`` into the region around ``a_pose``.
+
+    sigma_1's goal is a region, not the pose: the path goes to the nominal pose unless that needs a loop
+    (a path longer by more than half a turn than into one of 26 poses at half the region's radius and
+    half-height around it; then the shortest of those). A one-way robot that drifted a hair to the right
+    of a straight into the exact pose would otherwise loop (2 pi r, App. 3.4) at every re-plan; the
+    margin of half the region keeps the arrival inside it.
+    """
+    a = np.asarray(a_pose, dtype=np.float64)
+    th = float(a[2])
+    h, right = np.array([math.sin(th), math.cos(th)]), np.array([math.cos(th), -math.sin(th)])
+    g = np.array(np.meshgrid([-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], indexing="ij")).reshape(3, -1).T
+    cand = np.column_stack([
+        a[0] + radius_um * (g[:, 0] * h[0] + g[:, 1] * right[0]),
+        a[1] + radius_um * (g[:, 0] * h[1] + g[:, 1] * right[1]),
+        th + height_rad * g[:, 2],
+    ])
+    start = np.asarray(start, dtype=np.float64)
+    lengths = paths.shortest_path_lengths(np.broadcast_to(start, cand.shape), cand, turn_radius_um)
+    best = 13 if lengths[13] <= lengths.min() + math.pi * turn_radius_um else int(np.argmin(lengths))  # 13: a_pose
+    return paths.shortest_path(start, cand[best], turn_radius_um)
 
 
 # -- the plant loop --------------------------------------------------------------------------------
@@ -323,25 +347,11 @@ class SeedLoop:
         cyl = self.cylinders[i]
         return f"C_alpha (bounds) {cyl.radius_um:.0f} um / {math.degrees(cyl.height_rad):.0f} deg"
 
-    def path_into_region(self, i: int, a_pose) -> paths.Path:
-        """The shortest path from robot ``i``'s estimate into the region around ``a_pose`` (A_i, A_n', ...).
-
-        sigma_1's goal is a region, not the pose: the path goes to the nominal pose unless that needs a loop
-        (a path longer by more than half a turn than into one of 26 poses at half the region's radius and
-        half-height around it; then the shortest of those). A one-way robot that drifted a hair to the right
-        of a straight into the exact pose would otherwise loop (2 pi r, App. 3.4) at every re-plan; the
-        margin of half the region keeps the arrival inside it.
-        """
+    def path_into_region(self, i: int, a_pose, start=None) -> paths.Path:
+        """The shortest path from robot ``i``'s estimate (or ``start``) into the region around ``a_pose``
+        (A_i, A_n', ...): :func:`region_path` with the robot's region and identified radius."""
         rad, hgt = self.region(i)
-        a = np.asarray(a_pose, dtype=np.float64)
-        th = float(a[2])
-        h, right = np.array([math.sin(th), math.cos(th)]), np.array([math.cos(th), -math.sin(th)])
-        g = np.array(np.meshgrid([-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], [-0.5, 0.0, 0.5], indexing="ij")).reshape(3, -1).T
-        cand = np.column_stack([a[0] + rad * (g[:, 0] * h[0] + g[:, 1] * right[0]), a[1] + rad * (g[:, 0] * h[1] + g[:, 1] * right[1]), th + hgt * g[:, 2]])
-        r = float(self.r_hat[i])
-        lengths = paths.shortest_path_lengths(np.broadcast_to(self.est[i], cand.shape), cand, r)
-        best = 13 if lengths[13] <= lengths.min() + math.pi * r else int(np.argmin(lengths))  # 13: the nominal pose
-        return paths.shortest_path(self.est[i], cand[best], r)
+        return region_path(self.est[i] if start is None else start, a_pose, rad, hgt, float(self.r_hat[i]))
 
     def stalled(self, i: int, before: np.ndarray, duration_s: float) -> bool:
         """Whether robot ``i`` moved less than 15 % of what ``duration_s`` of driving should give."""
@@ -367,7 +377,7 @@ def _intermediate_for(loop: SeedLoop, i: int, goal, co, orbiting) -> tuple[np.nd
         if loop.hit(far, i, orbiting) is None:
             return a_pose, rho
     if first is None:
-        raise SeedStop(f"{loop.name(i)}: no intermediate configuration a_i outside C_O (App. 3.2: A_i* is empty)")
+        raise SeedStop(f"{loop.label(i)}: no intermediate configuration a_i outside C_O (App. 3.2: A_i* is empty)")
     loop.log("a_i", i, "no S_2f arc into the slot clears the obstacles; using S_2f(sym) anyway")
     return first
 
@@ -409,12 +419,12 @@ def gross_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, targets: 
         duration = math.fsum(d for _, d in steps)
         stalls = stalls + 1 if loop.stalled(i, before, duration) else 0
         if stalls >= 3:
-            raise SeedStop(f"{loop.name(i)} stopped during gross motion at ({loop.est[i, 0]:.0f}, {loop.est[i, 1]:.0f}) um (failure region H)")
+            raise SeedStop(f"{loop.label(i)} stopped during gross motion at ({loop.est[i, 0]:.0f}, {loop.est[i, 1]:.0f}) um (failure region H)")
         if whole:
             if len(targets) == 1:
                 return bool(inside())
             targets.pop(0)
-    raise SeedStop(f"{loop.name(i)}: gross motion did not reach A_i in {loop.cfg.max_cycles} re-plans")
+    raise SeedStop(f"{loop.label(i)}: gross motion did not reach A_i in {loop.cfg.max_cycles} re-plans")
 
 
 def check_docked(loop: SeedLoop, i: int, straight_k: int, goal) -> None:
@@ -430,8 +440,8 @@ def check_docked(loop: SeedLoop, i: int, straight_k: int, goal) -> None:
                 loop.docked[i] = True
                 loop.log("docked", i, f"{dpos:.1f} um, {math.degrees(dth):.1f} deg from the slot")
                 return
-            raise SeedStop(f"{loop.name(i)} stopped {dpos:.0f} um / {math.degrees(dth):.0f} deg from its slot (failure region H)")
-    raise SeedStop(f"{loop.name(i)} kept moving after its fine motion: it missed its slot")
+            raise SeedStop(f"{loop.label(i)} stopped {dpos:.0f} um / {math.degrees(dth):.0f} deg from its slot (failure region H)")
+    raise SeedStop(f"{loop.label(i)} kept moving after its fine motion: it missed its slot")
 
 
 def fine_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, goal) -> bool:
@@ -482,7 +492,7 @@ def dock_single(loop: SeedLoop, k: int, goal, co, waypoints) -> None:
         if fine_motion(loop, i, k, k - 1, goal):
             return
         route = []
-    raise SeedStop(f"{loop.name(i)} did not dock: {cfg.fine_attempts} times in A_i without a fine motion into its slot")
+    raise SeedStop(f"{loop.label(i)} did not dock: {cfg.fine_attempts} times in A_i without a fine motion into its slot")
 
 
 # -- the whole assembly ----------------------------------------------------------------------------
