@@ -22,11 +22,11 @@ from stressbots.control import Plant, nominal_plan
 from stressbots.errors import StressbotsError
 from stressbots.generate import LITERATURE_NOISE, random_scenario
 from stressbots.kinematics import move
-from stressbots.paths import arc_through, interpolation_deviation
+from stressbots.paths import arc_through, interpolation_deviation, shortest_path
 from stressbots.robots import angle_difference
 from stressbots.scenario import Noise, load, to_toml
 from stressbots.seed_fine_motion import arc_back, s2f_duty, s2f_steps, s3f_duty, s3f_radii, s3f_steps
-from stressbots.seed_strategy import assemble_seed, in_proximity, intermediate_reason, nominal_intermediate
+from stressbots.seed_strategy import assemble_seed, in_proximity, intermediate_reason, nominal_intermediate, region_path
 from stressbots.sim import SimulatedPlant
 from stressbots.strategies import STRATEGIES, assemble_with
 
@@ -148,6 +148,22 @@ def test_intermediate_region_membership_by_hand():
     assert "no clockwise arc" in intermediate_reason(left, left, goal, r, None, **kw)
     sharp = np.array([-400.0, -100.0, 0.0])  # the slot is ahead-right, but its arc turns 152 deg on the way
     assert "compliance cone" in intermediate_reason(sharp, sharp, goal, 10.0, None, **kw)
+
+
+def test_region_path_avoids_a_loop_and_ends_in_the_region():
+    r = 200.0
+    a_pose = np.array([0.0, 1000.0, 0.0])
+    start = np.array([-3.0, 0.0, 0.0])  # 3 um left of the straight into a_pose: the exact pose needs a loop
+    exact = shortest_path(start, a_pose, r)
+    assert exact.length > 1000.0 + 2 * math.pi * r * 0.9
+    p = region_path(start, a_pose, 40.0, math.radians(8), r)
+    assert p.length < 1000.0 + 25.0
+    end = np.array(p.end)
+    assert np.hypot(*(end[:2] - a_pose[:2])) <= 0.5 * 40.0 * math.sqrt(2) + 1e-9
+    assert abs(float(angle_difference(end[2], a_pose[2]))) <= 0.5 * math.radians(8) + 1e-12
+    # a start whose exact path needs no loop keeps the exact pose
+    on_line = np.array([0.0, 0.0, 0.0])
+    assert np.allclose(np.array(region_path(on_line, a_pose, 40.0, math.radians(8), r).end), a_pose, atol=1e-9)
 
 
 def test_arc_back_is_undone_by_driving_the_arc():
