@@ -9,8 +9,12 @@ D_n and D_(n-1) move together, but only one robot's error can be corrected at a 
 - **stage 1** (sigma_1,1; ``P_n``/``P_(n-1)``): D_n is re-planned every t_x to ``A_n'`` while D_(n-1)
   orbits. ``a_n'`` is ``v_n t_2`` behind ``a_n`` on its heading, ``t_2`` the time of D_(n-1)'s stage-2
   path from a departure pose on its orbit; D_n's path is lengthened to end when D_(n-1) is back at that
-  pose (``t_wait + k T_(n-1)``, App. 2.1), by :func:`stressbots.paths.path_of_length`. The departure phase
-  is the one (of :data:`DEPARTURE_PHASES`) with the shortest clear stage 2;
+  pose (``t_wait + k T_(n-1)``, App. 2.1): it orbits in place, then takes the shortest path
+  (:func:`orbit_then_go`; :func:`stressbots.paths.path_of_length` as a fallback). The departure phase is
+  the one (of :data:`DEPARTURE_PHASES`) with the shortest clear stage 2 that D_n can reach in time;
+- **partial stage 2** (when no straight run of D_n covers the whole stage 2, SPEC 5's known limit):
+  D_(n-1) moves toward ``A_(n-1)`` for as long as a clear straight run of D_n allows, then sigma_1 is
+  re-planned from the measured poses (App. 3.3's re-planning used as a plan);
 - **stage 2** (sigma_1,2; ``P_(n-1)``/``P_(n-2)``): D_(n-1) is re-planned every t_x to ``A_(n-1)``; D_n
   drives straight, uncorrected, to ``A_n``. When one robot enters its region and the other does not,
   sigma_1 is re-planned from the measured poses (back to stage 1, App. 3.3);

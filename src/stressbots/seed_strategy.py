@@ -17,8 +17,9 @@ The strategy (reachability ``R_i --sigma_1--> A_i --sigma_2--> G_i``):
   outside C_O, and its eq. (1) arc through the docking point is realisable (``r' >= r``) and arrives
   within the compliance cone (:func:`intermediate_reason`).
 - **sigma_1** (gross motion, App. 3.3): every ``t_x`` (``replan_interval_s``) measure the poses and
-  re-plan the shortest one-way path (:func:`stressbots.paths.shortest_path`) toward ``a_i`` (through the
-  nominal plan's route waypoints outside C_O), execute ``t_x`` of it; the last leg runs whole.
+  re-plan the shortest one-way path (:func:`stressbots.paths.shortest_path`) into A_i (through the
+  nominal plan's route waypoints outside C_O), execute ``t_x`` of it; the last leg runs whole. The path
+  aims at ``a_i`` itself unless that needs a loop, then at a nearby pose of the region (:func:`region_path`).
 - **sigma_2** (fine motion, App. 3.1): from the measured pose, eq. (1) gives ``r'`` through the docking
   point ``p_g,i`` and the corrected duty ``rho_a = r / r'`` gives S_2f; ``r'`` is re-computed every ``t_x``
   (the seed's "reducing or increasing r'"); at the end the robot pushes straight and docking compliance
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -209,6 +211,12 @@ def region_path(start, a_pose, radius_um: float, height_rad: float, turn_radius_
     return paths.shortest_path(start, cand[best], turn_radius_um)
 
 
+@lru_cache(maxsize=256)
+def _cylinder(speed_um_s: float, radius_um: float, model: ErrorModel):
+    """:func:`stressbots.bounds.cylinder`, cached: Monte Carlo trials of one scenario share it (~50 ms each)."""
+    return cylinder(speed_um_s, radius_um, model)
+
+
 # -- the plant loop --------------------------------------------------------------------------------
 
 
@@ -241,7 +249,7 @@ class SeedLoop:
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
         model = ErrorModel.from_noise(scenario.noise)
-        self.cylinders = tuple(cylinder(float(self.v_nom[i]), float(self.r_nom[i]), model, robot=scenario.names[i]) for i in range(n))
+        self.cylinders = tuple(_cylinder(float(self.v_nom[i]), float(self.r_nom[i]), model) for i in range(n))
 
     def name(self, i: int) -> str:
         return self.scn.names[i]

@@ -14,6 +14,7 @@ processes (Monte Carlo pools, Dask) as it is.
 
 from __future__ import annotations
 
+import importlib
 from typing import Callable
 
 from .control import assemble
@@ -34,12 +35,17 @@ STRATEGY_HELP = (
 )
 
 
+_HOMES = {"rendezvous": ("stressbots.control", "assemble"), "seed": ("stressbots.seed_strategy", "assemble_seed")}
+"""Where each strategy's function lives: looked up at call time, so a replaced ``control.assemble`` (tests,
+the control package) is the one that runs."""
+
+
 def strategy_function(strategy: str) -> Callable:
     """The assembly function of ``strategy``; a :class:`StressbotsError` naming the choices otherwise."""
-    try:
-        return STRATEGIES[str(strategy)]
-    except KeyError:
-        raise StressbotsError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}", field="strategy") from None
+    if str(strategy) not in STRATEGIES:
+        raise StressbotsError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}", field="strategy")
+    module, name = _HOMES[str(strategy)]
+    return getattr(importlib.import_module(module), name)
 
 
 def assemble_with(strategy: str, scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options=None):
