@@ -549,7 +549,9 @@ def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_b
     Same interface and result as :func:`stressbots.control.assemble` (``options`` gives t_x, the time
     budget and the success threshold; ``settings`` the strategy's own numbers). A run that cannot go on
     returns ``success=False`` with the reason in ``failure``; it raises only for bad input (a non-STRING
-    design, a plan that is not a ``PlanResult``).
+    design, a plan that is not a ``PlanResult``). As with ours, a plant that offers ``true_poses()`` is
+    asked for them after the run, for the result only (``final_true``, the errors); the strategy itself
+    sees nothing but ``observe()``.
     """
     from .planning import PlanResult
 
