@@ -6,6 +6,7 @@ extra: ``pip install -e ".[bench]"``; without it the OMPL figures are skipped wi
 Prints, on the same random pairs (positions uniform on a 3 mm square, headings uniform):
 
 - ns/pair of :func:`stressbots.paths.shortest_path_lengths` on the whole batch (best of several runs);
+- us/call of :func:`stressbots.paths.shortest_path` for one query (the scalar fast path, a Path value);
 - ns/pair of ``ompl.base.DubinsStateSpace.distance`` called in a Python loop, setting the two states
   each time (what a Python caller must do), and with all states built beforehand (OMPL's best case);
 - the speed-up (target: at least 2x the loop);
@@ -26,7 +27,7 @@ import time
 
 import numpy as np
 
-from stressbots.paths import shortest_path_lengths
+from stressbots.paths import shortest_path, shortest_path_lengths
 
 TWO_PI = 2.0 * math.pi
 
@@ -155,6 +156,9 @@ def main(argv=None) -> int:
     one_way = shortest_path_lengths(starts, goals, r)
     ns_ours = t_ours / n * 1e9
     print(f"stressbots shortest_path_lengths (batch, one-way): {ns_ours:8.1f} ns/pair (best of {args.repeat})")
+    single = [(tuple(map(float, s)), tuple(map(float, g))) for s, g in zip(starts[:5000], goals[:5000])]
+    t_single = best_time(lambda: [shortest_path(s, g, r) for s, g in single], args.repeat)
+    print(f"stressbots shortest_path (one query, Path value, scalar fast path): {t_single / len(single) * 1e6:8.2f} us/call")
 
     two_way_own = dubins_two_way_lengths(starts, goals, r)
     try:

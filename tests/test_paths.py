@@ -840,3 +840,28 @@ def test_never_shorter_than_ordinary_dubins_from_ompl():
     assert np.all(ours >= two_way * (1 - 1e-9))
     # and equal whenever the goal is reached by a right-turn-only RSR that OMPL also finds optimal
     assert np.mean(np.isclose(ours, two_way, rtol=1e-9)) > 0.1
+
+
+# -- the single-query fast path (issue 12 goal 5) -----------------------------------------------------
+
+
+@settings(max_examples=300)
+@given(pairs(), st.sampled_from([0.0, 0.0, 25.0, 160.0]))
+def test_single_query_fast_path_equals_the_vectorised_solver(pair, approach):
+    """``shortest_path`` (plain floats, no arrays) gives the batch solver's word and length (1e-9)."""
+    start, goal, r = pair
+    p = shortest_path(start, goal, r, approach_um=approach)
+    words, seg = shortest_path_segments(np.array([start]), np.array([goal]), r, approach_um=approach)
+    batch = Path(start, r, tuple(zip(str(words[0]), seg[0])))
+    assert p.word == batch.word
+    assert p.length == pytest.approx(float(shortest_path_lengths(start, goal, r, approach_um=approach)), rel=1e-9, abs=1e-9)
+    assert [v for _, v in p.segments] == pytest.approx([v for _, v in batch.segments], rel=1e-9, abs=1e-9)
+    assert p.start == batch.start
+
+
+def test_single_query_rejects_what_the_batch_rejects():
+    for bad in [((0, 0), (1, 1, 0), 200.0, 0.0), ((0, 0, math.nan), (1, 1, 0), 200.0, 0.0),
+                ((0, 0, 0), (1, 1, 0), 0.0, 0.0), ((0, 0, 0), (1, 1, 0), 200.0, -1.0)]:
+        start, goal, r, ell = bad
+        with pytest.raises(ValueError):
+            shortest_path(start, goal, r, approach_um=ell)

@@ -46,6 +46,19 @@ out = Console()
 err = Console(stderr=True)
 
 
+class StrategyChoice(str, Enum):
+    """The --strategy choices of simulate and run (stressbots.strategies.STRATEGIES)."""
+
+    rendezvous = "rendezvous"
+    seed = "seed"
+
+
+def _strategy_option():
+    from .strategies import STRATEGY_HELP
+
+    return typer.Option(StrategyChoice.rendezvous, "--strategy", help=STRATEGY_HELP)
+
+
 class NoiseChoice(str, Enum):
     """The --noise choices of simulate and run."""
 
@@ -118,6 +131,7 @@ def run(
         show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
+    strategy: StrategyChoice = _strategy_option(),
 ) -> None:
     """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
 
@@ -138,7 +152,7 @@ def run(
     from .console import RichJobObserver
 
     run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget,
-            observer=RichJobObserver(out, err, quiet=quiet))
+            observer=RichJobObserver(out, err, quiet=quiet), strategy=strategy.value)
 
 
 def _with_noise_choice(scn, choice):
@@ -519,6 +533,7 @@ def simulate(
         show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+    strategy: StrategyChoice = _strategy_option(),
 ) -> None:
     """Run the simulated plant: robots with control error, contact, compliance and a noisy camera.
 
@@ -548,7 +563,7 @@ def simulate(
     from .viz import plot_run
 
     if plan is None:
-        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet)
+        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet, strategy.value)
         return
     from .scenario import check_starts
 
@@ -630,7 +645,8 @@ def simulate(
     out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
 
 
-def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
+def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool,
+                          strategy: str = "rendezvous") -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     import time
 
@@ -666,7 +682,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
             status.update("closed loop...")
         if budget is None:
             budget = layout_time_budget_s(scn)
-        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
+        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy)
         if show:
             status.update("pictures...")
         doc = result_document(scn, run, source=str(scenario))
@@ -678,7 +694,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     if quiet:
         return
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
               f"{res.replans} re-plans; the command took {time.perf_counter() - t_command:.1f} s (wall time)",
               highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))

@@ -233,6 +233,16 @@ class Path:
             raise ValueError(f"speed must be positive (um/s), got {speed_um_s!r}")
         return tuple((k == "R", v / speed_um_s) for k, v in self.segments)
 
+    @classmethod
+    def _trusted(cls, x: float, y: float, theta: float, radius: float, segments) -> "Path":
+        """A path from values already checked (finite floats, radius > 0, lengths >= 0): no numpy."""
+        t = theta % TWO_PI
+        path = object.__new__(cls)
+        object.__setattr__(path, "start", Pose(x, y, 0.0 if t >= TWO_PI else t))
+        object.__setattr__(path, "radius", radius)
+        object.__setattr__(path, "segments", _normalise_segments(segments))
+        return path
+
     def then(self, *segments) -> "Path":
         """This path followed by more ``(kind, length_um)`` segments."""
         return Path(self.start, self.radius, self.segments + tuple(segments))
@@ -474,6 +484,79 @@ def _pose_tuple(p, name) -> np.ndarray:
     return a
 
 
+def _ieee_div(a: float, b: float) -> float:
+    """``a / b`` with numpy's IEEE semantics (inf or nan instead of ZeroDivisionError)."""
+    if b != 0.0:
+        return a / b
+    return math.nan if a == 0.0 or a != a else math.copysign(math.inf, a) * math.copysign(1.0, b)
+
+
+def _nanmax0(x: float) -> float:
+    """``np.maximum(x, 0.0)`` for a scalar (NaN propagates)."""
+    return x if x != x else (x if x > 0.0 else 0.0)
+
+
+def _mod2pi_scalar(x: float) -> float:
+    return max(x - TWO_PI * math.floor(x * (1.0 / TWO_PI)), 0.0)
+
+
+def _SINCOS(t: np.ndarray) -> tuple[float, float, float, float]:
+    s, c = np.sin(t), np.cos(t)
+    return s[0], c[0], s[1], c[1]
+
+
+def _solve_scalar(x1: float, y1: float, t1: float, x2: float, y2: float, t2: float, r: float) -> tuple[str, tuple[float, float, float]]:
+    """One pair of :func:`_solve_chunk` in plain floats: ``(word, three segment lengths)``.
+
+    The same operations in the same order as the vectorised core (snapping, tolerance, the SRS
+    conditioning), so single queries skip numpy's per-call overhead (~100 us) and agree with the batch to
+    rounding (checked by a Hypothesis property in the tests).
+    """
+    # numpy's transcendental functions (not math's, which may differ in the last bit): bit-identical to the batch
+    s1, c1, s2, c2 = (float(v) for v in _SINCOS(np.array((t1, t2))))
+    delta = _mod2pi_scalar(t2 - t1)
+    if delta > TWO_PI - ANGLE_TOL:
+        delta, s2, c2 = 0.0, s1, c1
+    dx, dy = x2 - x1, y2 - y1
+    wx = dx + r * (c2 - c1)
+    wy = dy - r * (s2 - s1)
+    d = float(np.hypot(wx, wy))
+    off = _mod2pi_scalar(float(np.arctan2(wx, wy)) - t1)
+    tol = REL_TOL * (r + abs(dx) + abs(dy)) + (64 * _EPS) * (abs(x1) + abs(y1) + abs(x2) + abs(y2) + r)
+    if d <= tol:
+        d = 0.0
+    if d == 0.0 or off >= TWO_PI or (TWO_PI - off) * d <= tol:
+        off = 0.0
+    if off > delta and (off - delta) * d <= tol:
+        off = delta
+    outside = off > delta
+    l_rsr = r * (delta + (TWO_PI if outside else 0.0)) + d
+    if outside and delta > _PI:
+        sin_delta, cos_delta = s2 * c1 - c2 * s1, c2 * c1 + s2 * s1
+        b = _nanmax0(_ieee_div(wx * c1 - wy * s1, sin_delta))
+        a = _nanmax0((wy * c1 + wx * s1) - b * cos_delta)
+        if delta - _PI < _SRS_ILL:
+            e = min(min(a, b), tol / (delta - _PI)) if a == a and b == b else math.nan
+            a, b = a - e, b - e
+        l_srs = a + b + r * delta
+        if l_srs < l_rsr:
+            return "SRS", (a, r * delta, b)
+    arc2 = delta - off + (TWO_PI if outside else 0.0)
+    return "RSR", (r * off, d, r * arc2)
+
+
+def _float_pose(p, name) -> tuple[float, float, float]:
+    """A finite pose as three floats (the checks of :func:`_pose_tuple` without numpy)."""
+    try:
+        x, y, t = p
+        out = (float(x), float(y), float(t))
+    except (TypeError, ValueError):
+        return tuple(float(v) for v in _pose_tuple(p, name))  # the array path raises the usual errors
+    if not all(math.isfinite(v) for v in out):
+        raise ValueError(f"{name} must be finite")
+    return out
+
+
 def shortest_path(start, goal, radius, *, approach_um=0.0) -> Path:
     """The shortest path from ``start`` to ``goal`` for a robot that turns clockwise only.
 
@@ -502,11 +585,19 @@ def shortest_path(start, goal, radius, *, approach_um=0.0) -> Path:
     >>> p.word, round(p.length / (2 * 3.141592653589793 * 200.0), 6)
     ('RSR', 1.000796)
     """
-    start = _pose_tuple(start, "start")
-    goal = _pose_tuple(goal, "goal")
-    words, seg = shortest_path_segments(start, goal, float(radius), approach_um=float(approach_um))
-    word = str(words)
-    return Path(tuple(start), float(radius), tuple(zip(word, (float(v) for v in seg))))
+    x1, y1, t1 = _float_pose(start, "start")
+    x2, y2, t2 = _float_pose(goal, "goal")
+    r = float(radius)
+    if not (r > 0.0 and math.isfinite(r)):
+        _check_radius(r)
+    ell = float(approach_um)
+    if not (ell >= 0.0 and math.isfinite(ell)):
+        raise ValueError(f"approach_um must be finite and >= 0 um, got {approach_um!r}")
+    if ell > 0.0:
+        x2, y2 = x2 - ell * math.sin(t2), y2 - ell * math.cos(t2)
+    word, seg = _solve_scalar(x1, y1, t1, x2, y2, t2, r)
+    segments = tuple(zip(word, seg)) + ((("S", ell),) if ell > 0.0 else ())
+    return Path._trusted(x1, y1, t1, r, segments)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -87,6 +87,7 @@ class ClosedLoop:
     plant: Any  # stressbots.sim.SimulatedPlant
     wall_s: float
     time_budget_s: float | None
+    strategy: str = "rendezvous"  # stressbots.strategies.STRATEGIES key
 
 
 def default_time_budget_s() -> float | None:
@@ -141,10 +142,13 @@ def plan_for(scenario, source: str | None = None, *, seed: int = 0, options=None
 
 
 def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None = None,
-                on_time: Callable[[float], None] | None = None) -> ClosedLoop:
-    """Run :func:`stressbots.control.assemble` on a recording :class:`~stressbots.sim.SimulatedPlant`."""
-    from .control import assemble
+                on_time: Callable[[float], None] | None = None, strategy: str = "rendezvous") -> ClosedLoop:
+    """Run the ``strategy``'s assembly (:mod:`stressbots.strategies`; default :func:`stressbots.control.assemble`)
+    on a recording :class:`~stressbots.sim.SimulatedPlant`."""
     from .sim import SimulatedPlant
+    from .strategies import strategy_function
+
+    assemble = strategy_function(strategy)
 
     plant = SimulatedPlant(scenario, seed=seed, record=True)
     kwargs: dict[str, Any] = {"seed": seed, "plan": plan_result}
@@ -152,7 +156,7 @@ def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None
         kwargs["time_budget_s"] = float(time_budget_s)
     t0 = time.perf_counter()
     res = assemble(scenario, _WatchedPlant(plant, on_time), **kwargs)
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s)
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, strategy)
 
 
 def merged_events(result, plant) -> list[dict[str, Any]]:
@@ -185,6 +189,7 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
     plant = run.plant
     more: dict[str, Any] = {
         "mode": "closed-loop",
+        "strategy": run.strategy,
         "scenario": source,
         "noise": scenario.noise.to_file_units(),
         "time_budget_s": run.time_budget_s,
@@ -356,6 +361,7 @@ def run_job(
     observer: JobObserver | None = None,
     title: str | None = None,
     extra: Callable[[JobContext], Extra] | None = None,
+    strategy: str = "rendezvous",
 ) -> JobResult:
     """Analyse, plan, run closed loop on the simulator and write the report and its files into ``out_dir``.
 
@@ -393,7 +399,7 @@ def run_job(
         def on_time(t: float) -> None:
             obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
+        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy)
         res = run.result
         obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
                   info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
