@@ -807,6 +807,13 @@ def montecarlo(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made with other settings)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: Optional[str] = typer.Option(
+        None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
+        "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
+    ),
+    strategy: str = typer.Option("default", "--strategy", help="Controller strategy (refused when the controller does not offer it)."),
 ) -> None:
     """Run N independent closed-loop assemblies on the simulated plant and summarise them.
 
@@ -817,8 +824,14 @@ def montecarlo(
     failed trials' seeds, seeds and provenance) and DIR/montecarlo.png; with --sweep also the success
     rate against the noise scale (summary "sweep" and DIR/sweep.png).
 
+    Every finished trial is committed to DIR/trials.sqlite as it finishes (SPEC 10) and the summary is
+    computed from it; DIR/trials.csv is written at the end. Ctrl-C (or kill) keeps the finished trials:
+    run the same command with --resume to run only the missing ones (exit status 130 after an
+    interrupt). --dask runs the trials on a Dask cluster with the same per-trial outcomes.
+
     Examples: `stressbots montecarlo examples/four-robots.toml --trials 100 --seed 1 --out out/mc`;
-    `stressbots montecarlo SCENARIO --trials 50 --seed 0 --out out/sweep --sweep 0,0.5,1,1.5,2`.
+    `stressbots montecarlo SCENARIO --trials 50 --seed 0 --out out/sweep --sweep 0,0.5,1,1.5,2`;
+    `stressbots montecarlo SCENARIO --trials 5000 --out out/big --dask tcp://scheduler:8786 --resume`.
     """
     from . import montecarlo as mc
     from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
@@ -829,25 +842,26 @@ def montecarlo(
         raise StressbotsError(f"must be a finite number > 0 s, got {time_budget_s:g}", source="--time-budget-s")
     scn = scenario_arg(scenario)
     folder = prepare_dir(out_dir, inputs=[scenario])
-    for name in ("summary.json", "montecarlo.png", "sweep.png"):
+    for name in ("summary.json", "montecarlo.png", "sweep.png", "trials.sqlite", "trials.csv"):
         check_not_input(folder / name, [scenario])
+    if resume and overwrite:
+        raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
     assemble = mc.default_assemble()
     show = not (quiet or as_json)
     with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext():
         plan = mc.default_planner()(scn)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    total = trials * (1 + len([f for f in (factors or ()) if f != 1.0]))
-    # No refresh thread: worker processes may be forked while the bar runs.
-    with Progress(TextColumn("trials"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=err, disable=not show, auto_refresh=False, transient=False) as bar:
-        task = bar.add_task("trials", total=total)
-        bar.refresh()
-        study = mc.run_study(
-            scn, trials, seed, workers=workers, sweep=factors, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
-            progress=lambda d, t: bar.update(task, completed=d, refresh=True), source=str(scenario),
-        )
+    def run_with_progress():
+        with _campaign_progress(show) as progress:
+            return mc.run_study(
+                scn, trials, seed, workers=workers, sweep=factors, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
+                progress=progress, source=str(scenario),
+                store=folder / "trials.sqlite", resume=resume, overwrite=overwrite, dask=dask, strategy=strategy,
+            )
+
+    study = _campaign_interrupt_guard(run_with_progress)
     s = study.summary
+    _write_trials_csv(folder)
     write_json(folder / "summary.json", s)
     save_figure(plot_montecarlo(s, study.main), folder / "montecarlo.png")
     if factors:
@@ -868,6 +882,8 @@ def montecarlo(
     line = lambda text: out.print(text, highlight=False, soft_wrap=True)  # noqa: E731
     line(f"[bold]{scn.name}[/bold]: {s['successes']}/{s['trials']} successes, rate {s['success_rate']:.3f} (95 % CI {lo:.3f}-{hi:.3f}), "
          f"seed {seed}, {s['run']['workers']} workers, {s['run']['wall_s']:.1f} s")
+    if s["run"]["resumed_with"]:
+        line(f"resumed: {s['run']['resumed_with']} trials were in the store, {s['run']['trials_run']} run now")
     line(f"shape error RMS: {pct(s['shape_error_rms_um'], 'um')}")
     line(f"placement error (largest per trial): {pct(s['placement_error_um'], 'um')}")
     line(f"duration (simulated): {pct(s['duration_s'], 's')}")
@@ -887,8 +903,89 @@ def montecarlo(
             t.add_row(f"{row['noise_scale']:g}", f"{row['successes']}/{row['trials']}", f"{row['success_rate']:.3f}",
                       f"{row['success_rate_ci95'][0]:.3f}-{row['success_rate_ci95'][1]:.3f}", "-" if p50 is None else f"{p50:.3g}")
         out.print(t)
-    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else [])
+    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else []) + ["trials.sqlite", "trials.csv"]
     line("wrote " + ", ".join(str(folder / f) for f in files))
+
+
+# ----------------------------------------------------------------------------------------------------
+# campaigns: interruption, export (SPEC 10)
+
+
+from contextlib import contextmanager as _contextmanager  # noqa: E402 - kept with the campaign block
+
+
+@_contextmanager
+def _campaign_progress(show: bool, label: str = "trials"):
+    """A progress bar with ETA for a campaign; it appears at the first report (after the store is
+    checked, so a refusal prints only its error line). No refresh thread: workers may be forked."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                   console=err, disable=not show, auto_refresh=False, transient=False)
+    state: dict = {}
+
+    def report(done: int, total: int) -> None:
+        if "task" not in state:
+            bar.start()
+            state["task"] = bar.add_task(label, total=total, completed=done)
+        bar.update(state["task"], completed=done, total=total, refresh=True)
+
+    try:
+        yield report
+    finally:
+        if "task" in state:
+            bar.stop()
+
+
+def _campaign_interrupt_guard(run):
+    """Run a campaign; on Ctrl-C / SIGTERM say what was kept and how to go on, exit status 130."""
+    from .campaign import CampaignInterrupted
+
+    try:
+        return run()
+    except CampaignInterrupted as exc:
+        print("error: interrupted", file=sys.stderr)
+        where = f" in {exc.path}" if exc.path is not None else ""
+        print(f"{exc.kept} of {exc.total} trials are kept{where}; run the same command with --resume to finish", file=sys.stderr)
+        raise typer.Exit(130) from None
+
+
+def _write_trials_csv(folder: Path) -> Path:
+    from .outputs import write_text
+    from .store import csv_text, read_rows, read_settings
+
+    path = folder / "trials.sqlite"
+    return write_text(folder / "trials.csv", csv_text(read_rows(path), read_settings(path)["cells"]))
+
+
+@app.command()
+def export(
+    store_dir: Path = typer.Argument(..., metavar="DIR", help="A campaign's folder (or its trials.sqlite).", show_default=False),
+    fmt: str = typer.Option("csv", "--format", help="csv, or parquet (needs pyarrow)."),
+    out_file: Optional[Path] = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
+) -> None:
+    """Export a campaign's trial store (finished, interrupted or still running) for pandas & co.
+
+    One row per stored trial: trial, cell, cell_trial, seed, noise_scale, success, failure,
+    shape_error_um, placement_error_um, heading_error_deg, duration_s (simulated), replans, docked,
+    robots, error, wall_s, worker, finished_utc, cell_label.
+
+    Example: `stressbots export out/mc --format parquet`, then `pandas.read_parquet("out/mc/trials.parquet")`.
+    """
+    from .outputs import check_not_input, write_text
+    from .store import STORE_NAME, csv_text, read_rows, read_settings, write_parquet
+
+    if fmt not in ("csv", "parquet"):
+        raise StressbotsError(f"must be csv or parquet, got {fmt!r}", source="--format")
+    db = store_dir / STORE_NAME if store_dir.is_dir() else store_dir
+    rows, cells = read_rows(db), read_settings(db)["cells"]
+    target = out_file or db.with_name(f"trials.{fmt}")
+    check_not_input(target, [db], option="--out")
+    if fmt == "csv":
+        write_text(target, csv_text(rows, cells))
+    else:
+        write_parquet(rows, cells, target)
+    err.print(f"wrote {target} ({len(rows)} trials)", highlight=False, soft_wrap=True)
 
 
 def _click_base(name: str) -> type[BaseException]:
