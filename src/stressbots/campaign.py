@@ -148,7 +148,7 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
             raise StressbotsError(f"the controller offers no strategy {strategy!r} (only 'default')", source=source)
     if options is not None:
         if "options" not in params and not takes_kwargs:
-            raise StressbotsError("this controller takes no options", source=source)
+            raise StressbotsError("this controller takes no options (controller.* settings)", source=source)
         out["options"] = options
     return tuple(sorted(out.items()))
 

@@ -988,6 +988,73 @@ def export(
     err.print(f"wrote {target} ({len(rows)} trials)", highlight=False, soft_wrap=True)
 
 
+@app.command()
+def study(
+    study_file: Path = typer.Argument(..., metavar="STUDY.toml", help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.", show_default=False),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    resume: bool = typer.Option(False, "--resume", help="Continue the study in DIR/trials.sqlite: run only its missing trials (refused if the study changed)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: Optional[str] = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
+) -> None:
+    """Run a study: a grid of conditions x a set of layouts, N paired closed-loop trials per cell.
+
+    The grid may vary any scenario, noise or control parameter (noise.speed_rel_sd, noise.scale,
+    control.replan_interval_s, robots.speed_um_s, ...), any controller option (controller.clearance_um,
+    ... : fields of stressbots.edr.ControllerOptions) and the controller strategy. Trial k of every cell
+    uses the same plant seed, so cells are compared on the same draws. Every trial is committed to
+    DIR/trials.sqlite as it finishes (table trials, column cell; table cells) and --resume runs only the
+    missing ones. Writes DIR/summary.json (per-cell success rates with Wilson 95 % intervals, failure
+    reasons) and DIR/report.html (success-rate curves with confidence bands, failure reasons per cell).
+
+    Example: `stressbots study examples/replanning.study.toml --out out/study`.
+    """
+    from .outputs import check_not_input, prepare_dir, to_json, write_json, write_text
+    from .study import load_study, run_study
+    from .studyreport import build_study_report
+
+    if resume and overwrite:
+        raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
+    spec = load_study(study_file)
+    folder = prepare_dir(out_dir, inputs=[study_file])
+    for name in ("summary.json", "report.html", "trials.sqlite", "trials.csv"):
+        check_not_input(folder / name, [study_file] + [lay.source for lay in spec.layouts])
+    show = not (quiet or as_json)
+
+    def run_with_progress():
+        with _campaign_progress(show, "plans ") as planning, _campaign_progress(show) as progress:
+            return run_study(spec, store=folder / "trials.sqlite", resume=resume, overwrite=overwrite, dask=dask, workers=workers,
+                             progress=progress, planning=planning)
+
+    summary, _, _ = _campaign_interrupt_guard(run_with_progress)
+    _write_trials_csv(folder)
+    write_json(folder / "summary.json", summary)
+    write_text(folder / "report.html", build_study_report(summary))
+    if as_json:
+        sys.stdout.write(to_json(summary))
+        return
+    if quiet:
+        return
+    from rich.table import Table
+
+    lo, hi = summary["success_rate_ci95"]
+    out.print(f"[bold]{summary['name']}[/bold]: {len(summary['cells'])} cells x {summary['trials_per_cell']} paired trials, "
+              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s", highlight=False, soft_wrap=True)
+    axes = list(summary["axes"])
+    t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
+    for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
+        t.add_column(col, justify="left" if col in ("layout", "top failure") else "right", overflow="fold")
+    for r in summary["cells"]:
+        top = next(iter(r["failures"]), "-")
+        t.add_row(str(r["cell"]), r["layout"], *(str(r["params"].get(k, "")) for k in axes), f"{r['successes']}/{r['trials']}",
+                  f"{r['success_rate']:.2f}", f"{r['success_rate_ci95'][0]:.2f}-{r['success_rate_ci95'][1]:.2f}",
+                  top if len(top) <= 40 else top[:39] + "...")
+    out.print(t)
+    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")), highlight=False, soft_wrap=True)
+
+
 def _click_base(name: str) -> type[BaseException]:
     """The click exception class ``name`` as used by this Typer (newer Typers vendor their own click)."""
     for cls in typer.BadParameter.__mro__:
