@@ -16,6 +16,13 @@ trial index. Only the ``"run"`` block of the summary (workers, wall time) differ
 (:meth:`stressbots.scenario.Noise.scaled`), with the *same* trial seeds (common random numbers: the
 differences between noise levels are not blurred by different draws).
 
+Trial store
+-----------
+:func:`run_study` runs the trials as a :mod:`stressbots.campaign` (one cell per noise scale) and commits
+each finished trial to a :class:`stressbots.store.TrialStore` (``DIR/trials.sqlite`` from the command
+line); the summary is computed from the store, so an interrupted and resumed study summarises exactly
+like an uninterrupted one.
+
 Statistics
 ----------
 The success rate comes with a 95 % Wilson score interval (:func:`wilson_interval`), which stays inside
