@@ -64,6 +64,23 @@ def fake_assemble(scenario, plant, *, seed=None, plan=None, time_budget_s=None, 
                       int(rng.integers(5, 30)))
 
 
+def dying_assemble(scenario, plant, **kwargs):
+    """The real controller, except that the first trial to start kills its worker process (hard, as a
+    node failure would) when ``STRESSBOTS_DIE_ONCE`` names a marker file that does not exist yet."""
+    marker = os.environ.get("STRESSBOTS_DIE_ONCE")
+    if marker:
+        try:
+            with open(marker, "x"):
+                pass
+        except FileExistsError:
+            pass
+        else:
+            os._exit(1)
+    from stressbots.control import assemble
+
+    return assemble(scenario, plant, **kwargs)
+
+
 def install(monkeypatch=None) -> None:
     """Make the montecarlo and study commands use the fake controller and plan."""
     from stressbots import montecarlo as mc

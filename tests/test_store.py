@@ -103,6 +103,19 @@ def test_resume_checks_the_settings(tmp_path):
     assert settings_differences({"x": [1, 2]}, {"x": [1, 2]}) == []
 
 
+def test_an_empty_file_or_database_is_no_campaign(tmp_path):
+    """A reader that connected before the campaign created its store, or a campaign killed while creating
+    it, leaves an empty file or schema: it holds no trial and is replaced, with or without --resume."""
+    db = tmp_path / STORE_NAME
+    db.touch()
+    with TrialStore.open(db, {"seed": 1}) as s:
+        assert len(s) == 0
+    db.unlink()
+    sqlite3.connect(db).execute("PRAGMA journal_mode = WAL").fetchone()
+    with TrialStore.open(db, {"seed": 1}, resume=True) as s:
+        assert s.settings == {"seed": 1}
+
+
 def test_a_file_that_is_not_a_store_is_refused(tmp_path):
     db = tmp_path / STORE_NAME
     db.write_text("not sqlite at all" * 100)
@@ -226,16 +239,21 @@ def test_export_parquet_or_a_clear_error(tmp_path, reference, run_cli):
 # Dask
 
 
-def test_dask_local_cluster_equals_the_local_pool(tmp_path):
+def test_dask_local_cluster_equals_the_local_pool_even_when_a_worker_dies(tmp_path, monkeypatch):
+    """The real controller on a 2-robot layout, on the local pool and on a LocalCluster where the first
+    trial kills its worker process: Dask re-runs it elsewhere; every trial once, identical outcomes."""
     pytest.importorskip("distributed")
     from stressbots.generate import LITERATURE_NOISE, random_scenario
 
     scn = random_scenario(2, 3, shape="pair", noise=LITERATURE_NOISE)
     plan = mc.default_planner()(scn)
-    kw = dict(plan=plan, time_budget_s=30.0)  # short trials: some fail by the budget, all differ
+    kw = dict(plan=plan, time_budget_s=60.0, assemble=campaign_fake.dying_assemble)  # short trials: most fail by the budget
     pool = mc.run_study(scn, 4, 7, workers=2, store=tmp_path / "pool.sqlite", **kw)
+    marker = tmp_path / "died"
+    monkeypatch.setenv("STRESSBOTS_DIE_ONCE", str(marker))  # inherited by the cluster's worker processes
     dask = mc.run_study(scn, 4, 7, workers=2, store=tmp_path / "dask.sqlite", dask="local", **kw)
-    assert dask.summary["run"]["backend"] == "dask local"
+    assert marker.exists()  # a worker did die under a trial
+    assert dask.summary["run"]["backend"] == "dask local" and dask.summary["run"]["trials_run"] == 4
     assert _outcomes(tmp_path / "dask.sqlite") == _outcomes(tmp_path / "pool.sqlite")
     assert _strip(dask.summary) == _strip(pool.summary)
-    assert len({r["worker"] for r in read_rows(tmp_path / "dask.sqlite")}) >= 1
+    assert len({r[OUTCOME_COLUMNS.index("placement_error_um")] for r in _outcomes(tmp_path / "pool.sqlite")}) == 4  # trials differ

@@ -145,6 +145,20 @@ def _open_readonly(path: Path | str) -> sqlite3.Connection:
     return con
 
 
+def _is_empty(p: Path) -> bool:
+    """True for an empty file or an SQLite database without a single table (no campaign was stored)."""
+    if p.stat().st_size == 0:
+        return True
+    try:
+        con = _connect(p)
+        try:
+            return con.execute("SELECT count(*) FROM sqlite_master").fetchone()[0] == 0
+        finally:
+            con.close()
+    except sqlite3.DatabaseError:
+        return False
+
+
 class TrialStore:
     """An open trial store (one writer: the process that runs the campaign).
 
@@ -171,8 +185,10 @@ class TrialStore:
         settings = json.loads(json.dumps(dict(settings)))  # what the store will hand back
         memory = str(path) == ":memory:"
         p = Path(str(path))
-        if not memory and p.exists() and p.stat().st_size == 0:
-            p.unlink()  # an empty file (e.g. made by a reader that looked too early) holds no campaign
+        if not memory and p.exists() and _is_empty(p):
+            # made by a reader that looked too early, or by a campaign killed while creating it
+            for suffix in ("", "-wal", "-shm"):
+                Path(str(p) + suffix).unlink(missing_ok=True)
         if not memory and p.exists():
             if overwrite:
                 for suffix in ("", "-wal", "-shm"):
