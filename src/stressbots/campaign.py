@@ -306,6 +306,20 @@ def _dask_task(campaign: Campaign, task: Task):
 
 
 @contextmanager
+def _sigint_ignored_by_children():
+    """Ctrl-C in a terminal reaches the whole process group: the LocalCluster's processes, started while
+    SIGINT is ignored, keep ignoring it (the disposition survives exec) and are stopped by us instead."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+
+
+@contextmanager
 def dask_client(address: str, workers: int | None):
     """A ``distributed.Client`` for ``address``: ``local`` (a LocalCluster of ``workers`` single-threaded
     processes), a scheduler file (``*.json``, as written by ``dask scheduler --scheduler-file``) or a
@@ -322,8 +336,9 @@ def dask_client(address: str, workers: int | None):
             n = int(workers or os.cpu_count() or 1)
             # single-threaded worker processes (a trial holds the GIL); dashboards on free ports; quiet
             # logs (a worker's connection closing at shutdown is not news)
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                   worker_dashboard_address=":0", silence_logs=logging.CRITICAL)
+            with _sigint_ignored_by_children():
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       worker_dashboard_address=":0", silence_logs=logging.CRITICAL)
             client = Client(cluster)
         elif address.endswith(".json"):
             client = Client(scheduler_file=address, timeout="30s")
@@ -373,8 +388,11 @@ def _dask(campaign: Campaign, tasks: Sequence[Task], client, token: str) -> Iter
                 raise StressbotsError(f"worker {worker} runs other stressbots code than this machine (sources differ); "
                                       "install the same version on every worker", source="--dask")
             yield outcome, worker
-    finally:
-        client.cancel([f for f in ac.futures] if hasattr(ac, "futures") else futures, force=True)
+    finally:  # stopped early (Ctrl-C, an error): the cluster should not go on with our trials
+        try:
+            client.cancel([f for f in futures if not f.done()] + list(getattr(ac, "futures", ())), force=True)
+        except Exception:  # noqa: BLE001 - the client may already be gone; nothing is lost either way
+            pass
 
 
 # ----------------------------------------------------------------------------------------------------

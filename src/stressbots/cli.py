@@ -929,6 +929,8 @@ def _campaign_progress(show: bool, label: str = "trials"):
             bar.start()
             state["task"] = bar.add_task(label, total=total, completed=done)
         bar.update(state["task"], completed=done, total=total, refresh=True)
+        if done >= total:
+            bar.stop()  # done: make room for the next bar (planning, then trials)
 
     try:
         yield report
