@@ -336,7 +336,11 @@ def dask_client(address: str, workers: int | None):
             n = int(workers or os.cpu_count() or 1)
             # single-threaded worker processes (a trial holds the GIL); dashboards on free ports; quiet
             # logs (a worker's connection closing at shutdown is not news)
-            with _sigint_ignored_by_children():
+            import dask
+
+            # the workers' statistical profiler samples every thread's stack every 10 ms, holding the GIL:
+            # measurable on CPU-bound pure-Python trials (remote clusters: set it in the workers' config)
+            with _sigint_ignored_by_children(), dask.config.set({"distributed.worker.profile.enabled": False}):
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                        worker_dashboard_address=":0", silence_logs=logging.CRITICAL)
             client = Client(cluster)
