@@ -157,13 +157,20 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
 # Fingerprints
 
 
+PRESENTATION_MODULES = frozenset({"__init__.py", "__main__.py", "cli.py", "demo.py", "outputs.py", "report.py", "store.py",
+                                  "studyreport.py", "viz.py"})
+"""Modules that cannot change a trial's outcome (command line, pictures, files): left out of
+:func:`code_fingerprint`, so editing them does not invalidate stores."""
+
+
 @lru_cache(maxsize=1)
 def code_fingerprint() -> str:
-    """SHA-256 of the stressbots sources (``*.py`` of the installed package): a store made by other code
-    may hold other outcomes, so ``--resume`` compares this too; Dask workers are checked against it."""
+    """SHA-256 of the stressbots sources that decide a trial's outcome (every ``*.py`` of the installed
+    package but :data:`PRESENTATION_MODULES`): a store made by other code may hold other outcomes, so
+    ``--resume`` compares this too; Dask workers are checked against it."""
     root = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for p in sorted(root.rglob("*.py")):
+    for p in sorted(q for q in root.rglob("*.py") if q.name not in PRESENTATION_MODULES):
         h.update(str(p.relative_to(root)).encode())
         h.update(b"\0")
         h.update(p.read_bytes())
