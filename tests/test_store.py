@@ -162,7 +162,7 @@ def reference(tmp_path_factory, monkeypatch):
     from stressbots.cli import main
 
     out = tmp_path_factory.mktemp("reference")
-    main(_cli_args(out, 24, 2, "--workers", "1", "--quiet"))
+    main(_cli_args(out, 40, 2, "--workers", "1", "--quiet"))
     return out
 
 
@@ -172,28 +172,28 @@ def _strip(summary: dict) -> dict:
 
 def test_kill_9_then_resume_gives_every_trial_once_with_the_same_outcomes(tmp_path, reference, run_cli):
     out = tmp_path / "mc"
-    proc = _spawn(_cli_args(out, 24, 2, "--workers", "2"), trial_s=0.1)
+    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=0.1)
     _wait_for_trials(out / STORE_NAME, 4, proc)
     proc.kill()  # SIGKILL: no handler runs
     proc.communicate(timeout=10)  # returns at once: the workers died with their parent
     assert proc.returncode == -signal.SIGKILL
     kept = _outcomes(out / STORE_NAME)
-    assert 4 <= len(kept) < 24
+    assert 4 <= len(kept) < 40
     # every committed trial is a finished one with its reference outcome
     ref = {r[0]: r for r in _outcomes(reference / STORE_NAME)}
     assert all(ref[r[0]] == r for r in kept)
-    r = run_cli(*_cli_args(out, 24, 2, "--workers", "2", "--resume", "--quiet"))
+    r = run_cli(*_cli_args(out, 40, 2, "--workers", "2", "--resume", "--quiet"))
     assert r.code == 0, r.err
     assert _outcomes(out / STORE_NAME) == _outcomes(reference / STORE_NAME)  # each trial exactly once, same outcomes
     s, s_ref = (json.loads((d / "summary.json").read_text()) for d in (out, reference))
     assert _strip(s) == _strip(s_ref)
-    assert s["run"]["resumed_with"] == len(kept) and s["run"]["trials_run"] == 24 - len(kept)
-    assert len((out / "trials.csv").read_text().splitlines()) == 25
+    assert s["run"]["resumed_with"] == len(kept) and s["run"]["trials_run"] == 40 - len(kept)
+    assert len((out / "trials.csv").read_text().splitlines()) == 41
 
 
 def test_ctrl_c_keeps_the_finished_trials(tmp_path, reference, run_cli):
     out = tmp_path / "mc"
-    proc = _spawn(_cli_args(out, 24, 2, "--workers", "2"), trial_s=0.1)
+    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=0.1)
     _wait_for_trials(out / STORE_NAME, 3, proc)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=20)
@@ -201,9 +201,9 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path, reference, run_cli):
     lines = [ln for ln in err.splitlines() if ln.startswith("error:") or "kept" in ln]
     assert lines[0] == "error: interrupted"
     kept = _outcomes(out / STORE_NAME)
-    assert f"{len(kept)} of 24 trials are kept in {out / STORE_NAME}" in lines[1] and "--resume" in lines[1]
-    assert "Traceback" not in err and 3 <= len(kept) < 24
-    r = run_cli(*_cli_args(out, 24, 2, "--workers", "1", "--resume", "--quiet"))
+    assert f"{len(kept)} of 40 trials are kept in {out / STORE_NAME}" in lines[1] and "--resume" in lines[1]
+    assert "Traceback" not in err and 3 <= len(kept) < 40
+    r = run_cli(*_cli_args(out, 40, 2, "--workers", "1", "--resume", "--quiet"))
     assert r.code == 0, r.err
     assert _outcomes(out / STORE_NAME) == _outcomes(reference / STORE_NAME)
 
@@ -211,11 +211,11 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path, reference, run_cli):
 def test_resume_refuses_a_store_of_other_settings(tmp_path, reference, run_cli, monkeypatch):
     campaign_fake.install(monkeypatch)
     monkeypatch.setenv("STRESSBOTS_FAKE_TRIAL_S", "0")
-    assert_user_error(run_cli(*_cli_args(reference, 24, 3, "--resume")), "--resume", "other settings", "seed 2 in the store, 3 now")
-    assert_user_error(run_cli(*_cli_args(reference, 30, 2, "--resume")), "trials 24 in the store, 30 now")
-    assert_user_error(run_cli(*_cli_args(reference, 24, 2, "--resume", "--sweep", "0,1")), "noise_scales")
-    assert_user_error(run_cli(*_cli_args(reference, 24, 2)), "--out", "already holds a campaign (24 trials)", "--resume")
-    r = run_cli(*_cli_args(reference, 24, 2, "--resume", "--json"))  # complete: nothing to run, same summary
+    assert_user_error(run_cli(*_cli_args(reference, 40, 3, "--resume")), "--resume", "other settings", "seed 2 in the store, 3 now")
+    assert_user_error(run_cli(*_cli_args(reference, 30, 2, "--resume")), "trials 40 in the store, 30 now")
+    assert_user_error(run_cli(*_cli_args(reference, 40, 2, "--resume", "--sweep", "0,1")), "noise_scales")
+    assert_user_error(run_cli(*_cli_args(reference, 40, 2)), "--out", "already holds a campaign (40 trials)", "--resume")
+    r = run_cli(*_cli_args(reference, 40, 2, "--resume", "--json"))  # complete: nothing to run, same summary
     assert r.code == 0 and json.loads(r.out)["run"]["trials_run"] == 0
 
 
