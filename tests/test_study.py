@@ -161,3 +161,30 @@ def test_study_command_resume_and_report(tmp_path, run_cli):
     assert "noise.scale" in html and "Wilson" in html
     study.write_text(study.read_text().replace("3.0]", "4.0]"))
     assert_user_error(run_cli("study", study, "--out", out, "--resume"), "--resume", "other settings", "axes")
+
+
+def test_a_strategy_goes_into_the_options_when_they_have_that_field():
+    from dataclasses import dataclass
+
+    from stressbots.campaign import controller_kwargs
+
+    @dataclass(frozen=True)
+    class Opts:
+        clearance_um: float = 15.0
+        strategy: str = "default"
+
+    def asm(scenario, plant, *, seed=None, plan=None, options=None):
+        raise AssertionError("not run")
+
+    assert controller_kwargs(asm, options=Opts(), strategy="seed") == (("options", Opts(strategy="seed")),)
+    assert controller_kwargs(asm, options=Opts(), strategy="default") == (("options", Opts()),)
+    assert controller_kwargs(asm) == ()
+    import dataclasses
+
+    from stressbots.edr import ControllerOptions
+
+    if "strategy" in {f.name for f in dataclasses.fields(ControllerOptions)}:  # a controller that offers strategies
+        assert dict(controller_kwargs(asm, strategy="seed"))["options"].strategy == "seed"
+    else:
+        with pytest.raises(StressbotsError, match="no strategy 'seed'"):
+            controller_kwargs(asm, strategy="seed")
