@@ -120,9 +120,11 @@ def mc_flatten(table: dict, prefix: str = "") -> dict:
 
 
 def test_a_strategy_the_controller_lacks_is_refused_and_default_passes():
-    spec = parse_study(_study(grid={"strategy": ["default", "seed"]}))
+    def plain(scenario, plant, *, seed=None, plan=None, time_budget_s=None):  # a controller of one strategy
+        raise AssertionError("not run")
+
     with pytest.raises(StressbotsError, match="no strategy 'seed'"):
-        build_cells(spec, campaign_fake.fake_assemble, campaign_fake.fake_plan)
+        build_cells(parse_study(_study(grid={"strategy": ["default", "seed"]}, fixed={})), plain, campaign_fake.fake_plan)
     ok = build_cells(parse_study(_study(grid={"strategy": ["default"]})), campaign_fake.fake_assemble, campaign_fake.fake_plan)
     assert all("strategy" not in dict(c.controller) for c in ok)
 
