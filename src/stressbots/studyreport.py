@@ -55,13 +55,14 @@ def plot_axis(summary: Mapping[str, Any], axis: str):
     numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
     x = [float(v) for v in values] if numeric else list(range(len(values)))
     fig, ax = plt.subplots(figsize=(7, 4))
+    alpha = 0.2 / len(series) ** 0.5  # overlapping bands stay readable
     for name, counts in series.items():
         rate = [s / n if n else float("nan") for s, n in counts]
         band = [wilson_interval(s, n) for s, n in counts]
         order = sorted(range(len(x)), key=lambda i: x[i])
         xs = [x[i] for i in order]
         line, = ax.plot(xs, [rate[i] for i in order], marker="o", label=name)
-        ax.fill_between(xs, [band[i][0] for i in order], [band[i][1] for i in order], color=line.get_color(), alpha=0.15, linewidth=0)
+        ax.fill_between(xs, [band[i][0] for i in order], [band[i][1] for i in order], color=line.get_color(), alpha=alpha, linewidth=0)
     if not numeric:
         ax.set_xticks(x, [str(v) for v in values])
     ax.set_ylim(-0.02, 1.02)
