@@ -75,6 +75,21 @@ def test_any_order_of_arrivals_keeps_each_trial_once(arrivals):
     assert all(r["seed"] == 1000 + r["trial"] and r["success"] == (r["trial"] % 2 == 0) for r in rows)
 
 
+_json_values = st.recursive(st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=5),
+                            lambda kids: st.lists(kids, max_size=3) | st.dictionaries(st.text(max_size=3), kids, max_size=3),
+                            max_leaves=6)
+
+
+@settings(max_examples=60)
+@given(st.dictionaries(st.sampled_from(["seed", "trials", "noise", "versions", "code_sha256"]), _json_values),
+       st.dictionaries(st.sampled_from(["seed", "trials", "noise", "versions", "code_sha256"]), _json_values))
+def test_settings_differences_name_exactly_the_keys_that_differ(a, b):
+    diff = settings_differences(a, b)
+    differing = [k for k in list(a) + [k for k in b if k not in a] if a.get(k, "\0missing") != b.get(k, "\0missing")]
+    assert [d.split(" ")[0] for d in diff] == differing
+    assert (diff == []) == (a == b)
+
+
 def test_nan_and_none_round_trip(tmp_path):
     with TrialStore.open(tmp_path / STORE_NAME, {}) as s:
         s.record(_row(0, shape_error_um=math.nan, failure="exception: boom", error="boom"))
