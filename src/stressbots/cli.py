@@ -1047,7 +1047,8 @@ def study(
     axes = list(summary["axes"])
     t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
     for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
-        t.add_column(col, justify="left" if col in ("layout", "top failure") else "right", overflow="fold")
+        t.add_column(col, justify="left" if col in ("layout", "top failure") else "right",
+                     overflow="ellipsis" if col in ("layout", "top failure") else "fold", no_wrap=col in ("layout", "top failure"))
     for r in summary["cells"]:
         top = next(iter(r["failures"]), "-")
         t.add_row(str(r["cell"]), r["layout"], *(str(r["params"].get(k, "")) for k in axes), f"{r['successes']}/{r['trials']}",
