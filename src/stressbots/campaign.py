@@ -288,16 +288,11 @@ def _pool(campaign: Campaign, tasks: Sequence[Task], k: int) -> Iterator[tuple[A
     methods = multiprocessing.get_all_start_methods()
     ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
     pool = ProcessPoolExecutor(max_workers=k, mp_context=ctx, initializer=_init_worker, initargs=(campaign,))
-    finished = False
     try:
         futures = [pool.submit(_worker_task, t) for t in tasks]
         for fut in as_completed(futures):
             yield fut.result()
-        finished = True
-    finally:
-        if finished:
-            pool.shutdown(wait=True)
-            return
+    except BaseException:  # Ctrl-C, SIGTERM, the consumer stopping early (GeneratorExit), a broken pool
         procs = list(getattr(pool, "_processes", {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
         for p in procs:  # a stopped campaign does not wait for the trials under way
@@ -305,6 +300,8 @@ def _pool(campaign: Campaign, tasks: Sequence[Task], k: int) -> Iterator[tuple[A
                 p.terminate()
         for p in procs:
             p.join(timeout=5)
+        raise
+    pool.shutdown(wait=True)
 
 
 def _dask_task(campaign: Campaign, task: Task):
