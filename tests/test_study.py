@@ -67,6 +67,14 @@ def test_grid_cells_conditions_and_paired_seeds(tmp_path):
     # paired cells share the draws: at zero noise and short interval every layout copy agrees trial by trial
     by_cell = {c: [r["success"] for r in rows if r["cell"] == c] for c in range(12)}
     assert by_cell[0] == by_cell[6]  # the same conditions on the same scenario (two labels) -> identical trials
+    for c, row in enumerate(summary["cells"]):  # paired comparison with the layout's first cell, from the store
+        base = c - c % 6
+        pv = row["paired_vs_baseline"]
+        if c == base:
+            assert pv is None
+            continue
+        pairs = list(zip(by_cell[c], by_cell[base]))
+        assert (pv["baseline_cell"], pv["gained"], pv["lost"]) == (base, sum(a and not b for a, b in pairs), sum(b and not a for a, b in pairs))
     assert summary["trials"] == 60 and summary["axes"] == {"control.replan_interval_s": [0.5, 2.0], "noise.scale": [0.0, 1.0, 2.0]}
 
 
@@ -190,3 +198,19 @@ def test_a_strategy_goes_into_the_options_when_they_have_that_field():
     else:
         with pytest.raises(StressbotsError, match="no strategy 'seed'"):
             controller_kwargs(asm, strategy="seed")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.booleans()), max_size=30))
+def test_paired_comparison_counts_and_mcnemar(pairs):
+    from scipy.stats import binomtest
+
+    from stressbots.study import paired_comparison
+
+    this, base = [a for a, _ in pairs], [b for _, b in pairs]
+    r = paired_comparison(this, base)
+    assert r["gained"] == sum(a and not b for a, b in pairs) and r["lost"] == sum(b and not a for a, b in pairs)
+    assert r["both"] == sum(a and b for a, b in pairs)
+    n = r["gained"] + r["lost"]
+    expected = 1.0 if n == 0 else binomtest(r["gained"], n, 0.5).pvalue  # scipy's exact two-sided binomial test
+    assert r["mcnemar_p"] == pytest.approx(min(1.0, expected), rel=1e-9)

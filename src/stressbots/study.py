@@ -44,11 +44,11 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
 from .errors import StressbotsError
 
-__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary", "run_study"]
+__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary", "paired_comparison", "run_study"]
 
 _ROBOT_KEY = re.compile(r"^robots\[(\d+)\]\.(\w+)$")
 _TOP_KEYS = {"name", "trials", "seed", "time_budget_s", "layouts", "grid", "fixed"}
@@ -336,19 +336,48 @@ def study_settings(spec: StudySpec, cells) -> dict[str, Any]:
             "fixed": dict(spec.fixed), "cells": len(cells), "cells_sha256": digest.hexdigest(), **base}
 
 
+def paired_comparison(this: Sequence[bool], baseline: Sequence[bool]) -> dict[str, Any]:
+    """Paired success counts of two cells over the same seeds, and the exact McNemar test.
+
+    ``gained`` trials succeed here but not in the baseline, ``lost`` the reverse; under "no difference"
+    each discordant pair is a fair coin, so the two-sided p-value is ``min(1, 2 * P[X <= min(gained,
+    lost)])`` for ``X ~ Binomial(gained + lost, 1/2)`` (1 when there are no discordant pairs).
+
+    >>> paired_comparison([True, True, False, True], [True, False, False, False])["gained"]
+    2
+    """
+    from scipy.stats import binom
+
+    if len(this) != len(baseline):
+        raise ValueError("paired cells need the same trials")
+    gained = sum(1 for a, b in zip(this, baseline) if a and not b)
+    lost = sum(1 for a, b in zip(this, baseline) if b and not a)
+    n = gained + lost
+    p = 1.0 if n == 0 else min(1.0, 2.0 * float(binom.cdf(min(gained, lost), n, 0.5)))
+    return {"gained": gained, "lost": lost, "both": sum(1 for a, b in zip(this, baseline) if a and b), "mcnemar_p": p}
+
+
 def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
     """The deterministic part of a study's ``summary.json``: per-cell statistics and the totals."""
     from .montecarlo import percentiles, summarise, wilson_interval
 
     rows = []
+    by_cell = {c: sorted((o for o in outcomes if o.cell == c), key=lambda o: o.index) for c in range(len(cells))}
+    baseline = {}  # the first cell of each layout: the others are compared with it, trial by trial
     for c, cell in enumerate(cells):
-        mine = [o for o in outcomes if o.cell == c]
+        baseline.setdefault(cell.params["layout"], c)
+    for c, cell in enumerate(cells):
+        mine = by_cell[c]
         st = summarise(mine)
+        base = by_cell[baseline[cell.params["layout"]]]
+        paired = None
+        if baseline[cell.params["layout"]] != c and [o.index for o in base] == [o.index for o in mine]:
+            paired = {"baseline_cell": baseline[cell.params["layout"]], **paired_comparison([o.success for o in mine], [o.success for o in base])}
         rows.append({"cell": c, "label": cell.label, "layout": cell.params["layout"],
                      "params": {k: v for k, v in cell.params.items() if k != "layout"}, "trials": st["trials"],
                      "successes": st["successes"], "success_rate": st["success_rate"], "success_rate_ci95": st["success_rate_ci95"],
                      "shape_error_rms_um": st["shape_error_rms_um"], "duration_s": st["duration_s"], "failures": st["failures"],
-                     "exceptions": st["exceptions"], "plan_error": cell.plan_error})
+                     "exceptions": st["exceptions"], "plan_error": cell.plan_error, "paired_vs_baseline": paired})
     n, s = len(outcomes), sum(1 for o in outcomes if o.success)
     return {
         "format": "stressbots.study/1", "name": spec.name, "source": spec.source, "trials_per_cell": spec.trials, "seed": spec.seed,

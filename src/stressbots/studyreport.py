@@ -139,9 +139,14 @@ def build_study_report(summary: Mapping[str, Any]) -> str:
         reasons = "; ".join(f"{n} x {_e(k)}" for k, n in list(r["failures"].items())[:4]) or "-"
         if r.get("plan_error"):
             reasons = f"no nominal plan: {_e(r['plan_error'])}"
+        pv = r.get("paired_vs_baseline")
+        paired = "baseline" if pv is None else f"+{pv['gained']} / -{pv['lost']} vs cell {pv['baseline_cell']} (p = {pv['mcnemar_p']:.2g})"
         table_rows.append([str(r["cell"]), _e(r["layout"]), _e(", ".join(f"{k}={v}" for k, v in r["params"].items()) or "-"),
-                           f"{r['successes']}/{r['trials']}", f"{r['success_rate']:.3f}", f"{lo:.3f}-{hi:.3f}", reasons])
-    cells = _table(["cell", "layout", "conditions", "successes", "rate", "95 % CI", "failure reasons"], table_rows, left=(1, 2, 6))
+                           f"{r['successes']}/{r['trials']}", f"{r['success_rate']:.3f}", f"{lo:.3f}-{hi:.3f}", paired, reasons])
+    cells = _table(["cell", "layout", "conditions", "successes", "rate", "95 % CI", "paired (McNemar)", "failure reasons"], table_rows,
+                   left=(1, 2, 6, 7))
+    cells = ('<p class="note">Paired: trials that succeed in this cell but not in the first cell of its layout (+), the reverse '
+             '(-), over the same seeds, with the exact McNemar test\'s two-sided p-value.</p>' + cells)
     lo, hi = summary["success_rate_ci95"]
     facts = _kv([
         ("trials", f"{summary['trials']} ({summary['trials_per_cell']} per cell, {len(summary['cells'])} cells)"),
