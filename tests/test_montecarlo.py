@@ -241,3 +241,21 @@ def test_montecarlo_rejects_bad_scenarios(run_cli, tmp_path, monkeypatch):
     f = tmp_path / "file"
     f.write_text("x")
     assert_user_error(run_cli("montecarlo", EXAMPLES / "four-robots.toml", "--out", f), "--out", "not a folder")
+
+
+def test_a_stored_study_summarises_like_an_in_memory_one(four, tmp_path):
+    """The summary is computed from the store: the same numbers as in memory; a sweep is one cell per
+    noise scale (scale 1 first) with the same trial seeds in every cell."""
+    from stressbots.store import read_rows, read_settings
+
+    mem = mc.run_study(four, 6, 9, workers=1, sweep=(0.0, 1.0, 2.0), assemble=fake_assemble, plan=PLAN)
+    db = tmp_path / "trials.sqlite"
+    stored = mc.run_study(four, 6, 9, workers=2, sweep=(0.0, 1.0, 2.0), assemble=fake_assemble, plan=PLAN, store=db)
+    assert {k: v for k, v in stored.summary.items() if k not in ("run", "store")} == _strip(mem.summary)
+    rows = read_rows(db)
+    cells = read_settings(db)["cells"]
+    assert [c["params"]["noise_scale"] for c in cells] == [1.0, 0.0, 2.0]
+    seeds = mc.trial_seeds(9, 6)
+    assert [(r["trial"], r["cell"], r["seed"], r["noise_scale"]) for r in rows] == [
+        (c * 6 + k, c, seeds[k], cells[c]["params"]["noise_scale"]) for c in range(3) for k in range(6)]
+    assert sum(r["success"] for r in rows if r["cell"] == 0) == stored.summary["successes"]

@@ -23,6 +23,10 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.edr` - the closed-loop EDR controller (work in progress)
 - :mod:`stressbots.bounds` - error bounds, forward projections, regions A_i*
 - :mod:`stressbots.montecarlo` - Monte Carlo studies of closed-loop assembly
+- :mod:`stressbots.store` - the trial store of a campaign (DIR/trials.sqlite)
+- :mod:`stressbots.campaign` - cells x paired trials, run in-process, on a process pool or on Dask
+- :mod:`stressbots.study` - study files: a grid of conditions over layouts
+- :mod:`stressbots.studyreport` - the HTML report of a study
 - :mod:`stressbots.viz` - pictures
 - :mod:`stressbots.demo` - the main job on the built-in scenario
 - :mod:`stressbots.cli` - the command line

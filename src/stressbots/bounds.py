@@ -1342,16 +1342,16 @@ class BoundsReport:
 
 def _resolve_structure(scenario, analysis, notes: list[str]):
     """The target structure: the variant the nominal plan of a closed-loop run uses (the planner's choice,
-    :func:`stressbots.montecarlo.default_planner`), else the canonical one."""
+    :func:`stressbots.control.nominal_plan`), else the canonical one."""
     from .errors import PlanningError
     from .structures import target_structures
 
     robots = [scenario.robots[i] for i in analysis.order_index]
     if scenario.structure is not None and scenario.has_starts:
-        from .montecarlo import default_planner  # the controller's planner when it has one: same variant
+        from .control import nominal_plan  # the controller's planner: the same variant as a closed-loop run
 
         try:
-            return default_planner()(scenario).structure
+            return nominal_plan(scenario).structure
         except PlanningError as exc:
             notes.append(f"the planner found no plan ({exc.problem}); bounds use the canonical {scenario.structure.shape}")
     return target_structures(robots, scenario.structure)[0]

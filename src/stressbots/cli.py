@@ -893,6 +893,13 @@ def montecarlo(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made with other settings)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: Optional[str] = typer.Option(
+        None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
+        "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
+    ),
+    strategy: StrategyChoice = _strategy_option(),
 ) -> None:
     """Run N independent closed-loop assemblies on the simulated plant and summarise them.
 
@@ -903,8 +910,14 @@ def montecarlo(
     failed trials' seeds, seeds and provenance) and DIR/montecarlo.png; with --sweep also the success
     rate against the noise scale (summary "sweep" and DIR/sweep.png).
 
+    Every finished trial is committed to DIR/trials.sqlite as it finishes (SPEC 10) and the summary is
+    computed from it; DIR/trials.csv is written at the end. Ctrl-C (or kill) keeps the finished trials:
+    run the same command with --resume to run only the missing ones (exit status 130 after an
+    interrupt). --dask runs the trials on a Dask cluster with the same per-trial outcomes.
+
     Examples: `stressbots montecarlo examples/four-robots.toml --trials 100 --seed 1 --out out/mc`;
-    `stressbots montecarlo SCENARIO --trials 50 --seed 0 --out out/sweep --sweep 0,0.5,1,1.5,2`.
+    `stressbots montecarlo SCENARIO --trials 50 --seed 0 --out out/sweep --sweep 0,0.5,1,1.5,2`;
+    `stressbots montecarlo SCENARIO --trials 5000 --out out/big --dask tcp://scheduler:8786 --resume`.
     """
     from . import montecarlo as mc
     from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
@@ -915,26 +928,27 @@ def montecarlo(
     finite_budget(time_budget_s)
     scn = scenario_arg(scenario, moving=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
-    for name in ("summary.json", "montecarlo.png", "sweep.png"):
+    for name in ("summary.json", "montecarlo.png", "sweep.png", "trials.sqlite", "trials.csv"):
         check_not_input(folder / name, [scenario])
+    if resume and overwrite:
+        raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
     assemble = mc.default_assemble()
     show = not (quiet or as_json)
     with err.status("planning the nominal assembly...", spinner="dots") if show else _nullcontext():
         with _attributed(str(scenario)):
             plan = mc.default_planner()(scn)
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-    total = trials * (1 + len([f for f in (factors or ()) if f != 1.0]))
-    # No refresh thread: worker processes may be forked while the bar runs.
-    with Progress(TextColumn("trials"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                  console=err, disable=not show, auto_refresh=False, transient=False) as bar:
-        task = bar.add_task("trials", total=total)
-        bar.refresh()
-        study = mc.run_study(
-            scn, trials, seed, workers=workers, sweep=factors, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
-            progress=lambda d, t: bar.update(task, completed=d, refresh=True), source=str(scenario),
-        )
+    def run_with_progress():
+        with _campaign_progress(show) as progress:
+            return mc.run_study(
+                scn, trials, seed, workers=workers, sweep=factors, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
+                progress=progress, source=str(scenario),
+                store=folder / "trials.sqlite", resume=resume, overwrite=overwrite, dask=dask, strategy=strategy.value,
+            )
+
+    study = _campaign_interrupt_guard(run_with_progress)
     s = study.summary
+    _write_trials_csv(folder)
     write_json(folder / "summary.json", s)
     save_figure(plot_montecarlo(s, study.main), folder / "montecarlo.png")
     if factors:
@@ -955,6 +969,8 @@ def montecarlo(
     line = lambda text: out.print(text, highlight=False, soft_wrap=True)  # noqa: E731
     line(f"[bold]{scn.name}[/bold]: {s['successes']}/{s['trials']} successes, rate {s['success_rate']:.3f} (95 % CI {lo:.3f}-{hi:.3f}), "
          f"seed {seed}, {s['run']['workers']} workers, {s['run']['wall_s']:.1f} s")
+    if s["run"]["resumed_with"]:
+        line(f"resumed: {s['run']['resumed_with']} trials were in the store, {s['run']['trials_run']} run now")
     line(f"shape error RMS: {pct(s['shape_error_rms_um'], 'um')}")
     line(f"placement error (largest per trial): {pct(s['placement_error_um'], 'um')}")
     line(f"duration (simulated): {pct(s['duration_s'], 's')}")
@@ -974,8 +990,159 @@ def montecarlo(
             t.add_row(f"{row['noise_scale']:g}", f"{row['successes']}/{row['trials']}", f"{row['success_rate']:.3f}",
                       f"{row['success_rate_ci95'][0]:.3f}-{row['success_rate_ci95'][1]:.3f}", "-" if p50 is None else f"{p50:.3g}")
         out.print(t)
-    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else [])
+    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else []) + ["trials.sqlite", "trials.csv"]
     line("wrote " + ", ".join(str(folder / f) for f in files))
+
+
+# ----------------------------------------------------------------------------------------------------
+# campaigns: interruption, export (SPEC 10)
+
+
+from contextlib import contextmanager as _contextmanager  # noqa: E402 - kept with the campaign block
+
+
+@_contextmanager
+def _campaign_progress(show: bool, label: str = "trials"):
+    """A progress bar with ETA for a campaign; it appears at the first report (after the store is
+    checked, so a refusal prints only its error line). No refresh thread: workers may be forked."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
+                   console=err, disable=not show, auto_refresh=False, transient=False)
+    state: dict = {}
+
+    def report(done: int, total: int) -> None:
+        if "task" not in state:
+            bar.start()
+            state["task"] = bar.add_task(label, total=total, completed=done)
+        bar.update(state["task"], completed=done, total=total, refresh=True)
+        if done >= total:
+            bar.stop()  # done: make room for the next bar (planning, then trials)
+
+    try:
+        yield report
+    finally:
+        if "task" in state:
+            bar.stop()
+
+
+def _campaign_interrupt_guard(run):
+    """Run a campaign; on Ctrl-C / SIGTERM say what was kept and how to go on, exit status 130."""
+    from .campaign import CampaignInterrupted
+
+    try:
+        return run()
+    except CampaignInterrupted as exc:
+        print("error: interrupted", file=sys.stderr)
+        where = f" in {exc.path}" if exc.path is not None else ""
+        print(f"{exc.kept} of {exc.total} trials are kept{where}; run the same command with --resume to finish", file=sys.stderr)
+        raise typer.Exit(130) from None
+
+
+def _write_trials_csv(folder: Path) -> Path:
+    from .outputs import write_text
+    from .store import csv_text, read_rows, read_settings
+
+    path = folder / "trials.sqlite"
+    return write_text(folder / "trials.csv", csv_text(read_rows(path), read_settings(path)["cells"]))
+
+
+@app.command()
+def export(
+    store_dir: Path = typer.Argument(..., metavar="DIR", help="A campaign's folder (or its trials.sqlite).", show_default=False),
+    fmt: str = typer.Option("csv", "--format", help="csv, or parquet (needs pyarrow)."),
+    out_file: Optional[Path] = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
+) -> None:
+    """Export a campaign's trial store (finished, interrupted or still running) for pandas & co.
+
+    One row per stored trial: trial, cell, cell_trial, seed, noise_scale, success, failure,
+    shape_error_um, placement_error_um, heading_error_deg, duration_s (simulated), replans, docked,
+    robots, error, wall_s, worker, finished_utc, cell_label.
+
+    Example: `stressbots export out/mc --format parquet`, then `pandas.read_parquet("out/mc/trials.parquet")`.
+    """
+    from .outputs import check_not_input, write_text
+    from .store import STORE_NAME, csv_text, read_rows, read_settings, write_parquet
+
+    if fmt not in ("csv", "parquet"):
+        raise StressbotsError(f"must be csv or parquet, got {fmt!r}", source="--format")
+    db = store_dir / STORE_NAME if store_dir.is_dir() else store_dir
+    rows, cells = read_rows(db), read_settings(db)["cells"]
+    target = out_file or db.with_name(f"trials.{fmt}")
+    check_not_input(target, [db], option="--out")
+    if fmt == "csv":
+        write_text(target, csv_text(rows, cells))
+    else:
+        write_parquet(rows, cells, target)
+    err.print(f"wrote {target} ({len(rows)} trials)", highlight=False, soft_wrap=True)
+
+
+@app.command()
+def study(
+    study_file: Path = typer.Argument(..., metavar="STUDY.toml", help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.", show_default=False),
+    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    resume: bool = typer.Option(False, "--resume", help="Continue the study in DIR/trials.sqlite: run only its missing trials (refused if the study changed)."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: Optional[str] = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
+) -> None:
+    """Run a study: a grid of conditions x a set of layouts, N paired closed-loop trials per cell.
+
+    The grid may vary any scenario, noise or control parameter (noise.speed_rel_sd, noise.scale,
+    control.replan_interval_s, robots.speed_um_s, ...), any controller option (controller.clearance_um,
+    ... : fields of stressbots.edr.ControllerOptions) and the controller strategy. Trial k of every cell
+    uses the same plant seed, so cells are compared on the same draws. Every trial is committed to
+    DIR/trials.sqlite as it finishes (table trials, column cell; table cells) and --resume runs only the
+    missing ones. Writes DIR/summary.json (per-cell success rates with Wilson 95 % intervals, failure
+    reasons) and DIR/report.html (success-rate curves with confidence bands, failure reasons per cell).
+
+    Example: `stressbots study examples/replanning.study.toml --out out/study`.
+    """
+    from .outputs import check_not_input, prepare_dir, to_json, write_json, write_text
+    from .study import load_study, run_study
+    from .studyreport import build_study_report
+
+    if resume and overwrite:
+        raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
+    spec = load_study(study_file)
+    folder = prepare_dir(out_dir, inputs=[study_file])
+    for name in ("summary.json", "report.html", "trials.sqlite", "trials.csv"):
+        check_not_input(folder / name, [study_file] + [lay.source for lay in spec.layouts])
+    show = not (quiet or as_json)
+
+    def run_with_progress():
+        with _campaign_progress(show, "plans ") as planning, _campaign_progress(show) as progress:
+            return run_study(spec, store=folder / "trials.sqlite", resume=resume, overwrite=overwrite, dask=dask, workers=workers,
+                             progress=progress, planning=planning)
+
+    summary, _, _ = _campaign_interrupt_guard(run_with_progress)
+    _write_trials_csv(folder)
+    write_json(folder / "summary.json", summary)
+    write_text(folder / "report.html", build_study_report(summary))
+    if as_json:
+        sys.stdout.write(to_json(summary))
+        return
+    if quiet:
+        return
+    from rich.table import Table
+
+    lo, hi = summary["success_rate_ci95"]
+    out.print(f"[bold]{summary['name']}[/bold]: {len(summary['cells'])} cells x {summary['trials_per_cell']} paired trials, "
+              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s", highlight=False, soft_wrap=True)
+    axes = list(summary["axes"])
+    t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
+    for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
+        t.add_column(col, justify="left" if col in ("layout", "top failure") else "right",
+                     overflow="ellipsis" if col in ("layout", "top failure") else "fold", no_wrap=col in ("layout", "top failure"))
+    for r in summary["cells"]:
+        top = next(iter(r["failures"]), "-")
+        t.add_row(str(r["cell"]), r["layout"], *(str(r["params"].get(k, "")) for k in axes), f"{r['successes']}/{r['trials']}",
+                  f"{r['success_rate']:.2f}", f"{r['success_rate_ci95'][0]:.2f}-{r['success_rate_ci95'][1]:.2f}",
+                  top if len(top) <= 40 else top[:39] + "...")
+    out.print(t)
+    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")), highlight=False, soft_wrap=True)
 
 
 def _click_base(name: str) -> Any:

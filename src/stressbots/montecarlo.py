@@ -16,6 +16,13 @@ trial index. Only the ``"run"`` block of the summary (workers, wall time) differ
 (:meth:`stressbots.scenario.Noise.scaled`), with the *same* trial seeds (common random numbers: the
 differences between noise levels are not blurred by different draws).
 
+Trial store
+-----------
+:func:`run_study` runs the trials as a :mod:`stressbots.campaign` (one cell per noise scale) and commits
+each finished trial to a :class:`stressbots.store.TrialStore` (``DIR/trials.sqlite`` from the command
+line); the summary is computed from the store, so an interrupted and resumed study summarises exactly
+like an uninterrupted one.
+
 Statistics
 ----------
 The success rate comes with a 95 % Wilson score interval (:func:`wilson_interval`), which stays inside
@@ -30,16 +37,16 @@ reproduction with ``stressbots simulate --seed``.
 from __future__ import annotations
 
 import math
-import os
 import re
-import time
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from .errors import StressbotsError
+from .trial import TrialOutcome, run_trial, trial_seeds  # re-exported: the one-trial unit
 
 __all__ = [
     "TrialOutcome",
@@ -52,6 +59,9 @@ __all__ = [
     "run_trials",
     "summarise",
     "run_study",
+    "montecarlo_campaign",
+    "montecarlo_settings",
+    "montecarlo_summary",
     "default_assemble",
     "default_planner",
     "parse_sweep",
@@ -66,18 +76,6 @@ _Z95 = 1.959963984540054  # standard normal quantile 0.975
 
 # ----------------------------------------------------------------------------------------------------
 # Pure pieces
-
-
-def trial_seeds(seed: int, trials: int) -> list[int]:
-    """Integer seeds of trials ``0..trials-1``: ``SeedSequence(seed).spawn(trials)[i]``, 53 bits each.
-
-    Spawned children are independent streams; trial ``i``'s seed does not depend on ``trials`` beyond
-    ``i < trials`` (spawning is sequential), so a longer study extends a shorter one.
-    """
-    if int(seed) < 0:
-        raise ValueError(f"seed must be >= 0, got {seed}")
-    children = np.random.SeedSequence(int(seed)).spawn(int(trials))
-    return [int(c.generate_state(1, np.uint64)[0] >> np.uint64(11)) for c in children]
 
 
 def wilson_interval(successes: int, trials: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -157,114 +155,15 @@ def parse_sweep(text: str, *, option: str = "--sweep") -> tuple[float, ...]:
 
 
 # ----------------------------------------------------------------------------------------------------
-# One trial
-
-
-@dataclass(frozen=True)
-class TrialOutcome:
-    """What one closed-loop trial produced (reduced from the controller's ``AssemblyResult``).
-
-    ``placement_error_um`` and ``heading_error_deg`` are the largest over the robots; ``error`` holds
-    the exception when the trial raised instead of returning (then ``success`` is False). ``wall_s``
-    is the only field that varies between identical runs.
-    """
-
-    index: int
-    seed: int
-    noise_scale: float
-    success: bool
-    failure: str | None
-    shape_error_rms_um: float
-    placement_error_um: float
-    heading_error_deg: float
-    duration_s: float
-    replans: int
-    docked: int
-    robots: int
-    error: str | None = None
-    wall_s: float = field(default=0.0, compare=False)
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-def _maxf(x) -> float:
-    a = np.asarray(x, dtype=np.float64).reshape(-1)
-    a = a[np.isfinite(a)]
-    return float(a.max()) if a.size else math.nan
-
-
-def run_trial(scenario, plan, index: int, seed: int, assemble: Callable, *, noise_scale: float = 1.0, time_budget_s: float | None = None) -> TrialOutcome:
-    """Run one closed-loop trial: ``assemble(scenario, SimulatedPlant(scenario, seed=seed), seed=seed, plan=plan)``.
-
-    An exception inside the trial becomes a failed outcome naming it (one bad trial does not end the
-    study); the study reports how many trials raised.
-    """
-    from .sim import SimulatedPlant
-
-    t0 = time.perf_counter()
-    n = scenario.n
-    try:
-        plant = SimulatedPlant(scenario, seed=seed)
-        kwargs: dict[str, Any] = {"seed": seed, "plan": plan}
-        if time_budget_s is not None:
-            kwargs["time_budget_s"] = time_budget_s
-        res = assemble(scenario, plant, **kwargs)
-    except Exception as exc:  # noqa: BLE001 - a trial's crash is data, reported in the summary
-        msg = f"{type(exc).__name__}: {exc}"
-        return TrialOutcome(index, seed, noise_scale, False, f"exception: {msg}", math.nan, math.nan, math.nan, math.nan, 0, 0, n, msg,
-                            time.perf_counter() - t0)
-    docked = np.asarray(res.docked, dtype=bool)
-    return TrialOutcome(
-        index=int(index),
-        seed=int(seed),
-        noise_scale=float(noise_scale),
-        success=bool(res.success),
-        failure=None if res.failure is None else str(res.failure),
-        shape_error_rms_um=float(res.shape_error_rms_um),
-        placement_error_um=_maxf(res.placement_error_um),
-        heading_error_deg=_maxf(res.heading_error_deg),
-        duration_s=float(res.duration_s),
-        replans=int(res.replans),
-        docked=int(docked.sum()),
-        robots=n,
-        error=None,
-        wall_s=time.perf_counter() - t0,
-    )
-
-
-# ----------------------------------------------------------------------------------------------------
-# Many trials, in parallel
-
-_WORKER: dict[str, Any] = {}
-
-
-def _init_worker(scenario, plan, assemble, time_budget_s) -> None:
-    _WORKER.update(scenario=scenario, plan=plan, assemble=assemble, time_budget_s=time_budget_s, scaled={})
-
-
-def _scaled(scenario, factor: float, cache: dict):
-    if factor == 1.0:
-        return scenario
-    if factor not in cache:
-        cache[factor] = scenario.with_noise(scenario.noise.scaled(factor))
-    return cache[factor]
-
-
-def _worker_trial(task: tuple[float, int, int]) -> TrialOutcome:
-    factor, index, seed = task
-    w = _WORKER
-    scn = _scaled(w["scenario"], factor, w["scaled"])
-    return run_trial(scn, w["plan"], index, seed, w["assemble"], noise_scale=factor, time_budget_s=w["time_budget_s"])
+# The controller and its planner
 
 
 def default_assemble() -> Callable:
-    """The controller: :func:`stressbots.control.assemble`."""
-    try:
-        from .control import assemble
-    except ImportError:
-        raise StressbotsError("the closed-loop controller (stressbots.control.assemble) is not available in this installation") from None
-    return assemble
+    """The controller: :func:`stressbots.strategies.assemble_strategy` (:func:`stressbots.control.assemble`
+    by default, the strategy chosen by name with ``strategy=``)."""
+    from .strategies import assemble_strategy
+
+    return assemble_strategy
 
 
 def default_planner() -> Callable:
@@ -321,56 +220,63 @@ def run_trials(
     progress:
         Called as ``progress(done, total)`` after every finished trial (in this process).
     """
-    if trials < 1:
-        raise StressbotsError(f"must be at least 1, got {trials}", source="--trials")
+    from .campaign import run_campaign
+    from .store import TrialStore
+
     if workers is not None and workers < 1:
         raise StressbotsError(f"must be at least 1, got {workers}", source="--workers")
     assemble = assemble or default_assemble()
     if plan is None:
         plan = default_planner()(scenario)
-    seeds = trial_seeds(seed, trials)
     scales = tuple(dict.fromkeys(float(f) for f in noise_scales))
-    tasks = [(f, i, s) for f in scales for i, s in enumerate(seeds)]
-    total = len(tasks)
-    results: dict[tuple[float, int], TrialOutcome] = {}
-    k = min(int(workers or os.cpu_count() or 1), total)
-    if k <= 1:
-        _init_worker(scenario, plan, assemble, time_budget_s)
-        try:
-            for done, task in enumerate(tasks, start=1):
-                out = _worker_trial(task)
-                results[(task[0], task[1])] = out
-                if progress is not None:
-                    progress(done, total)
-        finally:
-            _WORKER.clear()
-    else:
-        import multiprocessing
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    camp = montecarlo_campaign(scenario, trials, seed, scales, assemble=assemble, plan=plan, time_budget_s=time_budget_s)
+    with TrialStore.open(":memory:", {}) as store:
+        run_campaign(camp, store, workers=workers, progress=progress)
+        return _by_scale(camp, store.rows())
 
-        # fork where the platform has it: workers inherit the loaded modules (fast start, works from any
-        # __main__, even a notebook or stdin); elsewhere the platform's default (spawn). The results do
-        # not depend on the start method.
-        methods = multiprocessing.get_all_start_methods()
-        ctx = multiprocessing.get_context("fork" if "fork" in methods else None)
-        with ProcessPoolExecutor(max_workers=k, mp_context=ctx, initializer=_init_worker,
-                                 initargs=(scenario, plan, assemble, time_budget_s)) as pool:
-            pending = {pool.submit(_worker_trial, t): t for t in tasks}
-            done_count = 0
-            try:
-                while pending:
-                    finished, _ = wait(pending, return_when=FIRST_COMPLETED)
-                    for fut in finished:
-                        task = pending.pop(fut)
-                        results[(task[0], task[1])] = fut.result()
-                        done_count += 1
-                        if progress is not None:
-                            progress(done_count, total)
-            except BaseException:
-                for fut in pending:
-                    fut.cancel()
-                raise
-    return {f: [results[(f, i)] for i in range(trials)] for f in scales}
+
+def montecarlo_campaign(scenario, trials: int, seed: int, scales: Sequence[float], *, assemble: Callable, plan,
+                        time_budget_s: float | None = None, strategy: str | None = None, options=None):
+    """The :class:`stressbots.campaign.Campaign` of a Monte Carlo study: one cell per noise scale (in the
+    given order), every cell with the same trial seeds."""
+    from .campaign import Campaign, Cell, controller_kwargs
+
+    kw = controller_kwargs(assemble, options=options, strategy=strategy)
+    cells = tuple(
+        Cell(label=f"noise x{f:g}", params={"noise_scale": float(f)},
+             scenario=scenario if f == 1.0 else scenario.with_noise(scenario.noise.scaled(f)), plan=plan, noise_scale=float(f),
+             controller=kw)
+        for f in scales
+    )
+    return Campaign(cells, int(trials), int(seed), assemble, time_budget_s)
+
+
+def montecarlo_settings(scenario, trials: int, seed: int, scales: Sequence[float], *, time_budget_s: float | None,
+                        strategy: str | None = None, options=None) -> dict[str, Any]:
+    """The fingerprint of a Monte Carlo campaign (compared on ``--resume``): what decides its outcomes."""
+    import hashlib
+
+    from .campaign import base_settings
+    from .scenario import to_toml
+
+    out: dict[str, Any] = {
+        "command": "montecarlo",
+        "scenario": scenario.name,
+        "scenario_sha256": hashlib.sha256(to_toml(scenario).encode()).hexdigest(),
+        "noise": _noise_dict(scenario.noise),
+        "noise_scales": [float(f) for f in scales],
+        "strategy": "rendezvous" if strategy in (None, "default") else strategy,
+        "controller_options": None if options is None else asdict(options),
+    }
+    base = base_settings(trials, seed, time_budget_s)
+    return {**{k: base.pop(k) for k in ("trials", "seed")}, **out, **base}
+
+
+def _by_scale(camp, rows) -> dict[float, list[TrialOutcome]]:
+    from .campaign import row_outcome
+
+    outs = [row_outcome(r) for r in rows]
+    return {cell.noise_scale: [o for o in outs if o.cell == c] for c, cell in enumerate(camp.cells)}
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -436,29 +342,64 @@ def run_study(
     time_budget_s: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     source: str | None = None,
+    store: Path | str | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    dask: str | None = None,
+    strategy: str | None = None,
+    options=None,
 ) -> Study:
     """The whole study: trials at the scenario's noise (and at every ``sweep`` factor), summarised.
 
+    Every finished trial is committed to the trial store ``store`` (``DIR/trials.sqlite``; ``None`` keeps
+    it in memory) and the summary is computed from the store, so a resumed study (``resume=True``: only
+    the missing trials run; a store of other settings is refused) summarises exactly like an
+    uninterrupted one. ``dask`` runs the trials on a Dask cluster (:func:`stressbots.campaign.run_campaign`).
+
     The summary holds the SPEC 7 keys (``trials``, ``successes``, ``success_rate``), the Wilson 95 %
     interval, percentiles, failure counts, seeds and provenance, a ``"sweep"`` list when asked, and a
-    ``"run"`` block (workers, wall time: the only part that depends on the machine).
+    ``"run"`` block (backend, workers, wall time, trials run now: the only part that depends on the
+    machine and on interruptions).
+
+    Raises
+    ------
+    stressbots.campaign.CampaignInterrupted
+        On Ctrl-C / SIGTERM; the finished trials are in the store.
     """
+    from .campaign import run_campaign
     from .outputs import provenance
+    from .store import TrialStore
 
     if trials < 1:
         raise StressbotsError(f"must be at least 1, got {trials}", source="--trials")
     if workers is not None and workers < 1:
         raise StressbotsError(f"must be at least 1, got {workers}", source="--workers")
-    t0 = time.perf_counter()
+    assemble = assemble or default_assemble()
     if plan is None:
         plan = default_planner()(scenario)
-    scales = (1.0,) + tuple(f for f in (sweep or ()) if f != 1.0)
-    k = min(int(workers or os.cpu_count() or 1), trials * len(scales))
-    outcomes = run_trials(
-        scenario, trials, seed, workers=k, assemble=assemble, plan=plan, noise_scales=scales,
-        time_budget_s=time_budget_s, progress=progress,
-    )
-    wall = time.perf_counter() - t0
+    scales = (1.0,) + tuple(float(f) for f in (sweep or ()) if f != 1.0)
+    scales = tuple(dict.fromkeys(scales))
+    camp = montecarlo_campaign(scenario, trials, seed, scales, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
+                               strategy=strategy, options=options)
+    settings = montecarlo_settings(scenario, trials, seed, scales, time_budget_s=time_budget_s, strategy=strategy, options=options)
+    info = provenance(seed, scenario=source or scenario.name)
+    with TrialStore.open(":memory:" if store is None else store, settings, resume=resume, overwrite=overwrite, info=info,
+                         cells=[(c.label, c.params) for c in camp.cells]) as st:
+        run = run_campaign(camp, st, workers=workers, dask=dask, progress=progress)
+        outcomes = _by_scale(camp, st.rows())
+    summary = montecarlo_summary(scenario, outcomes, seed, plan, sweep=sweep, source=source)
+    summary["strategy"] = "rendezvous" if strategy in (None, "default") else strategy
+    summary["run"] = {**run.to_dict(), "trial_wall_s": percentiles(o.wall_s for v in outcomes.values() for o in v)}
+    if store is not None:
+        summary["store"] = {"path": Path(store).name, "trials": sum(len(v) for v in outcomes.values()),
+                            "table": "trials", "campaign_settings": "table campaign, key 'settings'"}
+    summary["provenance"] = provenance(seed, scenario=source or scenario.name)
+    return Study(summary, outcomes)
+
+
+def montecarlo_summary(scenario, outcomes: dict[float, list[TrialOutcome]], seed: int, plan, *, sweep: Sequence[float] | None = None,
+                       source: str | None = None) -> dict[str, Any]:
+    """The deterministic part of ``summary.json`` from the stored outcomes (by noise scale)."""
     summary: dict[str, Any] = {"format": "stressbots.montecarlo/1", "scenario": scenario.name, "source": source}
     summary.update(summarise(outcomes[1.0]))
     summary["ci_method"] = "Wilson score interval, 95 %"
@@ -473,7 +414,7 @@ def run_study(
     if sweep:
         rows = []
         for f in sweep:
-            st = summarise(outcomes[1.0 if f == 1.0 else f])
+            st = summarise(outcomes[1.0 if f == 1.0 else float(f)])
             rows.append(
                 {
                     "noise_scale": float(f),
@@ -487,12 +428,4 @@ def run_study(
                 }
             )
         summary["sweep"] = rows
-    n_tasks = sum(len(v) for v in outcomes.values())
-    summary["run"] = {
-        "workers": k,
-        "wall_s": wall,
-        "trials_run": n_tasks,
-        "trial_wall_s": percentiles(o.wall_s for v in outcomes.values() for o in v),
-    }
-    summary["provenance"] = provenance(seed, scenario=source or scenario.name)
-    return Study(summary, outcomes)
+    return summary

@@ -21,7 +21,7 @@ from .control import assemble
 from .errors import StressbotsError
 from .seed_strategy import assemble_seed
 
-__all__ = ["STRATEGIES", "DEFAULT_STRATEGY", "STRATEGY_HELP", "assemble_with", "strategy_function"]
+__all__ = ["STRATEGIES", "DEFAULT_STRATEGY", "STRATEGY_HELP", "assemble_strategy", "assemble_with", "strategy_function"]
 
 STRATEGIES: dict[str, Callable] = {"rendezvous": assemble, "seed": assemble_seed}
 """Strategy name -> assembly function ``f(scenario, plant, *, seed, plan, time_budget_s, options)``."""
@@ -51,3 +51,10 @@ def strategy_function(strategy: str) -> Callable:
 def assemble_with(strategy: str, scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options=None):
     """Assemble ``scenario`` through ``plant`` with the named strategy (see :data:`STRATEGIES`)."""
     return strategy_function(strategy)(scenario, plant, seed=seed, plan=plan, time_budget_s=time_budget_s, options=options)
+
+
+def assemble_strategy(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options=None,
+                      strategy: str = DEFAULT_STRATEGY):
+    """:func:`stressbots.control.assemble`'s signature plus ``strategy=``: the controller Monte Carlo runs
+    and studies use, so a campaign (or one cell of a study) can choose the strategy by name."""
+    return assemble_with(strategy, scenario, plant, seed=seed, plan=plan, time_budget_s=time_budget_s, options=options)
