@@ -382,26 +382,9 @@ def waveform(
     Examples: `stressbots waveform examples/four-robots.toml --steps P1:2.5,P0:1.0 --out wf.npy`;
     `stressbots waveform SCENARIO --plan out/plan.json --out wf.csv --rate-hz 50000`.
     """
-    from .electrostatics import analyse_scenario
-    from .outputs import check_not_input
-    from .waveform import export, parse_steps, replay, steps_from_plan, synthesize
+    from .waveform import export, replay
 
-    if (steps is None) == (plan is None):
-        raise StressbotsError("give exactly one of --steps or --plan", source="stressbots waveform")
-    check_not_input(out_file, [scenario, plan])
-    if out_file.exists() and out_file.is_dir():
-        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
-    if out_file.suffix.lower() not in (".npy", ".csv", ".json"):
-        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .npy, .csv or .json file", source="--out")
-    sc = scenario_arg(scenario)
-    analysis = analyse_scenario(sc)
-    if plan is not None:
-        from .plans import load as load_plan
-
-        step_list = steps_from_plan(load_plan(plan), analysis, source=str(plan))
-    else:
-        step_list = parse_steps(steps, analysis)
-    wf = synthesize(analysis, step_list)
+    sc, analysis, wf = _waveform_of(scenario, steps, plan, out_file, (".npy", ".csv", ".json"), "waveform")
     decoded = replay(wf, analysis.snap_down_V, analysis.release_V)
     summary = export(wf, out_file, rate_hz=rate_hz, drive_frequency_hz=sc.electrodes.drive_frequency_hz)
     levels = ", ".join(f"{v:g}" for v in summary.levels_V)
@@ -418,6 +401,32 @@ def waveform(
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _waveform_of(scenario: Path, steps: Optional[str], plan: Optional[Path], out_file: Path, suffixes: tuple[str, ...], command: str):
+    """The scenario, its voltage analysis and the waveform of ``--steps`` or ``--plan`` (shared by ``waveform``
+    and ``awg``), after checking ``--out`` (not an input, not a folder, a known suffix)."""
+    from .electrostatics import analyse_scenario
+    from .outputs import check_not_input
+    from .waveform import parse_steps, steps_from_plan, synthesize
+
+    if (steps is None) == (plan is None):
+        raise StressbotsError("give exactly one of --steps or --plan", source=f"stressbots {command}")
+    check_not_input(out_file, [scenario, plan])
+    if out_file.exists() and out_file.is_dir():
+        raise StressbotsError(f"{out_file} is a folder; give a file name", source="--out")
+    if out_file.suffix.lower() not in suffixes:
+        kinds = ", ".join(suffixes[:-1]) + f" or {suffixes[-1]}"
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a {kinds} file", source="--out")
+    sc = scenario_arg(scenario)
+    analysis = analyse_scenario(sc)
+    if plan is not None:
+        from .plans import load as load_plan
+
+        step_list = steps_from_plan(load_plan(plan), analysis, source=str(plan))
+    else:
+        step_list = parse_steps(steps, analysis)
+    return sc, analysis, synthesize(analysis, step_list)
 
 
 @app.command()
@@ -889,6 +898,101 @@ def montecarlo(
         out.print(t)
     files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else [])
     line("wrote " + ", ".join(str(folder / f) for f in files))
+
+
+# ----------------------------------------------------------------------------------------------------
+# Lab hardware (SPEC 9): awg, track
+
+
+@app.command()
+def awg(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.", show_default=False),
+    out_file: Path = typer.Option(
+        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) or .npy (int16 codes).",
+        show_default=False,
+    ),
+    steps: Optional[str] = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (SPEC 7) instead of --steps.", show_default=False),
+    gain: float = typer.Option(20.0, "--gain", help="Voltage gain of the amplifier between generator and electrodes (V/V)."),
+    offset_V: float = typer.Option(0.0, "--offset-V", help="Electrode level (V) at generator output 0 V (amplifier offset)."),
+    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz", help="Generator sample rate (Hz); at least twice the drive frequency."),
+    awg_max_V: float = typer.Option(10.0, "--awg-max-V", help="The generator's output limit (V): every level must stay within +-this."),
+    name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
+    upload_to: Optional[str] = typer.Option(
+        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).", show_default=False
+    ),
+    visa_library: Optional[str] = typer.Option(
+        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.", show_default=False
+    ),
+    ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
+    output_on: bool = typer.Option(False, "--output-on", help="Switch the generator's output on after a clean upload (off by default)."),
+) -> None:
+    """Compile a waveform for an arbitrary waveform generator (Keysight 33500B class) and export or upload it.
+
+    The electrode level is `V = gain * u + offset_V` for generator output `u` (an amplifier follows the
+    generator). The waveform of --steps or --plan is sampled at --sample-rate-hz (a Drive is a square
+    wave at the scenario's drive frequency), mapped to `u` and quantised to int16 DAC codes
+    (-32767 = VOLT:LOW, +32767 = VOLT:HIGH). Before anything is written or sent it refuses electrode
+    levels outside [0, max_V], generator levels outside +-awg_max_V and more points than the generator
+    holds (saying how to split the plan). --upload sends the SCPI sequence of SPEC 9.1 to channel 1 and
+    checks SYST:ERR? after the data and after the settings; the output stays off unless --output-on.
+
+    Examples: `stressbots awg examples/four-robots.toml --steps P1:0.5,P0:0.5 --out wf.arb`;
+    dry run against the simulated instrument: `stressbots awg examples/four-robots.toml --steps P1:0.5
+    --out wf.csv --upload TCPIP::awg.local::INSTR --visa-library examples/awg-sim.yaml@sim --ascii`.
+    """
+    from .lab.awg import compile_awg, export_program
+
+    sc, _, wf = _waveform_of(scenario, steps, plan, out_file, (".arb", ".csv", ".npy"), "awg")
+    prog = compile_awg(wf, sc.electrodes, gain=gain, offset_V=offset_V, sample_rate_hz=sample_rate_hz, awg_max_V=awg_max_V)
+    if upload_to is not None:
+        _upload_program(prog, upload_to, visa_library, name=name, ascii_data=ascii_data, output_on=output_on)
+    export_program(prog, out_file)
+    ev = prog.electrode_volts()
+    out.print(
+        f"wrote {out_file}: {prog.points} points at {prog.sample_rate_hz:g} Hz ({prog.duration_s:g} s); generator "
+        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset {offset_V:g} V",
+        highlight=False, soft_wrap=True,
+    )
+    if upload_to is not None:
+        out.print(f"uploaded to {upload_to} as {name!r}; output {'ON' if output_on else 'left off (use --output-on)'}",
+                  highlight=False, soft_wrap=True)
+
+
+def _upload_program(prog, resource: str, visa_library: Optional[str], *, name: str, ascii_data: bool, output_on: bool) -> None:
+    """Open the VISA resource and upload (errors from PyVISA become one ``error:`` line)."""
+    from .lab.awg import upload
+
+    try:
+        import pyvisa
+    except ImportError:
+        raise StressbotsError("needs PyVISA: pip install 'stressbots[lab]'", source="--upload") from None
+    try:
+        rm = pyvisa.ResourceManager(visa_library) if visa_library else pyvisa.ResourceManager()
+        inst = rm.open_resource(resource, read_termination="\n", write_termination="\n")
+    except Exception as exc:  # noqa: BLE001 - any failure to open is the user's resource or library
+        raise StressbotsError(f"cannot open {resource!r}{f' with {visa_library!r}' if visa_library else ''}: "
+                              f"{_one_line(exc)}", source="--upload") from None
+    try:
+        inst.timeout = 60_000  # ms: large waveforms take a while
+        upload(prog, inst, name=name, ascii=ascii_data, output_on=output_on)
+    except StressbotsError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - an I/O failure on the bus, reported in one line
+        raise StressbotsError(f"upload failed: {_one_line(exc)}", source="--upload") from None
+    finally:
+        inst.close()
+        rm.close()
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line; of an embedded traceback only the text before it and its last line."""
+    text = str(exc).replace("\\n", "\n")
+    if "Traceback" in text:
+        before, _, tb = text.partition("Traceback")
+        last = [ln for ln in tb.splitlines() if ln.strip(" '\"")][-1:]
+        text = before.rstrip(" '\"") + " " + " ".join(last)
+    return " ".join(text.split()).strip(" '\"") or type(exc).__name__
 
 
 def _click_base(name: str) -> type[BaseException]:
