@@ -38,6 +38,17 @@ out = Console()
 err = Console(stderr=True)
 
 
+class CameraChoice(str, Enum):
+    """The --camera choices of simulate and run: what the controller sees."""
+
+    poses = "poses"
+    images = "images"
+
+
+CAMERA_HELP = ("What the controller sees: 'poses' (the simulator's noisy pose camera) or 'images' (rendered microscope "
+               "frames tracked by stressbots.tracking: image in the loop; needs the [lab] extra).")
+
+
 class NoiseChoice(str, Enum):
     """The --noise choices of simulate and run."""
 
@@ -104,6 +115,7 @@ def run(
         None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default the controller's.", show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars; print only one summary line."),
+    camera: CameraChoice = typer.Option(CameraChoice.poses, "--camera", help=CAMERA_HELP),
 ) -> None:
     """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
 
@@ -122,7 +134,7 @@ def run(
     budget = finite_budget(time_budget_s)
     scn = _with_noise_choice(scenario_arg(scenario), noise)
     run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget, console=out,
-            err_console=err, quiet=quiet)
+            err_console=err, quiet=quiet, camera=camera.value)
 
 
 def _with_noise_choice(scn, choice):
@@ -516,6 +528,7 @@ def simulate(
         None, "--time-budget-s", help="Closed loop: simulated time budget (s); default the controller's.", show_default=False
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
+    camera: CameraChoice = typer.Option(CameraChoice.poses, "--camera", help=CAMERA_HELP),
 ) -> None:
     """Run the simulated plant: robots with control error, contact, compliance and a noisy camera.
 
@@ -545,8 +558,10 @@ def simulate(
     from .viz import plot_run
 
     if plan is None:
-        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet)
+        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet, camera.value)
         return
+    if camera is CameraChoice.images:
+        raise StressbotsError("a plan played open loop observes nothing; use --camera images without --plan", source="--camera")
     scn = scenario_arg(scenario)
     folder = prepare_dir(out_dir, inputs=[scenario, plan])
     for name in ("result.json", "trajectory.png"):
@@ -622,7 +637,8 @@ def simulate(
     out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
 
 
-def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool) -> None:
+def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool,
+                          camera: str = "poses") -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
     from .pipeline import closed_loop, finite_budget, merged_events, plan_for, result_document, robot_table, run_pictures, verdict_text
@@ -642,7 +658,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         on_time = (lambda t: status.update(f"closed loop: {t:.0f} s simulated...")) if show else None
         if show:
             status.update("closed loop...")
-        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time)
+        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, camera=camera)
         if show:
             status.update("pictures...")
         doc = result_document(scn, run, source=str(scenario))
@@ -650,11 +666,14 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         figs, anim = run_pictures(scn, run)
         write_bytes(folder / "trajectory.png", figs["run"])
         write_bytes(folder / "structure.png", figs["structure"])
+        if "frames" in figs:
+            write_bytes(folder / "frames.png", figs["frames"])
+            names = names + ("frames.png",)
         write_text(folder / "animation.html", animation_page(anim, title=anim["title"], subtitle=f"{verdict_text(doc)}"))
     if quiet:
         return
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop, noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated in "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop, noise {noise.value}, camera {camera}, seed {res.seed}: {res.duration_s:.1f} s simulated in "
               f"{run.wall_s:.1f} s, {res.replans} re-plans", highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))
     style = "bold green" if res.success else "bold red"

@@ -86,6 +86,8 @@ class ClosedLoop:
     wall_s: float
     time_budget_s: float | None
     error: str | None = None  # traceback of an exception the controller raised
+    camera: str = "poses"  # "images": the controller saw rendered frames through the tracker
+    frames: tuple = ()  # with camera "images": a few stressbots.lab.plants.TrackedFrame for the report
 
 
 def default_time_budget_s() -> float | None:
@@ -112,25 +114,47 @@ def plan_for(scenario, source: str | None = None):
 
 
 def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None = None,
-                on_time: Callable[[float], None] | None = None) -> ClosedLoop:
-    """Run :func:`stressbots.control.assemble` on a recording :class:`~stressbots.sim.SimulatedPlant`."""
+                on_time: Callable[[float], None] | None = None, camera: str = "poses") -> ClosedLoop:
+    """Run :func:`stressbots.control.assemble` on a recording :class:`~stressbots.sim.SimulatedPlant`.
+
+    ``camera="images"`` puts the image in the loop: the controller observes the plant through rendered
+    frames and the tracker (:class:`stressbots.lab.SyntheticLab`, needs the ``[lab]`` extra)."""
     from .control import assemble
     from .sim import SimulatedPlant
 
     plant = SimulatedPlant(scenario, seed=seed, record=True)
+    observed = plant
+    if camera == "images":
+        observed = _image_lab(scenario, plant, seed)
     kwargs: dict[str, Any] = {"seed": seed, "plan": plan_result}
     if time_budget_s is not None:
         kwargs["time_budget_s"] = float(time_budget_s)
     t0 = time.perf_counter()
     try:
-        res = assemble(scenario, _WatchedPlant(plant, on_time), **kwargs)
+        res = assemble(scenario, _WatchedPlant(observed, on_time), **kwargs)
         error = None
     except StressbotsError:
         raise
     except Exception as exc:  # noqa: BLE001 - a controller crash is the run's outcome; the report shows it
         error = traceback.format_exc()
         res = _crashed_result(scenario, plant, plan_result, seed, f"controller error: {type(exc).__name__}: {exc}")
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error)
+    frames = tuple(observed.frames) if observed is not plant else ()
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error, camera, frames)
+
+
+#: Frames of an image-in-the-loop run kept for the report.
+REPORT_FRAMES = 4
+
+
+def _image_lab(scenario, plant, seed: int):
+    """The simulated plant seen through rendered frames (:class:`stressbots.lab.SyntheticLab`)."""
+    try:
+        import cv2  # noqa: F401
+    except ImportError:
+        raise StressbotsError("needs OpenCV for tracking: pip install 'stressbots[lab]'", source="--camera images") from None
+    from .lab import SyntheticLab
+
+    return SyntheticLab(scenario, seed=seed, plant=plant, keep_frames=REPORT_FRAMES)
 
 
 def _crashed_result(scenario, plant, plan_result, seed, reason: str):
@@ -192,6 +216,7 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
             "time_s": plant.time_s,
         },
         "plant_events": [e.as_dict() for e in plant.events],
+        "camera": run.camera,
         "wall_time_s": run.wall_s,
         **(extra or {}),
         "provenance": provenance(run.result.seed),
@@ -246,6 +271,11 @@ def run_pictures(scenario, run: ClosedLoop, *, label: str = "closed loop") -> tu
             scenario, final, res.nominal_goals, res.docked,
             title=f"{verdict}: shape error {res.shape_error_rms_um:.3g} um RMS, alignment rotation {res.shape_rotation_deg:.1f} deg")),
     }
+    if run.frames:
+        from .lab.pictures import plot_tracked_frames
+
+        figs["frames"] = figure_bytes(plot_tracked_frames(
+            scenario, run.frames, title="camera frames the controller saw (image in the loop), tracked poses outlined"))
     anim = animation_data(scenario, times, poses, res.goals, merged_events(res, plant), title=title)
     return figs, anim
 
@@ -315,6 +345,7 @@ def run_job(
     title: str | None = None,
     extra: Callable[[JobContext], Extra] | None = None,
     show_analysis: bool = True,
+    camera: str = "poses",
 ) -> JobResult:
     """Analyse, plan, run closed loop on the simulator and write the report and its files into ``out_dir``.
 
@@ -364,7 +395,7 @@ def run_job(
         def on_time(t: float) -> None:
             bar.update(t_run, completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time)
+        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=time_budget_s, on_time=on_time, camera=camera)
         res = run.result
         bar.update(t_run, total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
                    info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
@@ -389,7 +420,7 @@ def run_job(
         write_json(out / "waveform.json", to_json(wf))
         wsum = export(excerpt(wf, EXCERPT_S), out / "waveform.npy", rate_hz=RATE_HZ,
                       drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
-        for key in ("waveform", "plan", "run", "structure"):
+        for key in ("waveform", "plan", "run", "structure") + (("frames",) if "frames" in figs else ()):
             write_bytes(out / f"{key}.png", figs[key])
         doc = result_document(scenario, run, source=source, extra={
             "plan": {"file": "plan.json", **{k: s.get(k) for k in ("structure", "variant", "duration_s", "steps", "lower_bound_s", "efficiency")}},
@@ -404,6 +435,8 @@ def run_job(
         by_name = {p.name: p for p in plan_result.plan.primitives}
         steps = [(st.primitive, by_name[st.primitive].turning, st.duration_s) for st in plan_result.plan.steps]
         files = [f for f in OUTPUT_FILES] + list(more.files)
+        if "frames" in figs:
+            files.append(("frames.png", "camera frames of the image-in-the-loop run with the tracked poses"))
         html_text = build_report(
             title=title or f"stressbots: {scenario.name}",
             scenario=scenario, analysis=analysis, plan_summary=s, plan_steps=steps, plan_notes=plan_result.notes,

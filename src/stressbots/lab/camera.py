@@ -23,7 +23,7 @@ import numpy as np
 
 from ..tracking import ArmGeometry, Calibration
 
-__all__ = ["ImageModel", "Camera", "frame_for_scenario"]
+__all__ = ["ImageModel", "Camera", "frame_for_scenario", "shape_for"]
 
 
 @dataclass(frozen=True)
@@ -114,20 +114,33 @@ class Camera:
         return np.clip(np.rint(img), 0, 255).astype(np.uint8)
 
 
+def _extent(scenario) -> tuple[float, float, float, float]:
+    """``(x0, y0, x1, y1)`` (um) a camera should show: the arena, or every start and goal with 600 um around."""
+    if scenario.arena_um is not None:
+        return 0.0, 0.0, float(scenario.arena_um[0]), float(scenario.arena_um[1])
+    pts = [scenario.starts[:, :2]] if scenario.has_starts else []
+    try:
+        pts.append(scenario.goals[:, :2])
+    except Exception:  # noqa: BLE001 - no explicit goals: the starts frame the view
+        pass
+    allp = np.concatenate(pts) if pts else np.zeros((1, 2))
+    (x0, y0), (x1, y1) = allp.min(axis=0) - 600.0, allp.max(axis=0) + 600.0
+    return float(x0), float(y0), float(x1), float(y1)
+
+
 def frame_for_scenario(scenario, um_per_px: float = 2.0, margin_um: float = 100.0) -> tuple[Calibration, tuple[int, int]]:
     """A calibration and frame shape that show the whole arena (or, without one, every start and goal
     with 600 um around them), ``margin_um`` beyond it on each side."""
-    if scenario.arena_um is not None:
-        x0, y0, x1, y1 = 0.0, 0.0, float(scenario.arena_um[0]), float(scenario.arena_um[1])
-    else:
-        pts = [scenario.starts[:, :2]] if scenario.has_starts else []
-        try:
-            pts.append(scenario.goals[:, :2])
-        except Exception:  # noqa: BLE001 - no explicit goals: the starts frame the view
-            pass
-        allp = np.concatenate(pts) if pts else np.zeros((1, 2))
-        (x0, y0), (x1, y1) = allp.min(axis=0) - 600.0, allp.max(axis=0) + 600.0
+    x0, y0, x1, y1 = _extent(scenario)
     cols = int(math.ceil((x1 - x0 + 2 * margin_um) / um_per_px))
     rows = int(math.ceil((y1 - y0 + 2 * margin_um) / um_per_px))
     origin = ((margin_um - x0) / um_per_px, rows - (margin_um - y0) / um_per_px)
     return Calibration(um_per_px, origin), (rows, cols)
+
+
+def shape_for(scenario, calibration: Calibration, margin_um: float = 100.0) -> tuple[int, int]:
+    """The frame shape ``(rows, cols)`` that reaches past the scenario's extent by ``margin_um`` in a
+    given calibration (pixels before the origin are cut off: the calibration decides them)."""
+    x0, y0, x1, y1 = _extent(scenario)
+    cols, rows = calibration.to_px(np.array([x1 + margin_um]), np.array([y0 - margin_um]))
+    return max(int(math.ceil(float(rows[0]))), 1), max(int(math.ceil(float(cols[0]))), 1)
