@@ -166,3 +166,37 @@ def test_camera_renders_the_image_model():
     assert f[150, 230] in (115, 116)  # a pixel centred on the body's edge is half lit (anti-aliased)
     noisy = Camera(cal, (200, 400), ImageModel()).render(np.zeros((0, 3)), [], [], np.random.default_rng(1))
     assert abs(noisy.mean() - 30.0) < 0.5 and 4.0 < noisy.std() < 8.0
+
+
+def test_cli_track_folder_of_pngs(run_cli, tmp_path, tee):
+    import csv
+
+    from stressbots.scenario import to_toml
+    from tests.conftest import assert_user_error
+
+    scn = tmp_path / "tee.toml"
+    scn.write_text(to_toml(tee))
+    cal, shape = _view(tee.goals[:, :2].mean(axis=0), 3.0, 1200.0)
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    rng = np.random.default_rng(0)
+    truth = []
+    for k in range(2):
+        true = tee.goals.copy()
+        true[:, 0] += 20.0 * k
+        truth.append(true)
+        cv2.imwrite(str(folder / f"f{k}.png"), reference_render(true, tee.lengths_um, tee.widths_um, cal, shape, rng, sub=3))
+    out = tmp_path / "poses.csv"
+    r = run_cli("track", folder, "--scenario", scn, "--um-per-px", "3", "--origin-px", *map(str, cal.origin_px), "--out", out)
+    assert r.code == 0, r.err
+    rows = list(csv.DictReader(out.open()))
+    assert [r_["robot"] for r_ in rows[:4]] == list(tee.names) and len(rows) == 8
+    # the first frame's identities come from the start poses, far away: compare frame 1 against frame 0's labels
+    got = {(int(r_["frame"]), r_["robot"]): (float(r_["x_um"]), float(r_["y_um"]), float(r_["heading_deg"])) for r_ in rows}
+    for nm in tee.names:
+        (x0, y0, h0), (x1, y1, h1) = got[(0, nm)], got[(1, nm)]
+        assert abs(x1 - x0 - 20.0) < 2.0 and abs(y1 - y0) < 2.0 and abs((h1 - h0 + 180) % 360 - 180) < 1.0
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert_user_error(run_cli("track", empty, "--scenario", scn, "--um-per-px", "3", "--origin-px", "0", "0", "--out", out), "no .png")
+    assert_user_error(run_cli("track", folder, "--scenario", scn, "--um-per-px", "-1", "--origin-px", "0", "0", "--out", out), "--um-per-px")

@@ -978,6 +978,66 @@ def awg(
                   highlight=False, soft_wrap=True)
 
 
+@app.command()
+def track(
+    frames: Path = typer.Argument(..., help="A folder of PNG frames (tracked in name order) or a video file.", show_default=False),
+    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.", show_default=False),
+    um_per_px: float = typer.Option(..., "--um-per-px", help="Camera calibration: micrometres per pixel.", show_default=False),
+    origin_px: tuple[float, float] = typer.Option(
+        ..., "--origin-px", help="Camera calibration: the pixel (column, row) of the arena origin (x = y = 0).", show_default=False
+    ),
+    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).", show_default=False),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Track the robots in camera frames: one pose per robot and frame, identities kept from frame to frame.
+
+    Frames are grey images, rows downward; `x = (col - C) * U`, `y = (R - row) * U` for `--origin-px C R`
+    and `--um-per-px U` (SPEC 9.2). Each frame is segmented, touching robots are split into their known
+    body rectangles, centres and headings are fitted to a fraction of a pixel (the steering arm on the
+    robot's right tells front from back) and identities follow the previous frame (the first frame's
+    come from the scenario's start poses). Needs the [lab] extra (OpenCV).
+
+    Example: `stressbots track frames/ --scenario examples/four-robots.toml --um-per-px 2 --origin-px 50 1550 --out poses.csv`
+    """
+    import io
+
+    from .lab.frames import frame_source
+    from .outputs import check_not_input, write_text
+    from .tracking import Calibration, locate
+
+    sc = scenario_arg(scenario)
+    check_not_input(out_file, [scenario, frames])
+    if out_file.suffix.lower() != ".csv":
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .csv file", source="--out")
+    try:
+        cal = Calibration(um_per_px, origin_px)
+    except StressbotsError as exc:
+        raise StressbotsError(exc.problem, source="--um-per-px" if exc.field == "um_per_px" else "--origin-px") from None
+    count, source = frame_source(frames)
+    buf = io.StringIO()
+    buf.write("frame,name,robot,x_um,y_um,heading_deg\n")
+    previous = sc.starts if sc.has_starts else None
+    seen_total, k = 0, 0
+    from rich.progress import Progress
+
+    with Progress(console=err, disable=quiet or not err.is_terminal, transient=True) as bar:
+        task = bar.add_task("tracking", total=count if count > 0 else None)
+        for k, (name, img) in enumerate(source):
+            poses = locate(img, sc, cal, previous=previous)
+            found = np.all(np.isfinite(poses), axis=1)
+            seen_total += int(found.sum())
+            for i, robot in enumerate(sc.names):
+                x, y, th = poses[i]
+                buf.write(f"{k},{name},{robot},{x:.4f},{y:.4f},{np.degrees(th):.4f}\n" if found[i] else f"{k},{name},{robot},nan,nan,nan\n")
+            previous = poses if previous is None else np.where(found[:, None], poses, previous)
+            bar.advance(task)
+    frames_done = k + 1
+    write_text(out_file, buf.getvalue())
+    if not quiet:
+        out.print(f"wrote {out_file}: {frames_done} frames, {seen_total} of {frames_done * sc.n} robot poses found", highlight=False,
+                  soft_wrap=True)
+
+
 def _upload_program(prog, resource: str, visa_library: Optional[str], *, name: str, ascii_data: bool, output_on: bool) -> None:
     """Open the VISA resource and upload (errors from PyVISA become one ``error:`` line)."""
     from .lab.awg import upload
