@@ -115,3 +115,15 @@ def test_cli_simulate_with_images(run_cli, tmp_path, pair):
     assert (tmp_path / "sim" / "frames.png").stat().st_size > 1000
     r = run_cli("simulate", path, "--plan", path, "--out", tmp_path / "open", "--camera", "images")
     assert r.code == 2 and "--camera" in r.err
+
+
+def test_hardware_plant_without_burst_uses_only_the_spec_commands(pair):
+    from stressbots.electrostatics import analyse_scenario
+
+    awg = RecordingInstrument()
+    waits: list[float] = []
+    hw = HardwarePlant(pair, awg, None, Calibration(4.0), sample_rate_hz=50_000.0, sleep=waits.append, burst=False)
+    hw.apply(synthesize(analyse_scenario(pair), [("P2", 0.001)]))
+    msgs = [m for kind, m in awg.log if kind != "write_raw"]
+    assert not any("BURS" in m or m == "*TRG" for m in msgs)
+    assert msgs[-2:] == ["OUTP1 ON", "OUTP1 OFF"] and len(waits) == 1

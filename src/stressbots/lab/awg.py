@@ -343,25 +343,29 @@ def upload(program: AwgProgram, instrument, *, name: str = "stressbots", ascii: 
         instrument.write("OUTP1 ON")
 
 
-def play_once(program: AwgProgram, instrument, *, name: str = "stressbots", sleep=None) -> None:
-    """Upload a program and play it exactly once (triggered burst of one cycle), then switch the output off.
+def play_once(program: AwgProgram, instrument, *, name: str = "stressbots", sleep=None, burst: bool = True) -> None:
+    """Upload a program and play it once, then switch the output off.
 
-    For :class:`stressbots.lab.HardwarePlant`: after :func:`upload` it sets a bus-triggered burst of one
-    cycle (``SOUR1:BURS:MODE TRIG``, ``SOUR1:BURS:NCYC 1``, ``TRIG1:SOUR BUS``, ``SOUR1:BURS:STAT ON``),
-    checks ``SYST:ERR?``, switches the output on, sends ``*TRG``, waits the program's duration
-    (``sleep``, default :func:`time.sleep`), waits for ``*OPC?`` and switches the output off again.
+    With ``burst`` (real instruments): after :func:`upload` a bus-triggered burst of one cycle
+    (``SOUR1:BURS:MODE TRIG``, ``SOUR1:BURS:NCYC 1``, ``TRIG1:SOUR BUS``, ``SOUR1:BURS:STAT ON``), checked
+    with ``SYST:ERR?``, then ``OUTP1 ON``, ``*TRG``, a wait of the program's duration (``sleep``, default
+    :func:`time.sleep`), ``*OPC?`` and ``OUTP1 OFF``. Without it (instruments or simulators that know only
+    the SPEC 9.1 commands): :func:`upload` with ``output_on=True``, the wait, ``OUTP1 OFF``; the
+    waveform then repeats until the output goes off, so the timing of the wait matters.
     """
     import time
 
     wait = time.sleep if sleep is None else sleep
-    upload(program, instrument, name=name, output_on=False)
-    for cmd in ("SOUR1:BURS:MODE TRIG", "SOUR1:BURS:NCYC 1", "TRIG1:SOUR BUS", "SOUR1:BURS:STAT ON"):
-        instrument.write(cmd)
-    _check_errors(instrument, "the burst settings")
-    instrument.write("OUTP1 ON")
+    upload(program, instrument, name=name, output_on=not burst)
     try:
-        instrument.write("*TRG")
+        if burst:
+            for cmd in ("SOUR1:BURS:MODE TRIG", "SOUR1:BURS:NCYC 1", "TRIG1:SOUR BUS", "SOUR1:BURS:STAT ON"):
+                instrument.write(cmd)
+            _check_errors(instrument, "the burst settings")
+            instrument.write("OUTP1 ON")
+            instrument.write("*TRG")
         wait(program.duration_s)
-        instrument.query("*OPC?")
+        if burst:
+            instrument.query("*OPC?")
     finally:
         instrument.write("OUTP1 OFF")

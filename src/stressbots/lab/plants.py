@@ -171,6 +171,10 @@ class HardwarePlant:
         As for :func:`stressbots.lab.awg.compile_awg` / :func:`~stressbots.lab.awg.upload`.
     sleep:
         How to wait while a waveform plays (default :func:`time.sleep`; tests pass a fake clock).
+    burst:
+        Play each waveform as a triggered burst of one cycle (default); False plays it by switching the
+        output on for its duration, for generators that know only the SPEC 9.1 commands
+        (:func:`stressbots.lab.awg.play_once`).
 
     Notes
     -----
@@ -182,7 +186,7 @@ class HardwarePlant:
 
     def __init__(self, scenario, awg, camera, calibration: Calibration, *, gain: float = 20.0, offset_V: float = 0.0,
                  sample_rate_hz: float = 100_000.0, awg_max_V: float = 10.0, name: str = "stressbots",
-                 sleep: Callable[[float], None] | None = None, tracker: TrackerSettings | None = None):
+                 sleep: Callable[[float], None] | None = None, tracker: TrackerSettings | None = None, burst: bool = True):
         from ..electrostatics import analyse_scenario
 
         self.scenario = scenario
@@ -192,6 +196,7 @@ class HardwarePlant:
         self.options = {"gain": gain, "offset_V": offset_V, "sample_rate_hz": sample_rate_hz, "awg_max_V": awg_max_V}
         self.name = name
         self._sleep = sleep
+        self._burst = bool(burst)
         self._analysis = analyse_scenario(scenario)
         self._arms = np.zeros(scenario.n, np.uint8)
         self._track = _Tracker(scenario, calibration, tracker)
@@ -213,7 +218,7 @@ class HardwarePlant:
 
         segs = self.restore() + tuple(waveform)
         program = compile_awg(segs, self.scenario.electrodes, **self.options)
-        play_once(program, self.awg, name=self.name, sleep=self._sleep)
+        play_once(program, self.awg, name=self.name, sleep=self._sleep, burst=self._burst)
         self._arms = np.asarray(replay(segs, self.scenario.snap_down_V, self.scenario.release_V).final, np.uint8)
 
     def observe(self) -> np.ndarray:
