@@ -44,6 +44,7 @@ class RecordingInstrument:
         return len(data)
 
     def write_binary_values(self, *args, **kwargs):
+        pytest.importorskip("pyvisa")
         from pyvisa.resources import MessageBasedResource
 
         return MessageBasedResource.write_binary_values(self, *args, **kwargs)
@@ -233,3 +234,11 @@ def test_cli_awg_refuses_before_writing(run_cli, tmp_path):
     assert_user_error(r, "outside [-10, 10] V")
     assert not out.exists()
     assert_user_error(run_cli("awg", EXAMPLES / "four-robots.toml", "--steps", "P1:0.01", "--out", tmp_path / "x.wav"), "--out", ".arb")
+
+
+def test_docstring_examples():
+    import doctest
+
+    from stressbots.lab import awg
+
+    assert doctest.testmod(awg).failed == 0
