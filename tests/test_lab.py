@@ -111,7 +111,7 @@ def test_cli_simulate_with_images(run_cli, tmp_path, pair):
     r = run_cli("simulate", path, "--seed", "1", "--out", tmp_path / "sim", "--camera", "images", "-q")
     assert r.code == 0, r.err
     doc = json.loads((tmp_path / "sim" / "result.json").read_text())
-    assert doc["camera"] == "images" and doc["success"]
+    assert doc["camera"] == "images" and doc["success"] and doc["image_camera"]["um_per_px"] == 2.0
     assert (tmp_path / "sim" / "frames.png").stat().st_size > 1000
     r = run_cli("simulate", path, "--plan", path, "--out", tmp_path / "open", "--camera", "images")
     assert r.code == 2 and "--camera" in r.err

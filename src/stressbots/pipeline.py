@@ -88,6 +88,7 @@ class ClosedLoop:
     error: str | None = None  # traceback of an exception the controller raised
     camera: str = "poses"  # "images": the controller saw rendered frames through the tracker
     frames: tuple = ()  # with camera "images": a few stressbots.lab.plants.TrackedFrame for the report
+    camera_info: dict = field(default_factory=dict)  # with camera "images": calibration, image model, frames observed
 
 
 def default_time_budget_s() -> float | None:
@@ -139,7 +140,8 @@ def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None
         error = traceback.format_exc()
         res = _crashed_result(scenario, plant, plan_result, seed, f"controller error: {type(exc).__name__}: {exc}")
     frames = tuple(observed.frames) if observed is not plant else ()
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error, camera, frames)
+    info = observed.describe() if observed is not plant else {}
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, error, camera, frames, info)
 
 
 #: Frames of an image-in-the-loop run kept for the report.
@@ -217,6 +219,7 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
         },
         "plant_events": [e.as_dict() for e in plant.events],
         "camera": run.camera,
+        **({"image_camera": run.camera_info} if run.camera_info else {}),
         "wall_time_s": run.wall_s,
         **(extra or {}),
         "provenance": provenance(run.result.seed),

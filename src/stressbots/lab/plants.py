@@ -152,6 +152,14 @@ class SyntheticLab:
     def frames_observed(self) -> int:
         return self._count
 
+    def describe(self) -> dict[str, Any]:
+        """The camera's settings and use, for ``result.json`` (reproducing an image-in-the-loop run)."""
+        from dataclasses import asdict
+
+        return {"um_per_px": self.calibration.um_per_px, "origin_px": list(self.calibration.origin_px),
+                "frame_shape": list(self.camera.shape), "image_model": asdict(self.camera.model),
+                "frames_observed": self._count, "image_stream_spawn_key": FRAME_STREAM}
+
 
 class HardwarePlant:
     """Lab hardware behind the Plant protocol: a waveform generator and a camera.
