@@ -202,7 +202,7 @@ def compile_awg(
     try:
         _, v = sample(segs, rate, electrodes.drive_frequency_hz, max_samples=int(max_points))
     except WaveformError as exc:
-        raise AwgError(exc.problem, field="sample_rate_hz") from None
+        raise AwgError(exc.problem.replace("--rate-hz", "--sample-rate-hz"), field="sample_rate_hz") from None
     u = (v - off) / g
     lo, hi = float(u.min()), float(u.max())
     if lo < -umax or hi > umax:
