@@ -12,7 +12,8 @@ and on generated 4-robot tee layouts (:func:`stressbots.generate.random_scenario
 rates per set (the issue asks for images within 5 points of poses), wall time per run, and writes the
 per-run outcomes to ``--out`` (JSON).
 
-Run: ``nice python benchmarks/bench_lab.py [--seeds 10] [--layouts 6] [--layout-seeds 2] [--um-per-px 2] [--workers 2]``
+Run: ``nice python benchmarks/bench_lab.py [--seeds 10] [--first-seed 0] [--layouts 6] [--first-layout 0] [--layout-seeds 2]
+[--um-per-px 2] [--workers 2] [--out bench_lab.json]``
 """
 
 from __future__ import annotations
@@ -63,14 +64,18 @@ def one(job: tuple[str, int, int, str, float]) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=10, help="plant seeds on the example")
+    ap.add_argument("--first-seed", type=int, default=0, help="first plant seed on the example")
     ap.add_argument("--layouts", type=int, default=6, help="generated layouts")
+    ap.add_argument("--first-layout", type=int, default=0, help="seed of the first generated layout")
     ap.add_argument("--layout-seeds", type=int, default=2, help="plant seeds per generated layout")
     ap.add_argument("--um-per-px", type=float, default=2.0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("bench_lab.json"))
     args = ap.parse_args()
-    jobs = [("example", 0, s, cam, args.um_per_px) for s in range(args.seeds) for cam in ("poses", "images")]
-    jobs += [("generated", lay, s, cam, args.um_per_px) for lay in range(args.layouts) for s in range(args.layout_seeds)
+    seeds = range(args.first_seed, args.first_seed + args.seeds)
+    layouts = range(args.first_layout, args.first_layout + args.layouts)
+    jobs = [("example", 0, s, cam, args.um_per_px) for s in seeds for cam in ("poses", "images")]
+    jobs += [("generated", lay, s, cam, args.um_per_px) for lay in layouts for s in range(args.layout_seeds)
              for cam in ("poses", "images")]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
