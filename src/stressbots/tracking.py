@@ -117,6 +117,9 @@ class TrackerSettings:
         Weight of a heading change in the identity cost (um per rad).
     size_cost:
         Weight of a size mismatch (L and W, um per um) in the identity cost.
+    width_weight:
+        How much more a width mismatch counts than a length mismatch when matching sizes: widths are
+        measured directly, lengths of robots touching end to end only through the fit.
     unseen_cost_um:
         Cost of assigning a detection to a robot with no previous pose.
     start_pose_weight:
@@ -134,6 +137,7 @@ class TrackerSettings:
     ambiguous_arm_frac: float = 0.15
     heading_cost_um_per_rad: float = 50.0
     size_cost: float = 2.0
+    width_weight: float = 3.0
     unseen_cost_um: float = 1e4
     start_pose_weight: float = 0.01
     arm: ArmGeometry = ArmGeometry()
@@ -300,9 +304,25 @@ def _split(pts, area_px: float, hl0: float, hw0: float, previous: np.ndarray | N
         last = m == len(starts) - 1
         for along in ((1.0,) if last else (1.0, settings.along_axis_weight)):
             poses, half, score = _fit_rectangles(pts, init, a, b, settings.split_iterations, adapt if last else None, along)
+            if last and adapt is not None:
+                snapped = _snap_sizes(pts, poses, half, prev_hl, prev_hw, settings)
+                if snapped[2] <= score:
+                    poses, half, score = snapped
             if score < best_score - 1e-9:
                 best, best_score = (poses, half), score
     return best
+
+
+def _snap_sizes(pts, poses, half, all_hl, all_hw, settings: TrackerSettings):
+    """Robots of different sizes: give each fitted rectangle the size of the robot whose body it matches
+    best (widths weigh more: a width is seen directly, a length only where a seam or an end shows), then
+    fit again with those sizes."""
+    from scipy.optimize import linear_sum_assignment
+
+    cost = (settings.width_weight * np.abs(half[:, None, 1] - all_hw[None, :]) + np.abs(half[:, None, 0] - all_hl[None, :]))
+    rows, cols = linear_sum_assignment(cost)
+    hl, hw = all_hl[cols[np.argsort(rows)]], all_hw[cols[np.argsort(rows)]]
+    return _fit_rectangles(pts, poses, hl, hw, settings.split_iterations)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -451,7 +471,7 @@ def _identity_cost(ref, P, clear, sizes, L, W, st: TrackerSettings, position_wei
         cost = position_weight * np.where(
             seen[:, None], np.nan_to_num(dist + st.heading_cost_um_per_rad * dax, nan=st.unseen_cost_um), st.unseen_cost_um)
     if np.ptp(L) > 0 or np.ptp(W) > 0:
-        cost = cost + st.size_cost * (np.abs(L[:, None] - sizes[None, :, 0]) + np.abs(W[:, None] - sizes[None, :, 1]))
+        cost = cost + st.size_cost * (np.abs(L[:, None] - sizes[None, :, 0]) + st.width_weight * np.abs(W[:, None] - sizes[None, :, 1]))
     return cost
 
 
