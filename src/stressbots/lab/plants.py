@@ -222,11 +222,17 @@ class HardwarePlant:
     def apply(self, waveform: Sequence[Any]) -> None:
         """Compile (refusing anything unsafe before the instrument is touched), upload and play once."""
         from ..waveform import replay
-        from .awg import compile_awg, play_once
+        from .awg import compile_awg, play_once, scpi_number
 
         segs = self.restore() + tuple(waveform)
         program = compile_awg(segs, self.scenario.electrodes, **self.options)
+        last = getattr(self, "_last_low", None)
+        if last is not None and program.u_high <= last:
+            # upload sets VOLT:HIGH before VOLT:LOW (SPEC 9.1); a HIGH below the current LOW would be a settings
+            # conflict on the instrument, so lower LOW first (the output is off here)
+            self.awg.write(f"SOUR1:VOLT:LOW {scpi_number(program.u_low)}")
         play_once(program, self.awg, name=self.name, sleep=self._sleep, burst=self._burst)
+        self._last_low = program.u_low
         self._arms = np.asarray(replay(segs, self.scenario.snap_down_V, self.scenario.release_V).final, np.uint8)
 
     def observe(self) -> np.ndarray:
