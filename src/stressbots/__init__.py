@@ -23,6 +23,8 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.edr` - the closed-loop EDR controller (work in progress)
 - :mod:`stressbots.bounds` - error bounds, forward projections, regions A_i*
 - :mod:`stressbots.montecarlo` - Monte Carlo studies of closed-loop assembly
+- :mod:`stressbots.tracking` - robot poses from camera frames (SPEC 9.2)
+- :mod:`stressbots.lab` - lab hardware: waveform generator, synthetic camera, image-in-the-loop plants
 - :mod:`stressbots.viz` - pictures
 - :mod:`stressbots.demo` - the main job on the built-in scenario
 - :mod:`stressbots.cli` - the command line
