@@ -102,6 +102,11 @@ class TrackerSettings:
         Components smaller than this fraction of the smallest body are noise or stray arms.
     split_iterations:
         Rounds of the rectangle split of a component holding several robots.
+    good_split:
+        A split leaving at most this fraction of the component uncovered or doubly covered is accepted
+        without trying further starts.
+    kmeans_restarts:
+        Extra k-means starts (deterministic first centres) when no start gives a good split.
     along_axis_weight:
         A second split from the previous poses discounts distance along each body's axis by this factor:
         robots drive along their axis, so side-by-side robots that moved far are still told apart.
@@ -131,6 +136,8 @@ class TrackerSettings:
     open_frac_of_width: float = 0.4
     min_area_frac: float = 0.4
     split_iterations: int = 12
+    good_split: float = 0.01
+    kmeans_restarts: int = 4
     along_axis_weight: float = 0.25
     refine_iterations: int = 2
     edge_margin_px: float = 2.5
@@ -262,10 +269,11 @@ def _fit_rectangles(pts, init: np.ndarray, hl, hw, iterations: int, size_range=N
     return poses, np.stack([hl, hw], axis=1), uncovered + overlap
 
 
-def _kmeans_init(pts: np.ndarray, k: int) -> np.ndarray:
-    """k-means (farthest-point start, 10 Lloyd rounds) -> one axis pose per cluster."""
+def _kmeans_init(pts: np.ndarray, k: int, first: int | None = None) -> np.ndarray:
+    """k-means (farthest-point start from point ``first``, default the one farthest from the centroid;
+    10 Lloyd rounds) -> one axis pose per cluster."""
     c = pts.mean(axis=0)
-    centres = [pts[np.argmax(np.sum((pts - c) ** 2, axis=1))]]
+    centres = [pts[np.argmax(np.sum((pts - c) ** 2, axis=1)) if first is None else first]]
     for _ in range(1, k):
         d = np.min([np.sum((pts - q) ** 2, axis=1) for q in centres], axis=0)
         centres.append(pts[np.argmax(d)])
@@ -296,20 +304,31 @@ def _split(pts, area_px: float, hl0: float, hw0: float, previous: np.ndarray | N
             idx = np.flatnonzero(ok)[d <= 2.0 * hw0]
             if len(idx) == k:
                 starts.append((previous[idx].copy(), prev_hl[idx], prev_hw[idx]))
-    starts.append((_kmeans_init(pts, k), np.full(k, hl0), np.full(k, hw0)))
     varied = np.ptp(prev_hl) > 0 or np.ptp(prev_hw) > 0
     adapt = ((prev_hl.min(), prev_hl.max()), (prev_hw.min(), prev_hw.max())) if varied else None
     best, best_score = None, np.inf
-    for m, (init, a, b) in enumerate(starts):
-        last = m == len(starts) - 1
-        for along in ((1.0,) if last else (1.0, settings.along_axis_weight)):
-            poses, half, score = _fit_rectangles(pts, init, a, b, settings.split_iterations, adapt if last else None, along)
-            if last and adapt is not None:
-                snapped = _snap_sizes(pts, poses, half, prev_hl, prev_hw, settings)
-                if snapped[2] <= score:
-                    poses, half, score = snapped
+    for init, a, b in starts:  # from the previous poses: as they are, and discounting motion along the axis
+        for along in (1.0, settings.along_axis_weight):
+            poses, half, score = _fit_rectangles(pts, init, a, b, settings.split_iterations, None, along)
             if score < best_score - 1e-9:
                 best, best_score = (poses, half), score
+    from_previous = best is not None
+    # from the pixels alone: a k-means partition, and from a few more deterministic first centres while
+    # no start splits the component well
+    firsts = [None] + list(np.random.default_rng(k).choice(len(pts), size=min(settings.kmeans_restarts, len(pts)), replace=False))
+    for m, first in enumerate(firsts):
+        if m > 0 and best_score <= settings.good_split:
+            break
+        init = _kmeans_init(pts, k, first)
+        poses, half, score = _fit_rectangles(pts, init, np.full(k, hl0), np.full(k, hw0), settings.split_iterations, adapt)
+        if adapt is not None:
+            snapped = _snap_sizes(pts, poses, half, prev_hl, prev_hw, settings)
+            if snapped[2] <= score:
+                poses, half, score = snapped
+        # a start from the previous poses (right sizes in the right places) wins unless clearly worse:
+        # coverage alone cannot see where robots touching end to end meet
+        if score < best_score - (settings.good_split if from_previous else 1e-9):
+            best, best_score, from_previous = (poses, half), score, False
     return best
 
 
