@@ -40,14 +40,16 @@ def speed(frames: int) -> None:
     poses = np.column_stack([gx.ravel(), gy.ravel(), rng.uniform(0, 2 * np.pi, 8)])
     f = cam.render(poses, sc.lengths_um, sc.widths_um, rng)
     locate(f, sc, cal, previous=poses)
-    ts = []
+    ts, cpu = [], []
     for _ in range(frames):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         est = locate(f, sc, cal, previous=poses)
         ts.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
     d, a = errors(poses, est)
     print(f"speed: 2000x2000 frame, 8 robots: median {1000 * np.median(ts):.1f} ms/frame = {1 / np.median(ts):.1f} frames/s "
-          f"(best {1000 * min(ts):.1f} ms); errors median {np.median(d):.2f} um, {np.median(a):.3f} deg")
+          f"(best {1000 * min(ts):.1f} ms; CPU {1000 * np.median(cpu):.1f} ms/frame, all threads); "
+          f"errors median {np.median(d):.2f} um, {np.median(a):.3f} deg")
 
 
 def structures(upx: float) -> None:
