@@ -17,7 +17,7 @@ cv2 = pytest.importorskip("cv2")
 from stressbots.lab.camera import Camera, ImageModel  # noqa: E402
 
 
-def reference_render(poses, lengths, widths, cal: Calibration, shape, rng, *, sub=6, noise=5.0, blur_px=0.8,
+def reference_render(poses, lengths, widths, cal: Calibration, shape, rng, *, sub=4, noise=5.0, blur_px=0.8,
                      arm_w=8.0, gap=6.0, frac=0.6):
     """An independent renderer of the SPEC 9.2 image model: hard-edged shapes on a grid ``sub`` times finer,
     averaged down to pixels (exact area coverage up to the grid), then blur and noise."""
