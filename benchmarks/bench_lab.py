@@ -92,7 +92,7 @@ def main() -> None:
                   f"wall {np.median([r['wall_s'] for r in rs]):.1f} s/run (median)" + (f"; failures: {fails}" if fails else ""))
     skipped = [r for r in rows if "skipped" in r]
     if skipped:
-        print(f"{len(skipped) // 2} generated layouts skipped (no nominal plan)")
+        print(f"{len({r['layout'] for r in skipped})} generated layouts skipped (no nominal plan)")
     print(f"total {time.perf_counter() - t0:.0f} s with {args.workers} workers; per-run outcomes in {args.out}")
 
 
