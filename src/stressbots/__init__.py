@@ -27,6 +27,8 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.campaign` - cells x paired trials, run in-process, on a process pool or on Dask
 - :mod:`stressbots.study` - study files: a grid of conditions over layouts
 - :mod:`stressbots.studyreport` - the HTML report of a study
+- :mod:`stressbots.tracking` - robot poses from camera frames (SPEC 9.2)
+- :mod:`stressbots.lab` - lab hardware: waveform generator, synthetic camera, image-in-the-loop plants
 - :mod:`stressbots.viz` - pictures
 - :mod:`stressbots.demo` - the main job on the built-in scenario
 - :mod:`stressbots.cli` - the command line

@@ -58,6 +58,16 @@ def _strategy_option():
 
     return typer.Option(StrategyChoice.rendezvous, "--strategy", help=STRATEGY_HELP)
 
+class CameraChoice(str, Enum):
+    """The --camera choices of simulate and run: what the controller sees."""
+
+    poses = "poses"
+    images = "images"
+
+
+CAMERA_HELP = ("What the controller sees: 'poses' (the simulator's noisy pose camera) or 'images' (rendered microscope "
+               "frames tracked by stressbots.tracking: image in the loop; needs the [lab] extra).")
+
 
 class NoiseChoice(str, Enum):
     """The --noise choices of simulate and run."""
@@ -132,6 +142,7 @@ def run(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
     strategy: StrategyChoice = _strategy_option(),
+    camera: CameraChoice = typer.Option(CameraChoice.poses, "--camera", help=CAMERA_HELP),
 ) -> None:
     """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
 
@@ -152,7 +163,7 @@ def run(
     from .console import RichJobObserver
 
     run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget,
-            observer=RichJobObserver(out, err, quiet=quiet), strategy=strategy.value)
+            observer=RichJobObserver(out, err, quiet=quiet), strategy=strategy.value, camera=camera.value)
 
 
 def _with_noise_choice(scn, choice):
@@ -390,6 +401,25 @@ def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bo
         )
 
 
+def _waveform_of(scenario: Path, steps: Optional[str], plan: Optional[Path], out_file: Path, suffixes: tuple[str, ...], command: str):
+    """The scenario, its voltage analysis and the waveform of ``--steps`` or ``--plan`` (shared by ``waveform``
+    and ``awg``), after checking ``--out`` (not an input, not a folder, a known suffix)."""
+    from .electrostatics import analyse_scenario
+    from .outputs import prepare_file
+    from .waveform import synthesize
+
+    if (steps is None) == (plan is None):
+        raise StressbotsError("give exactly one of --steps or --plan", source=f"stressbots {command}")
+    prepare_file(out_file, inputs=[scenario, plan])
+    if out_file.suffix.lower() not in suffixes:
+        kinds = ", ".join(suffixes[:-1]) + f" or {suffixes[-1]}"
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a {kinds} file", source="--out")
+    sc = scenario_arg(scenario)
+    analysis = analyse_scenario(sc)
+    step_list = _waveform_steps(analysis, steps, plan)
+    return sc, analysis, synthesize(analysis, step_list)
+
+
 @app.command()
 def plan(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) with start poses and goals or a [structure].", show_default=False),
@@ -534,6 +564,7 @@ def simulate(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
     strategy: StrategyChoice = _strategy_option(),
+    camera: CameraChoice = typer.Option(CameraChoice.poses, "--camera", help=CAMERA_HELP),
 ) -> None:
     """Run the simulated plant: robots with control error, contact, compliance and a noisy camera.
 
@@ -563,8 +594,10 @@ def simulate(
     from .viz import plot_run
 
     if plan is None:
-        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet, strategy.value)
+        _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet, strategy.value, camera.value)
         return
+    if camera is CameraChoice.images:
+        raise StressbotsError("a plan played open loop observes nothing; use --camera images without --plan", source="--camera")
     from .scenario import check_starts
 
     t_command = time.perf_counter()
@@ -646,7 +679,7 @@ def simulate(
 
 
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool,
-                          strategy: str = "rendezvous") -> None:
+                          strategy: str = "rendezvous", camera: str = "poses") -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     import time
 
@@ -682,7 +715,8 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
             status.update("closed loop...")
         if budget is None:
             budget = layout_time_budget_s(scn)
-        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy)
+        run = closed_loop(scn, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy,
+                          camera=camera)
         if show:
             status.update("pictures...")
         doc = result_document(scn, run, source=str(scenario))
@@ -690,11 +724,14 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
         figs, anim = run_pictures(scn, run)
         write_bytes(folder / "trajectory.png", figs["run"])
         write_bytes(folder / "structure.png", figs["structure"])
+        if "frames" in figs:
+            write_bytes(folder / "frames.png", figs["frames"])
+            names = names + ("frames.png",)
         write_text(folder / "animation.html", animation_page(anim, title=anim["title"], subtitle=f"{verdict_text(doc)}"))
     if quiet:
         return
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
               f"{res.replans} re-plans; the command took {time.perf_counter() - t_command:.1f} s (wall time)",
               highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))
@@ -910,7 +947,7 @@ def montecarlo(
     failed trials' seeds, seeds and provenance) and DIR/montecarlo.png; with --sweep also the success
     rate against the noise scale (summary "sweep" and DIR/sweep.png).
 
-    Every finished trial is committed to DIR/trials.sqlite as it finishes (SPEC 10) and the summary is
+    Every finished trial is committed to DIR/trials.sqlite as it finishes and the summary is
     computed from it; DIR/trials.csv is written at the end. Ctrl-C (or kill) keeps the finished trials:
     run the same command with --resume to run only the missing ones (exit status 130 after an
     interrupt). --dask runs the trials on a Dask cluster with the same per-trial outcomes.
@@ -1143,6 +1180,161 @@ def study(
                   top if len(top) <= 40 else top[:39] + "...")
     out.print(t)
     out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")), highlight=False, soft_wrap=True)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Lab hardware (SPEC 9): awg, track
+
+
+@app.command()
+def awg(
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.", show_default=False),
+    out_file: Path = typer.Option(
+        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) or .npy (int16 codes).",
+        show_default=False,
+    ),
+    steps: Optional[str] = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
+    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
+    gain: float = typer.Option(20.0, "--gain", help="Voltage gain of the amplifier between generator and electrodes (V/V)."),
+    offset_V: float = typer.Option(0.0, "--offset-V", help="Electrode level (V) at generator output 0 V (amplifier offset)."),
+    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz", help="Generator sample rate (Hz); at least twice the drive frequency."),
+    awg_max_V: float = typer.Option(10.0, "--awg-max-V", help="The generator's output limit (V): every level must stay within +-this."),
+    name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
+    upload_to: Optional[str] = typer.Option(
+        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).", show_default=False
+    ),
+    visa_library: Optional[str] = typer.Option(
+        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.", show_default=False
+    ),
+    ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
+    output_on: bool = typer.Option(False, "--output-on", help="Switch the generator's output on after a clean upload (off by default)."),
+) -> None:
+    """Compile a waveform for an arbitrary waveform generator (Keysight 33500B class) and export or upload it.
+
+    The electrode level is `V = gain * u + offset_V` for generator output `u` (an amplifier follows the
+    generator). The waveform of --steps or --plan is sampled at --sample-rate-hz (a Drive is a square
+    wave at the scenario's drive frequency), mapped to `u` and quantised to int16 DAC codes
+    (-32767 = VOLT:LOW, +32767 = VOLT:HIGH). Before anything is written or sent it refuses electrode
+    levels outside [0, max_V], generator levels outside +-awg_max_V and more points than the generator
+    holds (saying how to split the plan). --upload sends the SCPI sequence documented in the README ("Running on your hardware") to channel 1 and
+    checks SYST:ERR? after the data and after the settings; the output stays off unless --output-on.
+
+    Examples: `stressbots awg examples/four-robots.toml --steps P1:0.5,P0:0.5 --out wf.arb`;
+    dry run against the simulated instrument: `stressbots awg examples/four-robots.toml --steps P1:0.5
+    --out wf.csv --upload TCPIP::awg.local::INSTR --visa-library examples/awg-sim.yaml@sim --ascii`.
+    """
+    from .lab.awg import compile_awg, export_program
+
+    sc, _, wf = _waveform_of(scenario, steps, plan, out_file, (".arb", ".csv", ".npy"), "awg")
+    prog = compile_awg(wf, sc.electrodes, gain=gain, offset_V=offset_V, sample_rate_hz=sample_rate_hz, awg_max_V=awg_max_V)
+    if upload_to is not None:
+        _upload_program(prog, upload_to, visa_library, name=name, ascii_data=ascii_data, output_on=output_on)
+    export_program(prog, out_file)
+    ev = prog.electrode_volts()
+    out.print(
+        f"wrote {out_file}: {prog.points} points at {prog.sample_rate_hz:g} Hz ({prog.duration_s:g} s); generator "
+        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset {offset_V:g} V",
+        highlight=False, soft_wrap=True,
+    )
+    if upload_to is not None:
+        out.print(f"uploaded to {upload_to} as {name!r}; output {'ON' if output_on else 'left off (use --output-on)'}",
+                  highlight=False, soft_wrap=True)
+
+
+@app.command()
+def track(
+    frames: Path = typer.Argument(..., help="A folder of PNG frames (tracked in name order) or a video file.", show_default=False),
+    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.", show_default=False),
+    um_per_px: float = typer.Option(..., "--um-per-px", help="Camera calibration: micrometres per pixel.", show_default=False),
+    origin_px: tuple[float, float] = typer.Option(
+        ..., "--origin-px", help="Camera calibration: the pixel (column, row) of the arena origin (x = y = 0).", show_default=False
+    ),
+    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).", show_default=False),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Track the robots in camera frames: one pose per robot and frame, identities kept from frame to frame.
+
+    Frames are grey images, rows downward; `x = (col - C) * U`, `y = (R - row) * U` for `--origin-px C R`
+    and `--um-per-px U` (see the README, "Running on your hardware"). Each frame is segmented, touching
+    robots are split into their known body rectangles, centres and headings are fitted to a fraction of a pixel (the steering arm on the
+    robot's right tells front from back) and identities follow the previous frame (the first frame's
+    come from the scenario's start poses). Needs the [lab] extra (OpenCV).
+
+    Example: `stressbots track frames/ --scenario examples/four-robots.toml --um-per-px 2 --origin-px 50 1550 --out poses.csv`
+    """
+    import io
+
+    from .lab.frames import frame_source
+    from .outputs import check_not_input, write_text
+    from .tracking import Calibration, locate
+
+    sc = scenario_arg(scenario)
+    check_not_input(out_file, [scenario, frames])
+    if out_file.suffix.lower() != ".csv":
+        raise StressbotsError(f"unsupported output {out_file.name!r}: use a .csv file", source="--out")
+    try:
+        cal = Calibration(um_per_px, origin_px)
+    except StressbotsError as exc:
+        raise StressbotsError(exc.problem, source="--um-per-px" if exc.field == "um_per_px" else "--origin-px") from None
+    count, source = frame_source(frames)
+    buf = io.StringIO()
+    buf.write("frame,name,robot,x_um,y_um,heading_deg\n")
+    previous = sc.starts if sc.has_starts else None
+    seen_total, k = 0, 0
+    from rich.progress import Progress
+
+    with Progress(console=err, disable=quiet or not err.is_terminal, transient=True) as bar:
+        task = bar.add_task("tracking", total=count if count > 0 else None)
+        for k, (name, img) in enumerate(source):
+            poses = locate(img, sc, cal, previous=previous)
+            found = np.all(np.isfinite(poses), axis=1)
+            seen_total += int(found.sum())
+            for i, robot in enumerate(sc.names):
+                x, y, th = poses[i]
+                buf.write(f"{k},{name},{robot},{x:.4f},{y:.4f},{np.degrees(th):.4f}\n" if found[i] else f"{k},{name},{robot},nan,nan,nan\n")
+            previous = poses if previous is None else np.where(found[:, None], poses, previous)
+            bar.advance(task)
+    frames_done = k + 1
+    write_text(out_file, buf.getvalue())
+    if not quiet:
+        out.print(f"wrote {out_file}: {frames_done} frames, {seen_total} of {frames_done * sc.n} robot poses found", highlight=False,
+                  soft_wrap=True)
+
+
+def _upload_program(prog, resource: str, visa_library: Optional[str], *, name: str, ascii_data: bool, output_on: bool) -> None:
+    """Open the VISA resource and upload (errors from PyVISA become one ``error:`` line)."""
+    from .lab.awg import upload
+
+    try:
+        import pyvisa
+    except ImportError:
+        raise StressbotsError("needs PyVISA: pip install 'stressbots[lab]'", source="--upload") from None
+    try:
+        rm = pyvisa.ResourceManager(visa_library) if visa_library else pyvisa.ResourceManager()
+        inst = rm.open_resource(resource, read_termination="\n", write_termination="\n")
+    except Exception as exc:  # noqa: BLE001 - any failure to open is the user's resource or library
+        raise StressbotsError(f"cannot open {resource!r}{f' with {visa_library!r}' if visa_library else ''}: "
+                              f"{_one_line(exc)}", source="--upload") from None
+    try:
+        inst.timeout = 60_000  # ms: large waveforms take a while
+        upload(prog, inst, name=name, ascii=ascii_data, output_on=output_on)
+    except StressbotsError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - an I/O failure on the bus, reported in one line
+        raise StressbotsError(f"upload failed: {_one_line(exc)}", source="--upload") from None
+    finally:
+        inst.close()
+        rm.close()
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's message on one line; of an embedded traceback only the text before it and its last line."""
+    text = str(exc).replace("\\n", "\n")
+    if "Traceback" in text:
+        before, _, tb = text.partition("Traceback")
+        last = [ln for ln in tb.splitlines() if ln.strip(" '\"")][-1:]
+        text = before.rstrip(" '\"") + " " + " ".join(last)
+    return " ".join(text.split()).strip(" '\"") or type(exc).__name__
 
 
 def _click_base(name: str) -> Any:

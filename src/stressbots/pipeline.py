@@ -88,6 +88,9 @@ class ClosedLoop:
     wall_s: float
     time_budget_s: float | None
     strategy: str = "rendezvous"  # stressbots.strategies.STRATEGIES key
+    camera: str = "poses"  # "images": the controller saw rendered frames through the tracker
+    frames: tuple = ()  # with camera "images": a few stressbots.lab.plants.TrackedFrame for the report
+    camera_info: dict = field(default_factory=dict)  # with camera "images": calibration, image model, frames observed
 
 
 def default_time_budget_s() -> float | None:
@@ -142,21 +145,45 @@ def plan_for(scenario, source: str | None = None, *, seed: int = 0, options=None
 
 
 def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None = None,
-                on_time: Callable[[float], None] | None = None, strategy: str = "rendezvous") -> ClosedLoop:
+                on_time: Callable[[float], None] | None = None, strategy: str = "rendezvous",
+                camera: str = "poses") -> ClosedLoop:
     """Run the ``strategy``'s assembly (:mod:`stressbots.strategies`; default :func:`stressbots.control.assemble`)
-    on a recording :class:`~stressbots.sim.SimulatedPlant`."""
+    on a recording :class:`~stressbots.sim.SimulatedPlant`.
+
+    ``camera="images"`` puts the image in the loop: the controller observes the plant through rendered
+    frames and the tracker (:class:`stressbots.lab.SyntheticLab`, needs the ``[lab]`` extra)."""
     from .sim import SimulatedPlant
     from .strategies import strategy_function
 
     assemble = strategy_function(strategy)
 
     plant = SimulatedPlant(scenario, seed=seed, record=True)
+    observed = plant
+    if camera == "images":
+        observed = _image_lab(scenario, plant, seed)
     kwargs: dict[str, Any] = {"seed": seed, "plan": plan_result}
     if time_budget_s is not None:
         kwargs["time_budget_s"] = float(time_budget_s)
     t0 = time.perf_counter()
-    res = assemble(scenario, _WatchedPlant(plant, on_time), **kwargs)
-    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, strategy)
+    res = assemble(scenario, _WatchedPlant(observed, on_time), **kwargs)
+    frames = tuple(observed.frames) if observed is not plant else ()
+    info = observed.describe() if observed is not plant else {}
+    return ClosedLoop(res, plant, time.perf_counter() - t0, time_budget_s, strategy, camera, frames, info)
+
+
+#: Frames of an image-in-the-loop run kept for the report.
+REPORT_FRAMES = 4
+
+
+def _image_lab(scenario, plant, seed: int):
+    """The simulated plant seen through rendered frames (:class:`stressbots.lab.SyntheticLab`)."""
+    try:
+        import cv2  # noqa: F401
+    except ImportError:
+        raise StressbotsError("needs OpenCV for tracking: pip install 'stressbots[lab]'", source="--camera images") from None
+    from .lab import SyntheticLab
+
+    return SyntheticLab(scenario, seed=seed, plant=plant, keep_frames=REPORT_FRAMES)
 
 
 def merged_events(result, plant) -> list[dict[str, Any]]:
@@ -202,6 +229,8 @@ def result_document(scenario, run: ClosedLoop, *, source: str | None = None, ext
             "time_s": plant.time_s,
         },
         "plant_events": [e.as_dict() for e in plant.events],
+        "camera": run.camera,
+        **({"image_camera": run.camera_info} if run.camera_info else {}),
         "wall_time_s": run.wall_s,
         **(extra or {}),
         "provenance": provenance(run.result.seed),
@@ -256,6 +285,11 @@ def run_pictures(scenario, run: ClosedLoop, *, label: str = "closed loop") -> tu
             scenario, final, res.nominal_goals, res.docked,
             title=f"{verdict}: shape error {res.shape_error_rms_um:.3g} um RMS, alignment rotation {res.shape_rotation_deg:.1f} deg")),
     }
+    if run.frames:
+        from .lab.pictures import plot_tracked_frames
+
+        figs["frames"] = figure_bytes(plot_tracked_frames(
+            scenario, run.frames, title="camera frames the controller saw (image in the loop), tracked poses outlined"))
     anim = animation_data(scenario, times, poses, res.nominal_goals, merged_events(res, plant), title=title,
                           retargeted=res.goals, retarget_time_s=t_g1)
     return figs, anim
@@ -362,6 +396,7 @@ def run_job(
     title: str | None = None,
     extra: Callable[[JobContext], Extra] | None = None,
     strategy: str = "rendezvous",
+    camera: str = "poses",
 ) -> JobResult:
     """Analyse, plan, run closed loop on the simulator and write the report and its files into ``out_dir``.
 
@@ -399,7 +434,8 @@ def run_job(
         def on_time(t: float) -> None:
             obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
 
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy)
+        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy,
+                          camera=camera)
         res = run.result
         obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
                   info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
@@ -438,7 +474,7 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     write_json(out / "waveform.json", to_json(wf))
     wsum = export(excerpt(wf, EXCERPT_S), out / "waveform.npy", rate_hz=RATE_HZ,
                   drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
-    for key in ("waveform", "plan", "run", "structure"):
+    for key in ("waveform", "plan", "run", "structure") + (("frames",) if "frames" in figs else ()):
         write_bytes(out / f"{key}.png", figs[key])
     doc = result_document(scenario, run, source=source, extra={
         "plan": {"file": "plan.json",
@@ -448,6 +484,8 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     write_json(out / "result.json", doc)
     obs.stage("pictures and report", advance=1)
     files = [*OUTPUT_FILES, *more.files]
+    if "frames" in figs:
+        files.append(("frames.png", "camera frames of the image-in-the-loop run with the tracked poses"))
     write_text(out / "report.html", _report_html(scenario, analysis, plan_result, wf, wsum, run, doc, figs, anim, more, files,
                                                  source=source, title=title))
     report_bytes = (out / "report.html").stat().st_size

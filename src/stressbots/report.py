@@ -724,6 +724,9 @@ def build_report(
         + animation_html(animation, element_id="run-animation")
         + "<h3>Trajectories</h3>"
         + _img(figures, "run", "closed-loop trajectories")
+        + ("<h3>Camera frames (image in the loop)</h3><p>The controller saw the robots only through these rendered frames "
+           "and the tracker; outlines: the tracked poses.</p>" + _img(figures, "frames", "tracked camera frames")
+           if figures.get("frames") else "")
     )
     sec["structure"] = (
         "<p>Final bodies (filled) against the target structure after the best proper rigid alignment (dark outlines; "

@@ -30,7 +30,7 @@ DEFAULT_STRATEGY = "rendezvous"
 
 STRATEGY_HELP = (
     "Closed-loop strategy: 'rendezvous' (default, ours: G_1 as an orbit rendezvous, approach funnels, "
-    "recovery from H) or 'seed' (the seed's two-step EDR as written: sigma_1 re-planned every t_x into "
+    "recovery from H) or 'seed' (the paper's two-step EDR strategy as written: sigma_1 re-planned every t_x into "
     "A_i outside C_O, S_2f/S_3f fine motion by eq. (1), G_1 in two stages; it stops in H)."
 )
 
