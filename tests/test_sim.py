@@ -151,22 +151,7 @@ def test_speed_error_scales_the_distance_driven():
     np.testing.assert_allclose(plant.true_poses()[:, 2], km.wrap(sc.starts[:, 2]), atol=1e-12)  # no drift, no turn
 
 
-def test_heading_drift_per_um_driven():
-    sigma = math.radians(3.7) / 1000.0
-    sc = far_scenario(FAR, noise=Noise(heading_drift_rad_per_um=sigma))
-    dth, resid = [], []
-    for seed in range(150):
-        plant = SimulatedPlant(sc, seed=seed)
-        plant.apply([Drive(75.0, 105.0, 2.0)])
-        p = plant.true_poses()
-        s = sc.speeds_um_s * 2.0
-        d = (p[:, 2] - sc.starts[:, 2] + math.pi) % (2 * math.pi) - math.pi
-        dth.append(d / (sigma * s))
-        # constant drift rate within the Drive: the pose is exactly the arc of curvature d / s
-        resid.append(np.abs(km.move(sc.starts, s, d / s)[:, :2] - p[:, :2]).max())
-    z = np.array(dth).ravel()
-    assert abs(z.mean()) < 0.15 and 0.85 < z.std() < 1.15
-    assert max(resid) < 1e-8
+# Heading drift (a per-robot process of the distance driven) has its own file, test_drift.py.
 
 
 def test_camera_noise_and_dropouts():

@@ -11,7 +11,8 @@ Motion (per Drive of the waveform)
 Holds move nobody. During a Drive every robot drives forward at its speed on an arc of constant
 curvature: ``kappa = 1/r`` with its arm down, 0 with its arm up, ``1/(2 r)`` for an arm the drive band
 makes chatter (it turns every other cycle: an interpolated turn of mean radius 2r), plus its heading
-drift. Between contacts the motion is the closed form, so with all noise zero the simulator reproduces
+drift, a curvature that is piecewise constant between the knots of the robot's odometer (below). Between
+contacts and knots the motion is the closed form, so with all noise zero the simulator reproduces
 :func:`stressbots.kinematics.advance` exactly (to rounding, no integration error).
 
 Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
@@ -19,9 +20,14 @@ Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
 - per robot and run: speed factor ``1 + speed_rel_sd * z`` and radius factor ``1 + turn_radius_rel_sd * z``
   (z standard normal; floored at 0.1);
 - per robot and Drive: the same factors jittered by :data:`SEGMENT_JITTER` times those sds
-  ("small per-segment variation"), and a heading drift rate ``heading_drift_rad_per_um * z`` (rad per um
-  driven, either sign) added to the curvature. A straight Drive of length s thus turns the heading by
-  N(0, (sigma s)^2): 3.7 deg/mm gives 0.37 deg sd over a 100 um Drive;
+  ("small per-segment variation");
+- per robot, as a function of its odometer (distance driven, :attr:`SimulatedPlant.odometer`): heading
+  drift (:mod:`stressbots.drift`), a bias drawn once per run plus a random walk whose variance grows with
+  the distance driven, realised as a curvature constant between odometer knots every
+  :attr:`~stressbots.drift.DriftModel.knot_um` (25 um). The spread after 1 mm has sd
+  ``heading_drift_deg_per_mm`` however the millimetre is cut into Drives (the same seed even gives the
+  same drift, to rounding); the odometer advances only while a robot drives (not while it is held,
+  slides along a face or is turned by compliance);
 - camera (:meth:`SimulatedPlant.observe`): position N(0, sd) per axis, heading N(0, sd), and each robot
   missing (NaN row) with probability ``camera_dropout``.
 
@@ -78,8 +84,8 @@ pair stays within :data:`NEAR_UM`, so robots jostling against each other do not 
 Determinism
 -----------
 Everything random comes from ``np.random.SeedSequence(seed)``, spawned into independent streams for
-the per-run factors, the motion and the camera (so observing more or less often never changes the
-motion). The same seed and the same calls give bit-identical results; :meth:`SimulatedPlant.copy`
+the per-run factors, the per-Drive jitter, the camera (so observing more or less often never changes
+the motion) and the drift (one child stream per robot, knot values drawn in knot order). The same seed and the same calls give bit-identical results; :meth:`SimulatedPlant.copy`
 continues bit-identically; :func:`check_determinism` proves it.
 """
 
@@ -93,7 +99,8 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .collision import arena_gap, point_rectangle_distance
-from .kinematics import move, wrap
+from .drift import DEFAULT_DRIFT, DriftModel, HeadingDrift
+from .kinematics import move, poses_along, wrap
 from .robots import angle_difference, body_corners
 from .waveform import Segment, replay
 
@@ -275,14 +282,16 @@ class SimulatedPlant:
     must not use them (hardware has no such thing). See the module docstring for the model.
     """
 
-    def __init__(self, scenario, seed: int | None = None, *, poses=None, record: bool = False):
+    def __init__(self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None):
         self.scenario = scenario
         n = scenario.n
         ss = np.random.SeedSequence(seed)
         self.seed = int(ss.entropy)  # type: ignore[arg-type]
-        run_ss, motion_ss, camera_ss = ss.spawn(3)
+        run_ss, motion_ss, camera_ss, drift_ss = ss.spawn(4)
         z = np.random.default_rng(run_ss).standard_normal((2, n))
         nz = scenario.noise
+        self._drift = HeadingDrift(n, nz.heading_drift_rad_per_um, drift_ss, DEFAULT_DRIFT if drift is None else drift)
+        self._odo = np.zeros(n)
         self._speed_factor = np.maximum(1.0 + nz.speed_rel_sd * z[0], MIN_FACTOR)
         self._radius_factor = np.maximum(1.0 + nz.turn_radius_rel_sd * z[1], MIN_FACTOR)
         self._motion_rng = np.random.default_rng(motion_ss)
@@ -389,6 +398,17 @@ class SimulatedPlant:
         """Per-run turning-radius factors drawn from the seed."""
         return self._radius_factor.copy()
 
+    @property
+    def odometer(self) -> np.ndarray:
+        """``(n,)`` distance (um) each robot has driven so far (arcs and straight runs; not slides or
+        compliance moves): the variable its heading drift is a function of."""
+        return self._odo.copy()
+
+    @property
+    def drift_bias(self) -> np.ndarray:
+        """Per-run heading-drift bias (rad per um driven) of each robot (the plant's hidden truth)."""
+        return self._drift.bias.copy()
+
     def true_poses(self) -> np.ndarray:
         """True poses ``(n, 3)`` (um, rad in [0, 2 pi))."""
         return self._pose.copy()
@@ -413,24 +433,26 @@ class SimulatedPlant:
 
     def _drive(self, turning: np.ndarray, chatter: np.ndarray, duration_s: float, t_start: float) -> None:
         nz = self.scenario.noise
-        z = self._motion_rng.standard_normal((3, self.n))
+        z = self._motion_rng.standard_normal((2, self.n))
         speed = self._v * self._speed_factor * np.maximum(1.0 + SEGMENT_JITTER * nz.speed_rel_sd * z[0], MIN_FACTOR)
         radius = self._r * self._radius_factor * np.maximum(1.0 + SEGMENT_JITTER * nz.turn_radius_rel_sd * z[1], MIN_FACTOR)
-        drift = nz.heading_drift_rad_per_um * z[2]
-        kappa = np.where(chatter, 0.5 / radius, np.where(turning, 1.0 / radius, 0.0)) + drift
+        kappa = np.where(chatter, 0.5 / radius, np.where(turning, 1.0 / radius, 0.0))  # drift comes on top
         straight = ~turning & ~chatter
-        bound = speed * (1.0 + np.abs(kappa) * self._hd)  # fastest point of each body (um/s)
+        reach = speed * duration_s
+        kmax = np.abs(kappa) + np.array([self._drift.max_abs(i, self._odo[i], reach[i]) for i in range(self.n)])
+        bound = speed * (1.0 + kmax * self._hd)  # fastest point of each body (um/s)
         ctx = (speed, kappa, straight, bound)
         if self._quiet(bound, duration_s):
             # Broad phase: nobody can come near anybody or the wall during this Drive; closed form only.
             p0 = self._pose.copy()
             free = _Motion(np.full(self.n, _FREE), np.zeros((self.n, 2)), np.full(self.n, math.inf), set(), False)
             self._pose = self._poses_at(p0, free, ctx, np.array([duration_s]))[0]
+            if self._record:
+                self._record_segment(p0, free, ctx, duration_s, t_start)
+            self._odo += reach
             self._contacts = {}
             self._docked[:] = False
             self._stuck[:] = False
-            if self._record:
-                self._record_segment(p0, free, ctx, duration_s, t_start)
             return
         tau = 0.0
         stalls = 0
@@ -452,6 +474,7 @@ class SimulatedPlant:
                 self._stuck &= ~moved
                 if self._record:
                     self._record_segment(p0, motion, ctx, dt, t_start + tau)
+                self._odo += np.where(motion.mode == _FREE, speed * dt, 0.0)  # slides and holds drive nowhere
             if hit is None and dt == slide_ends:
                 for i in np.flatnonzero(motion.slide_end == slide_ends):
                     self._log(t_start + tau + dt, int(i), "slide_off", None, "its corner ran off the face it slid along")
@@ -498,8 +521,14 @@ class SimulatedPlant:
         taus = np.asarray(taus, dtype=np.float64)
         out = np.repeat(p0[None], taus.size, axis=0)
         f = np.flatnonzero(motion.mode == _FREE)
-        if f.size:
+        if f.size and not self._drift.active:
             out[:, f] = move(p0[f][None], speed[f][None, :] * taus[:, None], kappa[f][None, :])
+        elif f.size:
+            # Piecewise-constant curvature between the drift's odometer knots: exact arcs, composed.
+            tmax = float(taus.max())
+            for i in f.tolist():
+                lengths, kd = self._drift.segments(i, self._odo[i], speed[i] * tmax)
+                out[:, i] = poses_along(p0[i], lengths, kappa[i] + kd, speed[i] * taus)
         s = np.flatnonzero(motion.mode == _SLIDE)
         if s.size:
             out[:, s, :2] = p0[s, :2][None] + taus[:, None, None] * motion.slide_v[s][None]
@@ -620,6 +649,7 @@ class SimulatedPlant:
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self._contacts = {}
             return _Motion(mode, slide_v, slide_end, excluded, False)
+        kappa = kappa + self._drift.curvature_at(self._odo)
         probe = move(P, PROBE_UM, kappa)  # each robot alone, a hair further along its own motion
         # Touching pairs and whether each side's motion pushes into the other.
         push: dict[int, list[int]] = {}
