@@ -45,11 +45,13 @@ robot's motion *pushes* into a touching body (or the arena edge) when moving it 
 :data:`PROBE_UM` deepens the contact by more than :data:`PUSH_EPS_UM`. Rules, for every robot whose
 motion pushes (also applied at the end of every Drive, so a contact made on its last instant counts):
 
-1. **Self-aligning compliance (G_1).** Two robots with arms up pushing into each other head-on (each
-   approaches the contact with at least :data:`HEAD_ON_MIN_APPROACH` of its speed; headings opposed):
-   with incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral misalignment ``w_y`` (offset of
-   the two front-edge midpoints across the mean axis), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they
-   form G_1: both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
+1. **Self-aligning compliance (G_1).** Two robots with arms up, neither docked, meeting head-on:
+   headings opposed, closing on each other (at least one pushes), every contact point in the front half
+   of both bodies (front edges against each other, corner to corner, or a front corner on the other's
+   long side near its front). With incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral
+   misalignment ``w_y`` (offset of the two front-edge centres across the meeting axis, the bisector of
+   the two headings), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they form G_1 (seed App. 3.5: also
+   when ``w_y`` exceeds the width, so that only a corner meets the other's side): both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
    their front-edge midpoints coincide at the midpoint of the two, collinear and flush. Both are docked.
    Outside those limits, or if the aligned pair would overlap a third body or leave the arena, both stop
    where they met: stuck (H).
@@ -127,9 +129,6 @@ SELF_ALIGN_MAX_OFFSET_UM = 80.0
 
 SEGMENT_JITTER = 0.2
 """Per-Drive variation of speed and radius, as a fraction of the per-run sds."""
-
-HEAD_ON_MIN_APPROACH = 0.25
-"""Self-alignment needs both robots to approach the contact with at least this fraction of their speed."""
 
 MIN_FACTOR = 0.1
 SAMPLE_UM = 10.0  # coarse sampling: relative travel between samples (um)
@@ -687,28 +686,21 @@ class SimulatedPlant:
         done: set[int] = set(forced)
         slide_partner: dict[int, int] = {}
 
-        # 1. Self-aligning compliance: straight robots pushing into each other head-on.
-        for i in sorted(pushers):
-            for j in push[i]:
-                if j <= i or i in done or j in done or i not in push.get(j, []):
-                    continue
-                if not (straight[i] and straight[j]):
-                    continue
-                if min(approach[(i, j)], approach[(j, i)]) < HEAD_ON_MIN_APPROACH:
-                    continue
-                if math.cos(P[i, 2] - P[j, 2]) >= 0.0:
-                    continue
-                key = self._rule_key(i, j, straight)
-                hit = self._rule_cache.get((i, j))
-                if hit is not None and hit[0] == key:
-                    kind, detail = hit[1]
-                else:
-                    kind, detail = self._self_align(i, j)
-                    self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-                outcomes[(i, j)] = (kind, detail)
-                outcomes[(j, i)] = (kind, detail)
-                mode[i] = mode[j] = _HELD
-                done |= {i, j}
+        # 1. Self-aligning compliance: two free straight robots meeting head-on.
+        for i, j in sorted({(min(a, b), max(a, b)) for a in pushers for b in push[a] if b != ARENA}):
+            if i in done or j in done or not self._head_on(i, j, straight, speed, approach):
+                continue
+            key = self._rule_key(i, j, straight)
+            hit = self._rule_cache.get((i, j))
+            if hit is not None and hit[0] == key:
+                kind, detail = hit[1]
+            else:
+                kind, detail = self._self_align(i, j)
+                self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+            outcomes[(i, j)] = (kind, detail)
+            outcomes[(j, i)] = (kind, detail)
+            mode[i] = mode[j] = _HELD
+            done |= {i, j}
 
         # 2. Each remaining robot that pushes into something.
         for i in sorted(pushers - done):
@@ -774,6 +766,25 @@ class SimulatedPlant:
             mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
         )
         return _Motion(mode, slide_v, slide_end, excluded, recheck)
+
+    def _head_on(self, i: int, j: int, straight, speed, approach) -> bool:
+        """Whether touching robots i and j meet head-on (the situation of self-aligning compliance).
+
+        Both drive straight and neither is docked (a structure's member is a static body: rule 4), their
+        headings are opposed, the pair closes (at least one pushes, and together they approach), and
+        every contact point lies in the front half of both bodies: front edge on front edge, a front
+        corner on a front corner, or a front corner on the other's long side near its front. Whether
+        they then form G_1 is decided by the seed's limits (:meth:`_self_align`), not here.
+        """
+        if not (straight[i] and straight[j]) or speed[i] <= 0 or speed[j] <= 0:
+            return False
+        if self._docked[i] or self._docked[j]:
+            return False
+        P = self._pose
+        if math.cos(P[i, 2] - P[j, 2]) >= 0.0 or approach[(i, j)] + approach[(j, i)] <= 0.0:
+            return False
+        pts, _ = self._contact_points(i, j)
+        return bool((_local(pts, P[i])[0] >= 0.0).all() and (_local(pts, P[j])[0] >= 0.0).all())
 
     def _rule_key(self, i: int, j: int, straight) -> bytes:
         """What a contact rule's outcome depends on: the arm kinds of i and j and, bit for bit, the poses
