@@ -384,3 +384,40 @@ def test_head_on_meetings_form_g1_exactly_inside_the_seeds_limits(alpha_deg, w_y
     else:
         assert plant.stuck.all() and not plant.docked.any()
     no_overlap(plant)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Docking on arrival (issue 11.3): arriving flush in the slot is docking, whatever the arm does.
+
+
+@pytest.mark.parametrize("arc_um", [30.0, 120.0])
+def test_a_robot_turning_into_its_slot_is_docked_on_arrival_and_stays_docked(arc_um):
+    slot = np.array([1000.0, TOP + 130.0, math.pi])  # front edge flush on the bar's top face
+    d = arc_um / R
+    # the arc of SPEC 3 run backwards from the slot (independent of the simulator's kinematics)
+    th0 = slot[2] - d
+    start = np.array([slot[0] - R * (math.cos(th0) - math.cos(slot[2])), slot[1] - R * (math.sin(slot[2]) - math.sin(th0)), th0])
+    np.testing.assert_allclose(spec_motion(start, arc_um / V, True), slot, atol=1e-9)
+    for u in np.linspace(0.0, arc_um / V, 200)[:-1]:  # it touches nothing before the end
+        assert max(float(penetration_depth(spec_motion(start, u, True), 260.0, 60.0, q, 260.0, 60.0)[0]) for q in bar_poses()) < 0.0
+    plant = SimulatedPlant(scenario([tuple(Pose(*start).to_degrees())] + BAR), seed=0)
+    plant.apply(turn_r0(arc_um / V))  # the Drive ends exactly on arrival
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    assert plant.docked.all() and not plant.stuck.any()
+    assert set(kinds(plant, "R0")) == {"dock"}  # on both bar robots' faces (the slot spans the junction)
+    plant.apply([Drive(75.0, 105.0, 2.0)])  # arm still down: it pushes while turning, does not move
+    assert plant.docked[0]
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    plant.apply([Hold(0.0, 0.01)] + straight(2.0))  # arm up: it pushes straight in, still docked
+    assert plant.docked[0] and set(kinds(plant, "R0")) == {"dock"}
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    no_overlap(plant)
+
+
+def test_turning_against_a_body_without_being_flush_is_blocked_not_docked():
+    # R0 turning onto the bar's top face at an angle: its corner meets the face first.
+    start = (1000.0, 1300.0, 150.0)
+    plant = SimulatedPlant(scenario([start] + BAR), seed=0)
+    plant.apply(turn_r0(4.0))
+    assert kinds(plant, "R0")[0] == "blocked" and not plant.docked[0]
+    no_overlap(plant)

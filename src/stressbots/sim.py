@@ -56,7 +56,9 @@ motion pushes (also applied at the end of every Drive, so a contact made on its 
    Outside those limits, or if the aligned pair would overlap a third body or leave the arena, both stop
    where they met: stuck (H).
 2. **Turning robot** (arm down or chattering) whose motion pushes into anything: blocked; it stops for
-   the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle).
+   the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle). If its front edge is
+   flush against a static body (it arrived in its slot on an arc), it is **docked** there: arriving flush
+   against the structure is docking, with or without a straight push afterwards (SPEC 6).
 3. **Arena edge**: a robot pushing out of the arena stops at the edge ("arena"; ``arena_hits``).
 4. **Straight robot (arm up) against a static body** (one that does not move now: docked, stopped or
    stuck), contact on its front (its front corner on a face, the body's corner on its front edge, or
@@ -707,8 +709,17 @@ class SimulatedPlant:
             cs = push[i]
             mode[i] = _HELD
             if not straight[i]:
+                # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
+                # into its slot on an arc is docked there, and stays docked while it keeps pushing.
+                flush = [j for j in cs if j != ARENA and j in static and self._flush(i, j)]
                 for j in cs:
-                    outcomes[(i, j)] = ("blocked", "a turning robot cannot pivot off an obstacle")
+                    outcomes[(i, j)] = (
+                        ("dock", "arrived flush against the structure") if j in flush
+                        else ("blocked", "a turning robot cannot pivot off an obstacle")
+                    )
+                if flush:
+                    self._docked[i] = True
+                    self._stuck[i] = False
                 continue
             if ARENA in cs:
                 self._arena_hit[i] = True
