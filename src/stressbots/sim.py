@@ -104,7 +104,7 @@ import numpy as np
 
 from .collision import arena_gap, point_rectangle_distance
 from .drift import DEFAULT_DRIFT, DriftModel, HeadingDrift
-from .kinematics import move, poses_along, wrap
+from .kinematics import follow, move, wrap
 from .robots import angle_difference, body_corners
 from .waveform import Segment, replay
 
@@ -525,15 +525,32 @@ class SimulatedPlant:
         if f.size and not self._drift.active:
             out[:, f] = move(p0[f][None], speed[f][None, :] * taus[:, None], kappa[f][None, :])
         elif f.size:
-            # Piecewise-constant curvature between the drift's odometer knots: exact arcs, composed.
-            tmax = float(taus.max())
-            for i in f.tolist():
-                lengths, kd = self._drift.segments(i, self._odo[i], speed[i] * tmax)
-                out[:, i] = poses_along(p0[i], lengths, kappa[i] + kd, speed[i] * taus)
+            out[:, f] = self._drift_poses(p0[f], f, speed[f], kappa[f], taus)
         s = np.flatnonzero(motion.mode == _SLIDE)
         if s.size:
             out[:, s, :2] = p0[s, :2][None] + taus[:, None, None] * motion.slide_v[s][None]
         return out
+
+    def _drift_poses(self, p0, idx, speed, kappa, taus) -> np.ndarray:
+        """Poses ``(K, m, 3)`` of robots ``idx`` driving freely for ``taus`` s from ``p0`` on their base
+        curvature plus the drift's, which is piecewise constant between odometer knots: exact arcs,
+        composed (all robots at once, pieces padded to a common count)."""
+        tmax = float(taus.max())
+        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed)]
+        k = max(len(p[0]) for p in pieces)
+        lengths = np.zeros((len(pieces), k))
+        kd = np.zeros((len(pieces), k))
+        for r, (ln, kv) in enumerate(pieces):
+            lengths[r, : ln.size] = ln
+            kd[r, : ln.size] = kv
+        curv = kappa[:, None] + kd
+        nodes = follow(p0, lengths, curv)  # (m, k + 1, 3): the pose at every knot
+        cum = np.concatenate([np.zeros((len(pieces), 1)), np.cumsum(lengths, axis=1)], axis=1)
+        s = np.minimum(speed[None, :] * taus[:, None], cum[None, :, -1])  # (K, m)
+        last = np.array([p[0].size - 1 for p in pieces])  # each robot's own last piece (not the padding)
+        j = np.minimum((s[..., None] >= cum[None, :, 1:]).sum(axis=-1), last[None, :])  # piece each s lies in
+        rows = np.arange(len(pieces))[None, :]
+        return move(nodes[rows, j], s - cum[rows, j], curv[rows, j])
 
     # -- contact search ------------------------------------------------------------------------------
 
