@@ -157,6 +157,29 @@ def bench_docking(shapes, ns, seeds: int, workers: int, timeout_s: float) -> Non
           f"wall {time.perf_counter() - t0:.0f} s")
 
 
+def write_layouts(specs: str, folder: str) -> None:
+    """Write generated layouts and the planner's plans as test fixtures: ``shape:n:seed,...`` ->
+    ``FOLDER/shape-n-seed.toml`` and ``.plan.json`` (tests/test_sim.py replays them: planning 6-8 robots
+    is too slow for the suite)."""
+    from pathlib import Path
+
+    from stressbots.generate import random_scenario
+    from stressbots.planning import plan_assembly
+    from stressbots.plans import save
+    from stressbots.scenario import to_toml
+
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    for spec in specs.split(","):
+        shape, n, seed = spec.split(":")
+        sc = random_scenario(int(n), int(seed), shape=shape)
+        res = plan_assembly(sc)
+        stem = f"{shape}-{n}-{seed}"
+        (out / f"{stem}.toml").write_text(to_toml(sc))
+        save(res.plan, out / f"{stem}.plan.json")
+        print(f"wrote {stem}: {len(res.plan.steps)} steps, {res.plan.duration_s:.1f} s")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--robots", type=int, default=2000, help="robots per drift run")
@@ -168,7 +191,12 @@ def main() -> None:
     ap.add_argument("--plan-timeout-s", type=float, default=60.0)
     ap.add_argument("--skip-drift", action="store_true")
     ap.add_argument("--skip-docking", action="store_true")
+    ap.add_argument("--write-layouts", metavar="SPECS", help="write test fixtures shape:n:seed,... and exit")
+    ap.add_argument("--layouts-dir", default="tests/data/layouts")
     a = ap.parse_args()
+    if a.write_layouts:
+        write_layouts(a.write_layouts, a.layouts_dir)
+        return
     if "-" in a.n:
         lo, hi = (int(x) for x in a.n.split("-"))
         ns = list(range(lo, hi + 1))

@@ -332,6 +332,32 @@ def test_zero_noise_open_loop_docks_every_robot_at_its_goal(n, seed, shape):
     assert plant.time_s == pytest.approx(result.plan.duration_s + sum(s.duration_s for s in plan_waveform(sc, result.plan) if isinstance(s, Hold)))
 
 
+LAYOUTS = sorted((EXAMPLES.parent / "tests" / "data" / "layouts").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_zero_noise_open_loop_docks_every_robot_of_larger_generated_layouts(path):
+    """6-8 robots, every shape the planner plans quickly enough to store: generated layouts and the
+    planner's own plans, written by ``benchmarks/bench_physics.py --write-layouts`` (planning them takes
+    seconds to minutes, replaying them a fraction of a second). The wider sweep is that benchmark's."""
+    from stressbots.plans import load as load_plan
+
+    sc = load(path)
+    plan = load_plan(path.with_suffix("").with_suffix(".plan.json"))
+    plant = run_plan(sc, plan, seed=0)
+    goals = np.array([plan.goals[name] for name in sc.names])
+    pos, head = placement_errors(plant.true_poses(), goals)
+    assert plant.docked.all(), [e for e in plant.events if e.kind not in ("dock", "self_align")]
+    assert pos.max() < 1e-6 and head.max() < 1e-6, (pos, head)
+    assert {e.kind for e in plant.events} <= {"self_align", "dock"}, plant.events
+
+
+def test_layout_fixtures_cover_six_to_eight_robots_and_every_shape():
+    shapes = {p.stem.split("-")[0] for p in LAYOUTS}
+    counts = {int(p.stem.split("-")[1]) for p in LAYOUTS}
+    assert shapes == {"tee", "cross", "comb", "ladder"} and counts == {6, 7, 8}
+
+
 def test_open_loop_with_literature_noise_drifts_away(example_plan):
     sc, result = example_plan
     noisy = sc.with_noise(LITERATURE_NOISE)
