@@ -315,6 +315,7 @@ class SimulatedPlant:
         self._arena_hit = np.zeros(n, dtype=bool)
         self._contacts: dict[tuple[int, int], str] = {}
         self._rule_cache: dict[tuple[int, int], tuple[bytes, tuple[str, str]]] = {}
+        self._flush_cache: dict[tuple[int, int], tuple[bytes, bool]] = {}
         self._events: list[SimEvent] = []
         self._I, self._J = np.triu_indices(n, k=1)
         self._record = bool(record)
@@ -728,7 +729,7 @@ class SimulatedPlant:
             if not straight[i]:
                 # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
                 # into its slot on an arc is docked there, and stays docked while it keeps pushing.
-                flush = [j for j in cs if j != ARENA and j in static and self._flush(i, j)]
+                flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
                 for j in cs:
                     outcomes[(i, j)] = (
                         ("dock", "arrived flush against the structure") if j in flush
@@ -762,7 +763,7 @@ class SimulatedPlant:
                     excluded.add((min(i, j), max(i, j)))
                 continue
             if len(cs) > 1 and len(fronts) == len(cs):
-                flush = [j for j in cs if self._flush(i, j)]
+                flush = [j for j in cs if self._flush_cached(i, j, straight)]
                 for j in cs:
                     outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
                 self._docked[i] = bool(flush)
@@ -857,6 +858,19 @@ class SimulatedPlant:
         nrm = max((m for m, out in faces if out >= best - FACE_TIE_UM), key=lambda m: float(-(m @ h)))
         alpha = angle_difference(P[i, 2], _heading_of(-nrm))
         return c, nrm, float(alpha)
+
+    def _flush_cached(self, i: int, j: int, straight) -> bool:
+        """:meth:`_flush`, remembered while nothing near the pair moves (a blocked robot is asked every
+        evaluation); headings not square to each other are not flush (cheap test first)."""
+        d = (self._pose[i, 2] - self._pose[j, 2]) % (0.5 * math.pi)
+        if min(d, 0.5 * math.pi - d) > FLUSH_TOL_RAD:
+            return False
+        key = self._rule_key(i, j, straight)
+        hit = self._flush_cache.get((i, j))
+        if hit is None or hit[0] != key:
+            hit = (key, self._flush(i, j))
+            self._flush_cache[(i, j)] = hit
+        return hit[1]
 
     def _flush(self, i: int, j: int) -> bool:
         pts, own = self._contact_points(i, j)
