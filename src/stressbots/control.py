@@ -40,6 +40,6 @@ class Plant(Protocol):
 # The closed-loop EDR controller (seed Appendix 3) lives in :mod:`stressbots.edr`; SPEC 7 names it here.
 # Work in progress (issue 6): it assembles the example without control error; with the literature's
 # error levels the G_1 pair does not yet form reliably.
-from .edr import AssemblyResult, ControllerOptions, assemble, nominal_plan  # noqa: E402
+from .edr import AssemblyResult, ControllerOptions, Targets, assemble, check_determinism, nominal_plan, structure_targets  # noqa: E402
 
-__all__ += ["AssemblyResult", "ControllerOptions", "assemble", "nominal_plan"]
+__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "assemble", "check_determinism", "nominal_plan", "structure_targets"]

@@ -63,8 +63,9 @@ from .estimation import Estimator
 from .kinematics import move
 from .robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
 from .waveform import synthesize
+from . import se2
 
-__all__ = ["ControllerOptions", "AssemblyResult", "assemble", "nominal_plan"]
+__all__ = ["ControllerOptions", "AssemblyResult", "Targets", "assemble", "check_determinism", "nominal_plan", "structure_targets"]
 
 G1_CLEARANCE_UM = 25.0
 """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
@@ -78,6 +79,27 @@ rendezvous adapts to the orbit it is on, and the pair then forms that far from i
 
 WALL_CLEARANCE_UM = 40.0
 """Clearance of D_n's timed paths from the arena edge and the other orbits (a robot against the edge is stuck)."""
+
+PAIR_FRAMES = 6
+"""How many pair frames (the nominal one, then re-planned ones) G_1 may be tried in before the run fails."""
+
+FRAME_TURNS_DEG = (0.0, 20.0, -20.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0)
+"""Turns of the structure about the G_1 junction tried when G_1 is re-planned (deg, clockwise)."""
+
+FRAME_SHIFTS_UM = (0.0, 200.0, 400.0)
+"""Shifts of the structure tried when G_1 is re-planned (um; each in 8 directions)."""
+
+FRAME_SLOT_CLEARANCE_UM = 30.0
+"""Clearance of a re-planned frame's slots and station orbit from the orbits measured (the error bound of
+an orbit's drift over an assembly, tens of um)."""
+
+GROSS_DOCKED_CLEARANCE_UM = 40.0
+"""Clearance of gross motion from the docked structure away from its target (um): a robot that grazes the
+structure is turned flush against the wrong edge by docking compliance and is trapped there."""
+
+TRACK_OVERSHOOT = 0.15
+"""D_n's straight runs during a transfer may end this fraction (plus 40 um) further than planned (3 sigma
+of the literature's 5 % speed error): it must still have room to orbit there."""
 
 PLAN_CLEARANCE_UM = 40.0
 """Clearance of the nominal plans the controller follows: room for tens of um of control error."""
@@ -194,12 +216,29 @@ def _deg(p) -> list[float]:
     return [float(p[0]), float(p[1]), float(math.degrees(p[2]) % 360.0)]
 
 
+STREAMS = ("routes",)
+"""Names of the controller's random streams, each spawned from the run's seed (:func:`stream`)."""
+
+
+def stream(seed: int | None, name: str) -> np.random.Generator:
+    """The random generator of the named stream ``name`` for a run with ``seed`` (None counts as 0).
+
+    Streams are independent (``SeedSequence(seed, spawn_key=(index of name,))``), so adding draws to
+    one never shifts another.
+    """
+    return np.random.default_rng(np.random.SeedSequence(0 if seed is None else int(seed), spawn_key=(STREAMS.index(name),)))
+
+
 class _Abort(Exception):
     """The run cannot go on; ``reason`` says why (reported as the result's ``failure``)."""
 
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
+
+
+class _Replan(_Abort):
+    """A stage of G_1 has no solution from here: the pair's gross motion is planned again (not a failure yet)."""
 
 
 class _Budget(_Abort):
@@ -256,6 +295,10 @@ class _Runner:
         self.analysis = analyse_scenario(scenario)
         if not self.analysis.is_string:
             raise PlanningError("closed-loop assembly needs a STRING design: " + "; ".join(self.analysis.reasons))
+        # named random streams of this run (the roadmap's samples); never derived from the event count
+        self.routes_rng = stream(seed, "routes")
+        if not isinstance(plan_result, Targets):
+            plan_result = Targets(plan_result.plan.goal_array(), tuple(plan_result.phases))
         self.pr = plan_result
         n = scenario.n
         self.n = n
@@ -265,7 +308,7 @@ class _Runner:
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
         self.v, self.r = scenario.speeds_um_s, scenario.turn_radii_um
         self.L, self.W = scenario.lengths_um, scenario.widths_um
-        self.nominal_goals = plan_result.plan.goal_array()
+        self.nominal_goals = np.asarray(plan_result.goals, dtype=np.float64).copy()
         self.goals = self.nominal_goals.copy()
         self.docked = np.zeros(n, dtype=bool)
         self.state = np.zeros(n, dtype=np.uint8)
@@ -276,7 +319,6 @@ class _Runner:
         self.estimator = Estimator(obs, scenario.starts, self.v, self.r)
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
-        self._helper = None
         self._missed = False
         self._stuck = False
         self._plan = None
@@ -360,9 +402,21 @@ class _Runner:
 
     # -- geometry -------------------------------------------------------------------------------------
 
-    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None) -> bool:
-        """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge."""
+    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None, target=None) -> bool:
+        """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge.
+
+        With ``target`` (a gross-motion goal pose), docked bodies are kept :data:`GROSS_DOCKED_CLEARANCE_UM`
+        away except within one body length of the target: a robot that touches the structure on the
+        way is turned flush against the wrong edge by docking compliance and cannot pivot off again.
+        """
         c = self.opts.clearance_um if clearance is None else clearance
+        samples = np.asarray(samples, dtype=np.float64)
+        if target is not None and self.docked.any():
+            far = np.hypot(*(samples[:, :2] - np.asarray(target, float)[:2]).T) > self.L[i]
+            if far.any():
+                for j in np.flatnonzero(self.docked):
+                    if (penetration_depth(samples[far], self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -max(c, GROSS_DOCKED_CLEARANCE_UM)).any():
+                        return True
         orbiting = [j for j in orbiting if j != i]
         if orbiting or extra_discs:
             centres = [*turning_centres(self.est[orbiting], self.r_hat[orbiting])] if orbiting else []
@@ -416,12 +470,12 @@ class _Runner:
             if (ready is None and self.arrived(p, target)) or (ready is not None and ready()):
                 return True
             path = pathlib.shortest_path(p, target, r)
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance):
+            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
                 if via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     c_eff = self.opts.clearance_um if clearance is None else clearance
-                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0), salt=7)
+                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0))
                     t_before = self.t
                     if len(points) > 1:
                         for w in points[:-1]:
@@ -447,7 +501,7 @@ class _Runner:
             if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
                 cut_um = min(r * math.radians(3.0), 0.5 * segs[0][1])
                 biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance):
+                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
                     steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
                     steps.insert(1, (straight_k, cut_um / v))
                     steps = _trim(steps, self.tx)
@@ -469,8 +523,8 @@ class _Runner:
         """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
         return bool(np.hypot(*(pose[:2] - target[:2])) <= 25.0 and abs(angle_difference(pose[2], target[2])) <= math.radians(6.0))
 
-    def _obstacles(self, i: int, orbiting, extra_discs):
-        from .planning import _Obstacles
+    def _obstacles(self, i: int, orbiting, extra_discs, box_margin: float = 0.0):
+        from .planning import Obstacles
 
         orbiting = [j for j in orbiting if j != i]
         centres = list(turning_centres(self.est[orbiting], self.r_hat[orbiting])) if orbiting else []
@@ -479,25 +533,29 @@ class _Runner:
             centres.append(c)
             radii.append(rr)
         docked = np.flatnonzero(self.docked)
-        return _Obstacles(
+        return Obstacles(
             np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
-            self.est[docked], self.L[docked], self.W[docked], tuple("a docked robot" for _ in docked), self.scn.arena_um,
+            self.est[docked], self.L[docked] + 2.0 * box_margin, self.W[docked] + 2.0 * box_margin, tuple("a docked robot" for _ in docked), self.scn.arena_um,
         )
 
-    def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float, salt: int = 0):
+    def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
         """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
         structure and the arena edge to ``target`` (waypoints end with it), at ``clearance``; ``([], None)``
         when there is none. Logged as a detour."""
-        from .planning import PlannerOptions, _NoRoute, _Planner, _route
+        from .planning import NoRoute, PlannerOptions, route
 
-        if self._helper is None:
-            self._helper = _Planner(self.scn, self.analysis, self.pr.structure, PlannerOptions(clearance_um=self.opts.clearance_um, roadmap_nodes=(60, 200)))
-        obst = self._obstacles(i, orbiting, extra_discs)
-        rng = np.random.default_rng(np.random.SeedSequence([0 if self.seed is None else int(self.seed), len(self.events), i, *([salt] if salt else [])]))
-        opts = replace(self._helper.opts, clearance_um=clearance)
-        try:
-            _, routed, points = _route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
-        except _NoRoute:
+        rng = self.routes_rng
+        opts = PlannerOptions(clearance_um=clearance, roadmap_nodes=(60, 200))
+        # around the structure with the gross-motion clearance first (see obstacles_hit), else the plain one
+        margins = (max(GROSS_DOCKED_CLEARANCE_UM - clearance, 0.0), 0.0) if self.docked.any() else (0.0,)
+        for margin in margins:
+            obst = self._obstacles(i, orbiting, extra_discs, margin)
+            try:
+                _, routed, points = route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
+                break
+            except NoRoute:
+                continue
+        else:
             return [], None
         self.log("detour", i, f"route around obstacles ({routed.length:.0f} um, {len(points)} waypoints)")
         return [np.asarray(w, float) for w in points], routed
@@ -566,6 +624,8 @@ class _Runner:
         """
         i = self.by_rank[k]
         orbiting = self.orbiting_below(k)
+        if self._motion is not None and (abs(self._motion[0]) > math.radians(5.0) or np.hypot(*(self._motion[2] - self._motion[1])) > 60.0):
+            route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
         for attempt in range(6):
             goal = self.goals[i]
@@ -820,17 +880,110 @@ class _Runner:
         return tangent + self.r_hat[M] * right
 
     def form_pair(self) -> None:
+        """G_1 (App. 3.3), re-planned from the measured poses whenever a stage has no solution.
+
+        The first attempt aims at the nominal G_1 slots. When the transfer has no clear way, D_n finds no
+        timed path to its approach line, or the rendezvous keeps missing, the gross motion sigma_1 of
+        the pair is planned again from where the robots are (seed App. 3.3: re-plan when D_{n-1} is early
+        or late), toward another *pair frame*: the whole target structure turned and shifted as a rigid
+        body (success is judged on the shape after a best rigid alignment, SPEC 6). Frames are tried
+        nearest the nominal one first, and only those whose station orbit, approach line, departure
+        track and later slots are clear of the orbits as measured (:meth:`pair_frames`).
+        """
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         lower = self.orbiting_below(n - 1)
         D = self.meet_distance(N, M)
+        tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)]
+        last = ""
+        for frame_no in range(PAIR_FRAMES):
+            if frame_no > 0:
+                frames = [f for f in self.pair_frames(N, M, D, lower) if all(self._far(f, t) for t in tried)]
+                if not frames:
+                    break
+                phi, dx, dy = frames[0]
+                tried.append((phi, dx, dy))
+                self.set_pair_frame(phi, dx, dy)
+                self.replans += 1
+                self.log("replan", N, f"G_1 re-planned from the measured poses ({last}): the structure turned {math.degrees(phi):.0f} deg and shifted {math.hypot(dx, dy):.0f} um")
+            try:
+                c_star = self.station(N, M, D)
+                self.transfer(N, M, c_star, D, lower)
+                for attempt in range(4):
+                    if self.rendezvous(N, M, D, lower):
+                        return
+                    self.log("retry", N, f"rendezvous attempt {attempt + 1} missed; {self.scn.names[N]} re-plans its approach")
+                raise _Replan(f"G_1 of {self.scn.names[N]} and {self.scn.names[M]} did not form in 4 rendezvous attempts")
+            except _Replan as exc:
+                last = exc.reason
+        raise _Abort(f"G_1 not formed after {len(tried)} pair frame(s); last: {last}")
+
+    @staticmethod
+    def _far(a, b) -> bool:
+        return abs(angle_difference(a[0], b[0])) > math.radians(10.0) or math.hypot(a[1] - b[1], a[2] - b[2]) > 150.0
+
+    def set_pair_frame(self, phi: float, dx: float, dy: float) -> None:
+        """Aim at the nominal structure turned clockwise by ``phi`` about the G_1 junction and shifted by (dx, dy)."""
+        self.goals = self.framed_goals(phi, dx, dy)
+
+    def framed_goals(self, phi: float, dx: float, dy: float) -> np.ndarray:
+        N, M = self.by_rank[self.n], self.by_rank[self.n - 1]
+        g = self.nominal_goals
+        junction = 0.5 * (front_midpoints(g[[N]], self.L[[N]])[0] + front_midpoints(g[[M]], self.L[[M]])[0])
+        out = se2.rotate_about(g, junction, phi)
+        out[:, :2] += np.array([dx, dy])
+        return out
+
+    def pair_frames(self, N: int, M: int, D: float, lower) -> list[tuple[float, float, float]]:
+        """Candidate pair frames ``(phi_rad, dx_um, dy_um)`` that look feasible from the measured poses, best first.
+
+        A frame passes when, with the structure there: every slot lies inside the arena and clear of the
+        orbit of every robot that docks after it; D_{n-1}'s station orbit is clear of the lower orbits and
+        the arena edge; D_n's approach run (from its approach pose to its slot) and D_{n-1}'s departure
+        track (tangent point to slot) are clear of the lower orbits and the arena edge, with the steering
+        clearance. Cost: turning angle (1 um per 0.1 deg) plus shift plus how far D_{n-1} must move.
+        """
+        saved = self.goals.copy()
+        out = []
+        rank = self.rank
+        orbit_c = turning_centres(self.est, self.r_hat)
+        rs = self.rstar
+        try:
+            for phi_deg in FRAME_TURNS_DEG:
+                for dist in FRAME_SHIFTS_UM:
+                    for ang in (np.arange(0.0, 360.0, 45.0) if dist > 0 else [0.0]):
+                        dx, dy = dist * math.sin(math.radians(ang)), dist * math.cos(math.radians(ang))
+                        phi = math.radians(phi_deg)
+                        g = self.framed_goals(phi, dx, dy)
+                        self.goals = g
+                        if not self._frame_ok(N, M, D, lower, g, orbit_c, rs, rank):
+                            continue
+                        c_star = self.station(N, M, D)
+                        cost = 10.0 * abs(phi_deg) + dist + 0.3 * float(np.hypot(*(c_star - self.centre(M))))
+                        out.append((cost, (phi, dx, dy)))
+        finally:
+            self.goals = saved
+        out.sort(key=lambda t: t[0])
+        return [f for _, f in out]
+
+    def _frame_ok(self, N, M, D, lower, g, orbit_c, rs, rank) -> bool:
+        n = self.n
+        if self.scn.arena_um is not None and (arena_gap(g, self.L, self.W, self.scn.arena_um) < FRAME_SLOT_CLEARANCE_UM).any():
+            return False
+        for a in range(n):
+            later = [b for b in range(n) if rank[b] < rank[a]]
+            if later and bodies_hit_discs(g[a][None, :], self.L[a], self.W[a], orbit_c[later], rs[later] + FRAME_SLOT_CLEARANCE_UM).any():
+                return False
         c_star = self.station(N, M, D)
-        self.transfer(N, M, c_star, D, lower)
-        for attempt in range(4):
-            if self.rendezvous(N, M, D, lower):
-                return
-            self.log("retry", N, f"rendezvous attempt {attempt + 1} missed; D_n re-plans its approach")
-        raise _Abort("G_1 did not form in 4 rendezvous attempts")
+        if not self.orbits_free(M, c_star[None, :], [], lower, FRAME_SLOT_CLEARANCE_UM)[0]:
+            return False
+        q = self.approach_pose(N, M, c_star, D)
+        run = move(q, np.linspace(0.0, float(np.hypot(*(q[:2] - g[N, :2]))), 24), 0.0)
+        if self.obstacles_hit(run, N, lower, clearance=WALL_CLEARANCE_UM):
+            return False
+        tangent = pose_on_orbit(c_star, self.r_hat[M], float(g[M, 2]))
+        dep = move(tangent, np.linspace(0.0, float(np.hypot(*(tangent[:2] - g[M, :2]))), 16), 0.0)
+        return not self.obstacles_hit(dep, M, lower, clearance=self.opts.clearance_um)
 
     # stage 1: D_{n-1} onto its station orbit ---------------------------------------------------------
 
@@ -855,12 +1008,17 @@ class _Runner:
             u = d_vec / d
             th_dep = float(np.mod(math.atan2(u[0], u[1]) - math.radians(3.0), TWO_PI))
             t_turn = float(np.mod(th_dep - self.est[M, 2], TWO_PI)) / self.omega_hat[M]
-            plan = None
-            for leg in sorted({d, min(d, 900.0), min(d, 600.0), min(d, 400.0)}, reverse=True):
+            plan = tight = None
+            why = f"{self.scn.names[N]} has no clear straight track while {self.scn.names[M]} moves {d:.0f} um to its station orbit"
+            for leg in sorted({d, min(d, 900.0), min(d, 600.0), min(d, 400.0), min(d, 250.0)}, reverse=True):
                 c_next = cM + leg * u
                 if leg < d - 1.0 and not self.orbits_free(M, c_next[None, :], [], lower, 10.0)[0]:
                     continue
-                opt = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
+                try:
+                    opt = self.transfer_option(N, M, t_turn, leg, th_dep, lower, c_next, q_next)
+                except _Replan as exc:  # D_{n-1}'s own track is blocked this far: a shorter leg may clear
+                    why = exc.reason
+                    continue
                 if opt is not None and opt[1] < 1e4:
                     plan = ("turn", opt[0], leg, c_next)
                     break
@@ -868,30 +1026,29 @@ class _Runner:
                 if start is not None:
                     plan = ("run", start, leg, c_next)
                     break
-                if opt is not None:  # clear, though it leaves D_n in a tight spot
-                    plan = ("turn", opt[0], leg, c_next)
-                    break
+                if opt is not None:  # clear, though it leaves D_n in a tight spot: the shortest such leg
+                    tight = ("turn", opt[0], leg, c_next)
+            plan = plan or tight
             if plan is None:
-                raise _Abort(
-                    f"D_n ({self.scn.names[N]}) has no clear straight track while D_(n-1) ({self.scn.names[M]}) "
-                    f"moves {d:.0f} um to its station orbit"
-                )
+                raise _Replan(why)
             kind, arg, leg, c_next = plan
             self.replans += 1
             if kind == "turn":
                 self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} turns {arg:.0%} of the wait, then runs straight")
                 turn = t_turn * self.omega_hat[M]
                 turned = 0.0
-                n_turn = arg * t_turn
+                # D_n's turn is closed loop on its measured heading: a long open-loop turn with a turn rate
+                # not yet identified ends tens of degrees off, and the straight run after it goes astray
+                n_turn, n_turned = arg * t_turn * self.omega_hat[N], 0.0
                 while True:
                     left = (turn - turned) / self.omega_hat[M]
                     if left <= 1e-3:
                         break
                     dt = left if left <= 1.6 * self.tx else self.tx
-                    a = min(dt, max(n_turn, 0.0))
-                    th0 = self.est[M, 2]
+                    a = min(dt, max((n_turn - n_turned) / self.omega_hat[N], 0.0))
+                    th0, thN0 = self.est[M, 2], self.est[N, 2]
                     self.drive([(n, a), (n - 1, dt - a)])
-                    n_turn -= a
+                    n_turned += float(np.mod(self.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
                     turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
                     if dt == left:
                         break
@@ -902,7 +1059,7 @@ class _Runner:
                     self.log("retry", N, f"{self.scn.names[N]} could not reach its track in time; the leg is planned again")
                     failed_runs += 1
                     if failed_runs >= 4:
-                        raise _Abort(f"D_n ({self.scn.names[N]}) cannot reach a clear track in time for D_(n-1)'s move")
+                        raise _Replan(f"{self.scn.names[N]} cannot reach a clear track in time for {self.scn.names[M]}'s move")
                     continue
                 self.wait_straight(N, M, th_dep)
             self.straight_leg(N, M, c_next, lower)
@@ -940,7 +1097,7 @@ class _Runner:
                 dt = self.tx
             steps.append((n - 2, dt))
             if not self.track_clear(N, sum(d for _, d in steps) * self.v_hat[N] + 40.0, lower):
-                self.log("transfer", N, "D_n's track runs out; D_(n-1) stops short and moves on from there")
+                self.log("transfer", N, f"{self.scn.names[N]}'s track runs out; {self.scn.names[M]} stops short and moves on from there")
                 return
             self.drive(steps)
 
@@ -1029,7 +1186,7 @@ class _Runner:
         s_m = np.linspace(0.0, vM * t_straight, 60)
         m_track = move(mdep, s_m, 0.0)
         if self._blocked(m_track, M, lower, c):
-            raise _Abort(f"D_(n-1) ({self.scn.names[M]})'s straight move to its station orbit is blocked")
+            raise _Replan(f"{self.scn.names[M]}'s straight move to its station orbit is blocked")
         m_disc = [(self.centre(M), self.rstar[M] + c)]
         new_disc = [(np.asarray(c_star, float), self.rstar[M] + 40.0)]
         best, best_len = None, math.inf
@@ -1054,8 +1211,11 @@ class _Runner:
             # prefer a clear way on, and room to wait on D_n's own orbit there (its timing reserve)
             if self._blocked(nxt.sample(10.0), N, lower, 0.0, discs=new_disc):
                 ell += 1e5
-            loop = move(end, np.linspace(0.0, TWO_PI * rN, 40), 1.0 / rN)
-            if self._blocked(loop, N, lower, 0.0, discs=new_disc):
+            # room to orbit where the run ends, also if it runs long (speed error, drift): a robot that
+            # meets the arena edge while turning is trapped there
+            late = move(end, TRACK_OVERSHOOT * (b + vN * d / vM) + 40.0, 0.0)
+            loops = np.vstack([move(e, np.linspace(0.0, TWO_PI * rN, 40), 1.0 / rN) for e in (end, late)])
+            if self._blocked(loops, N, lower, self.opts.clearance_um, discs=new_disc):
                 ell += 1e4
             if ell < best_len:
                 best, best_len = float(f), ell
@@ -1182,7 +1342,7 @@ class _Runner:
     def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
         th_dep = float(self.goals[M, 2])
         if not self.arrive_timed(N, M, lambda: self.approach_pose(N, M, self.centre(M), D), th_dep, lower):
-            raise _Abort(f"D_n ({self.scn.names[N]}) finds no timed path to its approach line")
+            raise _Replan(f"{self.scn.names[N]} found no timed path to its approach line")
         return self.depart_and_meet(N, M, lower)
 
     def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float = 1.2) -> bool:
@@ -1301,7 +1461,7 @@ class _Runner:
         for _ in range(40):
             best = self.best_departure(N, M)
             if best is None:
-                self.log("miss", N, "D_n is not on a line D_(n-1) can leave its orbit along")
+                self.log("miss", N, f"{self.scn.names[N]} is not on a line {self.scn.names[M]} can leave its orbit along")
                 self.drive([(n, 0.5 * math.pi / self.omega_hat[N])])  # turn away from the orbit
                 return False
             t_wait, cost = best
@@ -1405,6 +1565,54 @@ class _Runner:
         return None
 
 
+@dataclass(frozen=True)
+class Targets:
+    """What the controller takes from a nominal plan: the slots and (optionally) the planned phases.
+
+    A :class:`stressbots.planning.PlanResult` provides both; :func:`structure_targets` provides the slots
+    of the target structure alone, for layouts the planner cannot plan.
+    """
+
+    goals: np.ndarray
+    phases: tuple = ()
+
+
+def structure_targets(scenario) -> Targets:
+    """The slots of the scenario's target structure without a nominal plan.
+
+    Of the candidate structures (a named shape's variants, or the explicit goals), the one whose slots
+    lie inside the arena and clear of the start orbits of every robot that docks after them, with the
+    least lower bound on the plan's duration (:func:`stressbots.planning.lower_bound_s`).
+    """
+    from .planning import lower_bound_s
+    from .structures import target_structures
+
+    analysis = analyse_scenario(scenario)
+    if not analysis.is_string:
+        raise PlanningError("closed-loop assembly needs a STRING design: " + "; ".join(analysis.reasons))
+    n = scenario.n
+    rank = np.empty(n, dtype=int)
+    for k, i in enumerate(analysis.order_index):
+        rank[i] = k + 1
+    robots = [scenario.robots[i] for i in analysis.order_index]
+    L, W, R = scenario.lengths_um, scenario.widths_um, scenario.turn_radii_um
+    centres, rs = turning_centres(scenario.starts, R), orbit_radii(L, W, R)
+    best = None
+    for st in target_structures(robots, scenario.structure):
+        g = st.goal_poses(scenario.names)
+        clear = scenario.arena_um is None or bool((arena_gap(g, L, W, scenario.arena_um) >= 0.0).all())
+        for a in range(n):
+            later = [b for b in range(n) if rank[b] < rank[a]]
+            if later and bodies_hit_discs(g[a][None, :], L[a], W[a], centres[later], rs[later]).any():
+                clear = False
+        key = (not clear, lower_bound_s(scenario, st, rank))
+        if best is None or key < best[0]:
+            best = (key, g)
+    if best is None:
+        raise PlanningError("no target structure for these robots")
+    return Targets(np.asarray(best[1], dtype=np.float64))
+
+
 def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options: ControllerOptions | None = None) -> AssemblyResult:
     """Assemble ``scenario``'s structure through ``plant`` in closed loop (seed Appendix 3).
 
@@ -1429,11 +1637,20 @@ def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget
     opts = options or ControllerOptions()
     if time_budget_s is not None:
         opts = replace(opts, time_budget_s=float(time_budget_s))
+    no_plan = None
     if plan is None:
-        plan = nominal_plan(scenario)
-    if not isinstance(plan, PlanResult):
+        try:
+            plan = nominal_plan(scenario)
+        except PlanningError as exc:
+            # the controller needs the slots, not the nominal schedule: it re-plans everything from the
+            # measured poses (G_1 as a rendezvous, single robots by routing); only the routes' hints are lost
+            no_plan = str(exc)
+            plan = structure_targets(scenario)
+    if not isinstance(plan, (PlanResult, Targets)):
         raise TypeError("plan must be a PlanResult from stressbots.planning.plan_assembly")
     run = _Runner(scenario, plant, plan, opts, seed)
+    if no_plan is not None:
+        run.log("no-plan", None, f"the planner found no nominal plan ({no_plan}); the controller plans from the measured poses alone")
     failure = run.run()
     true = plant.true_poses() if hasattr(plant, "true_poses") else None
     final = np.asarray(true if true is not None else run.est, dtype=np.float64)
@@ -1463,3 +1680,65 @@ def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget
         trace_t=np.asarray(run.trace_t),
         trace_poses=np.asarray(run.trace_p),
     )
+
+
+class _Recorder:
+    """A plant wrapper recording every waveform applied and every frame observed (for determinism checks)."""
+
+    def __init__(self, inner):
+        self._inner = inner
+        self.waveforms: list = []
+        self.frames: list = []
+
+    def observe(self):
+        frame = np.asarray(self._inner.observe(), dtype=np.float64)
+        self.frames.append(frame.copy())
+        return frame
+
+    def apply(self, waveform):
+        self.waveforms.append(tuple(waveform))
+        self._inner.apply(waveform)
+
+
+def check_determinism(scenario, seed: int, *, plan=None, options: ControllerOptions | None = None, plant_factory=None) -> AssemblyResult:
+    """Prove that a seed fixes a closed-loop run bit for bit (like :func:`stressbots.sim.check_determinism`).
+
+    Two fresh plants with the same seed (``plant_factory(scenario, seed=...)``, default
+    :class:`stressbots.sim.SimulatedPlant`) are driven by two runs of :func:`assemble`; every waveform the
+    controller sends, every frame it receives, its event log, trace and result must be identical.
+    Returns the first run's result.
+
+    Raises
+    ------
+    AssertionError
+        Naming the first quantity that differs.
+    """
+    if plant_factory is None:
+        from .sim import SimulatedPlant as plant_factory
+    if plan is None:
+        try:
+            plan = nominal_plan(scenario)
+        except PlanningError:
+            plan = structure_targets(scenario)
+    runs = []
+    for _ in range(2):
+        rec = _Recorder(plant_factory(scenario, seed=seed))
+        res = assemble(scenario, rec, seed=seed, plan=plan, options=options)
+        runs.append((rec, res))
+    (ra, a), (rb, b) = runs
+    if len(ra.waveforms) != len(rb.waveforms):
+        raise AssertionError(f"seed {seed}: {len(ra.waveforms)} vs {len(rb.waveforms)} waveforms applied")
+    for k, (wa, wb) in enumerate(zip(ra.waveforms, rb.waveforms)):
+        if wa != wb:
+            raise AssertionError(f"seed {seed}: waveform {k} differs")
+    for k, (fa, fb) in enumerate(zip(ra.frames, rb.frames)):
+        if not np.array_equal(fa, fb, equal_nan=True):
+            raise AssertionError(f"seed {seed}: camera frame {k} differs")
+    if a.events != b.events:
+        first = next(k for k, (x, y) in enumerate(zip(a.events, b.events)) if x != y) if len(a.events) == len(b.events) else min(len(a.events), len(b.events))
+        raise AssertionError(f"seed {seed}: event logs differ from event {first}")
+    if not (np.array_equal(a.trace_t, b.trace_t) and np.array_equal(a.trace_poses, b.trace_poses)):
+        raise AssertionError(f"seed {seed}: traces differ")
+    if (a.success, a.failure, a.duration_s, a.replans) != (b.success, b.failure, b.duration_s, b.replans):
+        raise AssertionError(f"seed {seed}: results differ")
+    return a
