@@ -13,7 +13,7 @@ import pytest
 
 from stressbots.assessment import shape_error
 from stressbots.control import Plant
-from stressbots.edr import assemble, nominal_plan
+from stressbots.control import assemble, nominal_plan
 from stressbots.scenario import Noise, load
 from stressbots.sim import SimulatedPlant
 

@@ -1,5 +1,11 @@
 """Control of the group through a plant: the Plant protocol (SPEC 6/7) and closed-loop assembly.
 
+Modules: :mod:`~stressbots.control.runner` (the closed loop, :func:`assemble`),
+:mod:`~stressbots.control.queries` (pure geometric queries), :mod:`~stressbots.control.tuning`
+(:class:`ControllerOptions` and the named thresholds :class:`Tuning`), :mod:`~stressbots.control.targets`
+(slots from a nominal plan or the structure alone), :mod:`~stressbots.control.result`
+(:class:`AssemblyResult`) and :mod:`~stressbots.control.determinism` (:func:`check_determinism`).
+
 A *plant* is whatever the voltage signal drives and the camera watches: the built-in simulator
 (:class:`stressbots.sim.SimulatedPlant`) or lab hardware (a waveform generator and a microscope camera).
 The controller talks to it only through :class:`Plant`, so hardware can stand in for the simulator
@@ -12,7 +18,7 @@ from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
-from .waveform import Segment
+from ..waveform import Segment
 
 __all__ = ["Plant"]
 
@@ -37,9 +43,11 @@ class Plant(Protocol):
     def apply(self, waveform: Sequence[Segment]) -> None: ...
 
 
-# The closed-loop EDR controller (seed Appendix 3) lives in :mod:`stressbots.edr`; SPEC 7 names it here.
-# Work in progress (issue 6): it assembles the example without control error; with the literature's
-# error levels the G_1 pair does not yet form reliably.
-from .edr import AssemblyResult, ControllerOptions, Targets, assemble, check_determinism, nominal_plan, structure_targets  # noqa: E402
+# The closed-loop EDR controller (seed Appendix 3): SPEC 7 names it here.
+from .determinism import check_determinism  # noqa: E402
+from .result import AssemblyResult  # noqa: E402
+from .runner import assemble  # noqa: E402
+from .targets import Targets, nominal_plan, structure_targets  # noqa: E402
+from .tuning import ControllerOptions, Tuning  # noqa: E402
 
-__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "assemble", "check_determinism", "nominal_plan", "structure_targets"]
+__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "Tuning", "assemble", "check_determinism", "nominal_plan", "structure_targets"]
