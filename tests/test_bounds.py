@@ -105,15 +105,17 @@ def test_delta_grows_monotonically():
 
 
 def test_straight_bound_matches_the_analytic_heading_error():
-    """Driving straight, only the drift turns the robot: delta_theta(t) = d (1 + a) v t, and the lateral
-    error is the drift arc's offset (1 - cos(d s)) / d over the longest distance s = (1 + a) v t."""
+    """Driving straight, only the drift turns the robot: delta_theta(t) = d s + c sqrt(s) (bias and random
+    walk) over the longest distance s = (1 + a) v t, and the lateral error is the bias arc's offset
+    (1 - cos(d s)) / d plus the walk's (2/3) c s^1.5."""
     m = B.ErrorModel.from_noise(LIT, 3.0)
-    a, d = m.speed_rel, m.drift_rad_per_um
+    a, d, cw = m.speed_rel, m.drift_rad_per_um, m.drift_walk_rad_per_sqrt_um
+    assert cw == pytest.approx(3 * math.radians(3.7) / 1000 * math.sqrt(0.5 * 1000))  # k sd sqrt((1 - f) S)
     t = np.linspace(0.0, 30.0, 31)
     c = B.deviation_envelope(B.straight_sequence(30.0), V, R, m, times_s=t)
-    assert np.allclose(c.theta_rad, d * (1 + a) * V * t, rtol=1e-12, atol=1e-15)
     s = (1 + a) * V * t
-    assert np.allclose(c.across_um, (1 - np.cos(d * s)) / d, rtol=1e-9)
+    assert np.allclose(c.theta_rad, d * s + cw * np.sqrt(s), rtol=1e-12, atol=1e-15)
+    assert np.allclose(c.across_um, (1 - np.cos(d * s)) / d + (2 / 3) * cw * s**1.5, rtol=1e-9)
     assert np.all(c.along_um >= a * V * t - 1e-9)
 
 
@@ -126,7 +128,8 @@ def test_turning_bound_matches_the_analytic_turn_rate_error():
     assert B.turn_rate_range(V, R, m) == pytest.approx((w_lo, w_hi))
     t = np.linspace(0.0, 40.0, 41)
     c = B.deviation_envelope(B.turning_sequence(40.0), V, R, m, times_s=t)
-    assert np.allclose(c.theta_rad, max(w_hi - w, w - w_lo) * t, rtol=1e-12)  # unwrapped: beyond pi too
+    walk = m.drift_walk_rad_per_sqrt_um * np.sqrt((1 + a) * V * t)
+    assert np.allclose(c.theta_rad, max(w_hi - w, w - w_lo) * t + walk, rtol=1e-12)  # unwrapped: beyond pi too
     assert B.turn_time(2 * math.pi, V, R, m) == pytest.approx(2 * math.pi / w_lo)
 
 

@@ -14,8 +14,10 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
-from stressbots.collision import penetration_depth, pairwise_overlaps
+from stressbots.collision import pairwise_overlaps, penetration_depth, point_rectangle_distance
 from stressbots.electrostatics import Electrodes
 from stressbots.robots import Pose, Robot, body_corners
 from stressbots.scenario import Noise, Scenario
@@ -276,10 +278,28 @@ def front_mid(p, L=260.0):
     return p[:2] + 0.5 * L * np.array([math.sin(p[2]), math.cos(p[2])])
 
 
-@pytest.mark.parametrize("alpha_deg, w_y, width", [(40.0, 0.0, 60.0), (-40.0, 20.0, 60.0), (0.0, 50.0, 150.0)])
+def lateral_offset(pa, pb):
+    """|w_y|: offset of the two front-edge centres across the meeting axis (the bisector of the headings)."""
+    ha = np.array([math.sin(pa[2]), math.cos(pa[2])])
+    hb = np.array([math.sin(pb[2]), math.cos(pb[2])])
+    axis = (ha - hb) / np.linalg.norm(ha - hb)
+    return abs(float((front_mid(pb) - front_mid(pa)) @ np.array([axis[1], -axis[0]])))
+
+
+# w_y = 0, 40, 70, 79 um (issue 11): 60-um-wide robots offset by more than their width meet only with an
+# incidence (a front corner on the other's side near its front); wide ones meet front edge to front edge.
+# 56.38 um at 40 deg is the corner-to-corner contact (60 cos 20 deg = 56.382 um).
+INSIDE = [(40.0, 0.0, 60.0), (-40.0, 20.0, 60.0), (0.0, 50.0, 150.0), (30.0, 40.0, 60.0), (40.0, 56.38, 60.0),
+          (40.0, 70.0, 60.0), (-40.0, 70.0, 60.0), (25.0, 79.0, 60.0), (-55.0, 79.0, 60.0), (0.0, 79.0, 180.0)]
+OUTSIDE = [(70.0, 0.0, 60.0), (-70.0, 10.0, 60.0), (0.0, 100.0, 150.0), (40.0, 85.0, 60.0), (-55.0, 85.0, 60.0),
+           (0.0, 85.0, 180.0), (0.0, 80.0, 180.0)]
+
+
+@pytest.mark.parametrize("alpha_deg, w_y, width", INSIDE)
 def test_self_aligning_compliance_forms_g1_inside_the_limits(alpha_deg, w_y, width):
     a, b = g1_case(alpha_deg, w_y, width)
     t_c, pa, pb = contact_of_pair(a, b, width)
+    assert lateral_offset(pa, pb) == pytest.approx(w_y, abs=1e-6)  # the meeting is the one named
     axis_th = a[2] - 0.5 * math.radians(alpha_deg)  # the mean axis: each turns by half of alpha
     h = np.array([math.sin(axis_th), math.cos(axis_th)])
     junction = 0.5 * (front_mid(pa) + front_mid(pb))
@@ -297,10 +317,11 @@ def test_self_aligning_compliance_forms_g1_inside_the_limits(alpha_deg, w_y, wid
     no_overlap(plant)
 
 
-@pytest.mark.parametrize("alpha_deg, w_y, width", [(70.0, 0.0, 60.0), (-70.0, 10.0, 60.0), (0.0, 100.0, 150.0)])
+@pytest.mark.parametrize("alpha_deg, w_y, width", OUTSIDE)
 def test_self_alignment_outside_the_limits_leaves_both_stuck(alpha_deg, w_y, width):
     a, b = g1_case(alpha_deg, w_y, width)
     t_c, pa, pb = contact_of_pair(a, b, width)
+    assert lateral_offset(pa, pb) == pytest.approx(w_y, abs=1e-6)
     sc = scenario([tuple(Pose(*a).to_degrees()), tuple(Pose(*b).to_degrees())], width=width)
     plant = SimulatedPlant(sc, seed=0)
     plant.apply(straight(t_c + 1.0))
@@ -319,3 +340,84 @@ def test_straight_robot_stops_behind_a_moving_robot_and_follows():
     plant.apply(straight(3.0))
     np.testing.assert_allclose(plant.true_poses()[:, 1], [1300.0, 1560.5], atol=1e-9)
     assert plant.events == ()
+
+
+def test_a_sideswipe_is_not_a_head_on_meeting():
+    """At 10 deg incidence and 79 um offset, 60-um-wide robots touch only when a front corner reaches the
+    rear half of the other's side: they have passed each other (scratch drives cannot back up to flush),
+    so they slide past; no G_1 and no permanent stall."""
+    a, b = g1_case(10.0, 79.0)
+    t_c, pa, pb = contact_of_pair(a, b, 60.0)
+    sc = scenario([tuple(Pose(*a).to_degrees()), tuple(Pose(*b).to_degrees())])
+    plant = SimulatedPlant(sc, seed=0)
+    plant.apply(straight(t_c + 6.0))
+    assert not plant.docked.any() and not plant.stuck.any()
+    assert "self_align" not in kinds(plant, "R0") + kinds(plant, "R1")
+    final = plant.true_poses()
+    assert final[0, 0] > 1300.0 and final[1, 0] < 700.0  # they drove past each other
+    no_overlap(plant)
+
+
+@settings(max_examples=12, deadline=None, derandomize=True)
+@given(alpha_deg=st.floats(-58.0, 58.0), w_y=st.floats(0.0, 95.0), width=st.floats(50.0, 200.0))
+def test_head_on_meetings_form_g1_exactly_inside_the_seeds_limits(alpha_deg, w_y, width):
+    """Any meeting whose contact lies in the front half of both bodies: G_1 iff |w_y| < 80 um (|alpha| < 60 deg)."""
+    a, b = g1_case(alpha_deg, w_y, width)
+    try:
+        t_c, pa, pb = contact_of_pair(a, b, width)
+    except StopIteration:  # they pass each other without touching
+        assume(False)
+    la = np.array([math.sin(pa[2]), math.cos(pa[2])])
+    lb = np.array([math.sin(pb[2]), math.cos(pb[2])])
+    ca, cb = body_corners(pa, 260.0, width)[0], body_corners(pb, 260.0, width)[0]
+    touching = np.vstack([ca[point_rectangle_distance(ca, pb, 260.0, width)[0] < 1e-3],
+                          cb[point_rectangle_distance(cb, pa, 260.0, width)[0] < 1e-3]])
+    assume(touching.size and ((touching - pa[:2]) @ la >= 1.0).all() and ((touching - pb[:2]) @ lb >= 1.0).all())  # front halves
+    assume(abs(lateral_offset(pa, pb) - 80.0) > 1e-3)
+    sc = scenario([tuple(Pose(*a).to_degrees()), tuple(Pose(*b).to_degrees())], width=width)
+    plant = SimulatedPlant(sc, seed=0)
+    plant.apply(straight(t_c + 0.5))
+    final = plant.true_poses()
+    if lateral_offset(pa, pb) < 80.0:
+        assert plant.docked.all() and kinds(plant, "R0") == ["self_align"]
+        np.testing.assert_allclose(front_mid(final[0]), front_mid(final[1]), atol=1e-6)
+    else:
+        assert plant.stuck.all() and not plant.docked.any()
+    no_overlap(plant)
+
+
+# ----------------------------------------------------------------------------------------------------
+# Docking on arrival (issue 11.3): arriving flush in the slot is docking, whatever the arm does.
+
+
+@pytest.mark.parametrize("arc_um", [30.0, 120.0])
+def test_a_robot_turning_into_its_slot_is_docked_on_arrival_and_stays_docked(arc_um):
+    slot = np.array([1000.0, TOP + 130.0, math.pi])  # front edge flush on the bar's top face
+    d = arc_um / R
+    # the arc of SPEC 3 run backwards from the slot (independent of the simulator's kinematics)
+    th0 = slot[2] - d
+    start = np.array([slot[0] - R * (math.cos(th0) - math.cos(slot[2])), slot[1] - R * (math.sin(slot[2]) - math.sin(th0)), th0])
+    np.testing.assert_allclose(spec_motion(start, arc_um / V, True), slot, atol=1e-9)
+    for u in np.linspace(0.0, arc_um / V, 200)[:-1]:  # it touches nothing before the end
+        assert max(float(penetration_depth(spec_motion(start, u, True), 260.0, 60.0, q, 260.0, 60.0)[0]) for q in bar_poses()) < 0.0
+    plant = SimulatedPlant(scenario([tuple(Pose(*start).to_degrees())] + BAR), seed=0)
+    plant.apply(turn_r0(arc_um / V))  # the Drive ends exactly on arrival
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    assert plant.docked.all() and not plant.stuck.any()
+    assert set(kinds(plant, "R0")) == {"dock"}  # on both bar robots' faces (the slot spans the junction)
+    plant.apply([Drive(75.0, 105.0, 2.0)])  # arm still down: it pushes while turning, does not move
+    assert plant.docked[0]
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    plant.apply([Hold(0.0, 0.01)] + straight(2.0))  # arm up: it pushes straight in, still docked
+    assert plant.docked[0] and set(kinds(plant, "R0")) == {"dock"}
+    assert_pose(plant.true_poses()[0], slot, atol=1e-9)
+    no_overlap(plant)
+
+
+def test_turning_against_a_body_without_being_flush_is_blocked_not_docked():
+    # R0 turning onto the bar's top face at an angle: its corner meets the face first.
+    start = (1000.0, 1300.0, 150.0)
+    plant = SimulatedPlant(scenario([start] + BAR), seed=0)
+    plant.apply(turn_r0(4.0))
+    assert kinds(plant, "R0")[0] == "blocked" and not plant.docked[0]
+    no_overlap(plant)

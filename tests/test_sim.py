@@ -151,22 +151,7 @@ def test_speed_error_scales_the_distance_driven():
     np.testing.assert_allclose(plant.true_poses()[:, 2], km.wrap(sc.starts[:, 2]), atol=1e-12)  # no drift, no turn
 
 
-def test_heading_drift_per_um_driven():
-    sigma = math.radians(3.7) / 1000.0
-    sc = far_scenario(FAR, noise=Noise(heading_drift_rad_per_um=sigma))
-    dth, resid = [], []
-    for seed in range(150):
-        plant = SimulatedPlant(sc, seed=seed)
-        plant.apply([Drive(75.0, 105.0, 2.0)])
-        p = plant.true_poses()
-        s = sc.speeds_um_s * 2.0
-        d = (p[:, 2] - sc.starts[:, 2] + math.pi) % (2 * math.pi) - math.pi
-        dth.append(d / (sigma * s))
-        # constant drift rate within the Drive: the pose is exactly the arc of curvature d / s
-        resid.append(np.abs(km.move(sc.starts, s, d / s)[:, :2] - p[:, :2]).max())
-    z = np.array(dth).ravel()
-    assert abs(z.mean()) < 0.15 and 0.85 < z.std() < 1.15
-    assert max(resid) < 1e-8
+# Heading drift (a per-robot process of the distance driven) has its own file, test_drift.py.
 
 
 def test_camera_noise_and_dropouts():
@@ -345,6 +330,32 @@ def test_zero_noise_open_loop_docks_every_robot_at_its_goal(n, seed, shape):
     kinds = {e.kind for e in plant.events}
     assert kinds <= {"self_align", "dock"}, plant.events  # nothing stuck, slid, blocked or outside
     assert plant.time_s == pytest.approx(result.plan.duration_s + sum(s.duration_s for s in plan_waveform(sc, result.plan) if isinstance(s, Hold)))
+
+
+LAYOUTS = sorted((EXAMPLES.parent / "tests" / "data" / "layouts").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
+def test_zero_noise_open_loop_docks_every_robot_of_larger_generated_layouts(path):
+    """6-8 robots, every shape the planner plans quickly enough to store: generated layouts and the
+    planner's own plans, written by ``benchmarks/bench_physics.py --write-layouts`` (planning them takes
+    seconds to minutes, replaying them a fraction of a second). The wider sweep is that benchmark's."""
+    from stressbots.plans import load as load_plan
+
+    sc = load(path)
+    plan = load_plan(path.with_suffix("").with_suffix(".plan.json"))
+    plant = run_plan(sc, plan, seed=0)
+    goals = np.array([plan.goals[name] for name in sc.names])
+    pos, head = placement_errors(plant.true_poses(), goals)
+    assert plant.docked.all(), [e for e in plant.events if e.kind not in ("dock", "self_align")]
+    assert pos.max() < 1e-6 and head.max() < 1e-6, (pos, head)
+    assert {e.kind for e in plant.events} <= {"self_align", "dock"}, plant.events
+
+
+def test_layout_fixtures_cover_six_to_eight_robots_and_every_shape():
+    shapes = {p.stem.split("-")[0] for p in LAYOUTS}
+    counts = {int(p.stem.split("-")[1]) for p in LAYOUTS}
+    assert shapes == {"tee", "cross", "comb", "ladder"} and counts == {6, 7, 8}
 
 
 def test_open_loop_with_literature_noise_drifts_away(example_plan):

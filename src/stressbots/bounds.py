@@ -21,12 +21,18 @@ The error model (SPEC 8: seed eq. 5 is garbled)
 -----------------------------------------------
 Seed eq. 4 adds errors to the speed and turn rate, ``v_hat = v + v_e`` and ``omega_hat = omega + omega_e``.
 The scenario's ``[noise]`` describes them statistically (per-robot speed and radius factors drawn once per
-run, a random heading drift per Drive); a *bound* needs a box. :class:`ErrorModel` takes ``k``-sigma
+run, a heading drift that is a per-robot bias plus a random walk in the distance driven,
+:mod:`stressbots.drift`); a *bound* needs a box. :class:`ErrorModel` takes ``k``-sigma
 (default :data:`DEFAULT_K` = 3, i.e. 99.7 % of each factor's draws) of each:
 
 - relative speed error ``|v_e| / v <= a = k sd_v (1 + J)``,
 - relative radius error ``|r_e| / r <= b = k sd_r (1 + J)``,
-- heading drift ``|d| <= k sd_drift`` (rad per um driven),
+- heading drift ``|d| <= k sd_drift`` (rad per um driven), a constant curvature that covers the per-run bias
+  (whose sd is ``sqrt(f) sd_drift``, :data:`stressbots.drift.DEFAULT_DRIFT`) with room,
+- plus the drift's random walk, bounded at ``k`` sigma as ``|W(s)| <= c sqrt(s)`` over ``s`` um driven with
+  ``c = k sd_drift sqrt((1 - f) S)`` (``S`` = 1 mm). It is added to ``delta(t)`` after the grid: ``c sqrt(s)``
+  to the heading and, since a heading error ``e(u)`` displaces the robot by at most ``int |e(u)| du``,
+  ``(2/3) c s^(3/2)`` to every position component (``s`` at the fastest speed of the box),
 
 where ``J`` = :data:`SEGMENT_JITTER` is the per-Drive variation the simulator adds on top of the per-run
 factors (as a fraction of the same sds), counted at its own ``k`` sigma. Under a turning primitive the
@@ -147,6 +153,13 @@ SELF_ALIGN_MAX_OFFSET_UM = 80.0
 _MIN_FACTOR = 0.1  # the simulator floors speed and radius factors here
 
 
+def _walk_scale_sqrt_um() -> float:
+    """``sqrt((1 - f) S)`` (sqrt um) of the simulator's drift model: the walk's sd per unit ``sd_drift``."""
+    from .drift import DEFAULT_DRIFT
+
+    return math.sqrt((1.0 - DEFAULT_DRIFT.bias_share) * DEFAULT_DRIFT.reference_um)
+
+
 # ----------------------------------------------------------------------------------------------------
 # The error model
 
@@ -162,7 +175,9 @@ class ErrorModel:
     radius_rel:
         ``b``: bound of the relative turning-radius error.
     drift_rad_per_um:
-        ``d``: bound of the heading drift (rad per um driven, either sign), added to the curvature.
+        ``d``: bound of the heading drift's bias (rad per um driven, either sign), added to the curvature.
+    drift_walk_rad_per_sqrt_um:
+        ``c``: bound of the heading drift's random walk, ``|W(s)| <= c sqrt(s)`` over ``s`` um driven.
     camera_position_um:
         Bound of the camera's position error per axis (um).
     camera_heading_rad:
@@ -177,6 +192,7 @@ class ErrorModel:
     camera_position_um: float = 0.0
     camera_heading_rad: float = 0.0
     k: float = DEFAULT_K
+    drift_walk_rad_per_sqrt_um: float = 0.0
 
     @classmethod
     def from_noise(cls, noise, k: float = DEFAULT_K, *, jitter: float = SEGMENT_JITTER) -> "ErrorModel":
@@ -188,6 +204,7 @@ class ErrorModel:
             speed_rel=k * noise.speed_rel_sd * grow,
             radius_rel=k * noise.turn_radius_rel_sd * grow,
             drift_rad_per_um=k * noise.heading_drift_rad_per_um,
+            drift_walk_rad_per_sqrt_um=k * noise.heading_drift_rad_per_um * _walk_scale_sqrt_um(),
             camera_position_um=k * noise.camera_position_sd_um,
             camera_heading_rad=k * noise.camera_heading_sd_rad,
             k=float(k),
@@ -195,7 +212,16 @@ class ErrorModel:
 
     @property
     def is_zero(self) -> bool:
-        return self.speed_rel == 0.0 and self.radius_rel == 0.0 and self.drift_rad_per_um == 0.0
+        return self.speed_rel == 0.0 and self.radius_rel == 0.0 and self.drift_rad_per_um == 0.0 and self.drift_walk_rad_per_sqrt_um == 0.0
+
+    def walk_heading(self, s_um):
+        """Bound (rad) of the drift's random walk over ``s_um`` driven: ``c sqrt(s)``."""
+        return self.drift_walk_rad_per_sqrt_um * np.sqrt(np.maximum(np.asarray(s_um, dtype=np.float64), 0.0))
+
+    def walk_displacement(self, s_um):
+        """Bound (um) of the displacement the walk's heading error causes over ``s_um``: ``(2/3) c s^1.5``."""
+        s = np.maximum(np.asarray(s_um, dtype=np.float64), 0.0)
+        return (2.0 / 3.0) * self.drift_walk_rad_per_sqrt_um * s * np.sqrt(s)
 
     @property
     def speed_factors(self) -> tuple[float, float]:
@@ -227,6 +253,7 @@ class ErrorModel:
             "speed_rel": self.speed_rel,
             "radius_rel": self.radius_rel,
             "heading_drift_deg_per_mm": math.degrees(self.drift_rad_per_um) * 1000.0,
+            "heading_drift_walk_deg_per_sqrt_mm": math.degrees(self.drift_walk_rad_per_sqrt_um) * math.sqrt(1000.0),
             "camera_position_um": self.camera_position_um,
             "camera_heading_deg": math.degrees(self.camera_heading_rad),
         }
@@ -460,6 +487,10 @@ def deviation_envelope(
         along = np.maximum(along, np.abs(dy).max(axis=0))
         xy = np.maximum(xy, np.hypot(dx, dy).max(axis=0))
         th = np.maximum(th, dth.max(axis=0))
+    # The drift's random walk, on top of the grid (module notes): distance at the box's fastest speed.
+    s = speed_um_s * model.speed_factors[1] * t
+    walk = model.walk_displacement(s)
+    across, along, xy, th = across + walk, along + walk, xy + walk, th + model.walk_heading(s)
     acc = np.maximum.accumulate
     return DeltaCurve(sequence.name, t, acc(across), acc(along), acc(xy), acc(th))
 
@@ -621,14 +652,16 @@ def timed_forward_projection(
 
 
 def fine_motion_heading_error(turn_rad, length_um, model: ErrorModel):
-    """Heading error (rad) a fine-motion arc can accumulate: ``turn g + s (1 + a) d``.
+    """Heading error (rad) a fine-motion arc can accumulate: ``turn g + s (1 + a) d + c sqrt(s (1 + a))``.
 
     ``g = (1 + a) / (1 - b) - 1`` is the largest relative error of the turn (speed and radius factors),
-    ``s (1 + a) d`` the drift over the arc length ``s``. Vectorised.
+    ``s (1 + a) d`` the drift's bias and ``c sqrt(s (1 + a))`` its random walk over the arc length ``s``.
+    Vectorised.
     """
     (_, v_hi), (r_lo, _) = model.speed_factors, model.radius_factors
     g = v_hi / r_lo - 1.0
-    return np.abs(turn_rad) * g + np.abs(length_um) * v_hi * model.drift_rad_per_um
+    s = np.abs(length_um) * v_hi
+    return np.abs(turn_rad) * g + s * model.drift_rad_per_um + model.walk_heading(s)
 
 
 def fine_motion_preimage(

@@ -11,7 +11,8 @@ Motion (per Drive of the waveform)
 Holds move nobody. During a Drive every robot drives forward at its speed on an arc of constant
 curvature: ``kappa = 1/r`` with its arm down, 0 with its arm up, ``1/(2 r)`` for an arm the drive band
 makes chatter (it turns every other cycle: an interpolated turn of mean radius 2r), plus its heading
-drift. Between contacts the motion is the closed form, so with all noise zero the simulator reproduces
+drift, a curvature that is piecewise constant between the knots of the robot's odometer (below). Between
+contacts and knots the motion is the closed form, so with all noise zero the simulator reproduces
 :func:`stressbots.kinematics.advance` exactly (to rounding, no integration error).
 
 Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
@@ -19,9 +20,14 @@ Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
 - per robot and run: speed factor ``1 + speed_rel_sd * z`` and radius factor ``1 + turn_radius_rel_sd * z``
   (z standard normal; floored at 0.1);
 - per robot and Drive: the same factors jittered by :data:`SEGMENT_JITTER` times those sds
-  ("small per-segment variation"), and a heading drift rate ``heading_drift_rad_per_um * z`` (rad per um
-  driven, either sign) added to the curvature. A straight Drive of length s thus turns the heading by
-  N(0, (sigma s)^2): 3.7 deg/mm gives 0.37 deg sd over a 100 um Drive;
+  ("small per-segment variation");
+- per robot, as a function of its odometer (distance driven, :attr:`SimulatedPlant.odometer`): heading
+  drift (:mod:`stressbots.drift`), a bias drawn once per run plus a random walk whose variance grows with
+  the distance driven, realised as a curvature constant between odometer knots every
+  :attr:`~stressbots.drift.DriftModel.knot_um` (25 um). The spread after 1 mm has sd
+  ``heading_drift_deg_per_mm`` however the millimetre is cut into Drives (the same seed even gives the
+  same drift, to rounding); the odometer advances only while a robot drives (not while it is held,
+  slides along a face or is turned by compliance);
 - camera (:meth:`SimulatedPlant.observe`): position N(0, sd) per axis, heading N(0, sd), and each robot
   missing (NaN row) with probability ``camera_dropout``.
 
@@ -39,16 +45,20 @@ robot's motion *pushes* into a touching body (or the arena edge) when moving it 
 :data:`PROBE_UM` deepens the contact by more than :data:`PUSH_EPS_UM`. Rules, for every robot whose
 motion pushes (also applied at the end of every Drive, so a contact made on its last instant counts):
 
-1. **Self-aligning compliance (G_1).** Two robots with arms up pushing into each other head-on (each
-   approaches the contact with at least :data:`HEAD_ON_MIN_APPROACH` of its speed; headings opposed):
-   with incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral misalignment ``w_y`` (offset of
-   the two front-edge midpoints across the mean axis), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they
-   form G_1: both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
+1. **Self-aligning compliance (G_1).** Two robots with arms up, neither docked, meeting head-on:
+   headings opposed, closing on each other (at least one pushes), every contact point in the front half
+   of both bodies (front edges against each other, corner to corner, or a front corner on the other's
+   long side near its front). With incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral
+   misalignment ``w_y`` (offset of the two front-edge centres across the meeting axis, the bisector of
+   the two headings), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they form G_1 (seed App. 3.5: also
+   when ``w_y`` exceeds the width, so that only a corner meets the other's side): both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
    their front-edge midpoints coincide at the midpoint of the two, collinear and flush. Both are docked.
    Outside those limits, or if the aligned pair would overlap a third body or leave the arena, both stop
    where they met: stuck (H).
 2. **Turning robot** (arm down or chattering) whose motion pushes into anything: blocked; it stops for
-   the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle).
+   the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle). If its front edge is
+   flush against a static body (it arrived in its slot on an arc), it is **docked** there: arriving flush
+   against the structure is docking, with or without a straight push afterwards (SPEC 6).
 3. **Arena edge**: a robot pushing out of the arena stops at the edge ("arena"; ``arena_hits``).
 4. **Straight robot (arm up) against a static body** (one that does not move now: docked, stopped or
    stuck), contact on its front (its front corner on a face, the body's corner on its front edge, or
@@ -78,8 +88,8 @@ pair stays within :data:`NEAR_UM`, so robots jostling against each other do not 
 Determinism
 -----------
 Everything random comes from ``np.random.SeedSequence(seed)``, spawned into independent streams for
-the per-run factors, the motion and the camera (so observing more or less often never changes the
-motion). The same seed and the same calls give bit-identical results; :meth:`SimulatedPlant.copy`
+the per-run factors, the per-Drive jitter, the camera (so observing more or less often never changes
+the motion) and the drift (one child stream per robot, knot values drawn in knot order). The same seed and the same calls give bit-identical results; :meth:`SimulatedPlant.copy`
 continues bit-identically; :func:`check_determinism` proves it.
 """
 
@@ -93,7 +103,8 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from .collision import arena_gap, point_rectangle_distance
-from .kinematics import move, wrap
+from .drift import DEFAULT_DRIFT, DriftModel, HeadingDrift
+from .kinematics import follow, move, wrap
 from .robots import angle_difference, body_corners
 from .waveform import Segment, replay
 
@@ -120,9 +131,6 @@ SELF_ALIGN_MAX_OFFSET_UM = 80.0
 
 SEGMENT_JITTER = 0.2
 """Per-Drive variation of speed and radius, as a fraction of the per-run sds."""
-
-HEAD_ON_MIN_APPROACH = 0.25
-"""Self-alignment needs both robots to approach the contact with at least this fraction of their speed."""
 
 MIN_FACTOR = 0.1
 SAMPLE_UM = 10.0  # coarse sampling: relative travel between samples (um)
@@ -275,14 +283,16 @@ class SimulatedPlant:
     must not use them (hardware has no such thing). See the module docstring for the model.
     """
 
-    def __init__(self, scenario, seed: int | None = None, *, poses=None, record: bool = False):
+    def __init__(self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None):
         self.scenario = scenario
         n = scenario.n
         ss = np.random.SeedSequence(seed)
         self.seed = int(ss.entropy)  # type: ignore[arg-type]
-        run_ss, motion_ss, camera_ss = ss.spawn(3)
+        run_ss, motion_ss, camera_ss, drift_ss = ss.spawn(4)
         z = np.random.default_rng(run_ss).standard_normal((2, n))
         nz = scenario.noise
+        self._drift = HeadingDrift(n, nz.heading_drift_rad_per_um, drift_ss, DEFAULT_DRIFT if drift is None else drift)
+        self._odo = np.zeros(n)
         self._speed_factor = np.maximum(1.0 + nz.speed_rel_sd * z[0], MIN_FACTOR)
         self._radius_factor = np.maximum(1.0 + nz.turn_radius_rel_sd * z[1], MIN_FACTOR)
         self._motion_rng = np.random.default_rng(motion_ss)
@@ -305,6 +315,7 @@ class SimulatedPlant:
         self._arena_hit = np.zeros(n, dtype=bool)
         self._contacts: dict[tuple[int, int], str] = {}
         self._rule_cache: dict[tuple[int, int], tuple[bytes, tuple[str, str]]] = {}
+        self._flush_cache: dict[tuple[int, int], tuple[bytes, bool]] = {}
         self._events: list[SimEvent] = []
         self._I, self._J = np.triu_indices(n, k=1)
         self._record = bool(record)
@@ -389,6 +400,17 @@ class SimulatedPlant:
         """Per-run turning-radius factors drawn from the seed."""
         return self._radius_factor.copy()
 
+    @property
+    def odometer(self) -> np.ndarray:
+        """``(n,)`` distance (um) each robot has driven so far (arcs and straight runs; not slides or
+        compliance moves): the variable its heading drift is a function of."""
+        return self._odo.copy()
+
+    @property
+    def drift_bias(self) -> np.ndarray:
+        """Per-run heading-drift bias (rad per um driven) of each robot (the plant's hidden truth)."""
+        return self._drift.bias.copy()
+
     def true_poses(self) -> np.ndarray:
         """True poses ``(n, 3)`` (um, rad in [0, 2 pi))."""
         return self._pose.copy()
@@ -413,24 +435,26 @@ class SimulatedPlant:
 
     def _drive(self, turning: np.ndarray, chatter: np.ndarray, duration_s: float, t_start: float) -> None:
         nz = self.scenario.noise
-        z = self._motion_rng.standard_normal((3, self.n))
+        z = self._motion_rng.standard_normal((2, self.n))
         speed = self._v * self._speed_factor * np.maximum(1.0 + SEGMENT_JITTER * nz.speed_rel_sd * z[0], MIN_FACTOR)
         radius = self._r * self._radius_factor * np.maximum(1.0 + SEGMENT_JITTER * nz.turn_radius_rel_sd * z[1], MIN_FACTOR)
-        drift = nz.heading_drift_rad_per_um * z[2]
-        kappa = np.where(chatter, 0.5 / radius, np.where(turning, 1.0 / radius, 0.0)) + drift
+        kappa = np.where(chatter, 0.5 / radius, np.where(turning, 1.0 / radius, 0.0))  # drift comes on top
         straight = ~turning & ~chatter
-        bound = speed * (1.0 + np.abs(kappa) * self._hd)  # fastest point of each body (um/s)
+        reach = speed * duration_s
+        kmax = np.abs(kappa) + np.array([self._drift.max_abs(i, self._odo[i], reach[i]) for i in range(self.n)])
+        bound = speed * (1.0 + kmax * self._hd)  # fastest point of each body (um/s)
         ctx = (speed, kappa, straight, bound)
         if self._quiet(bound, duration_s):
             # Broad phase: nobody can come near anybody or the wall during this Drive; closed form only.
             p0 = self._pose.copy()
             free = _Motion(np.full(self.n, _FREE), np.zeros((self.n, 2)), np.full(self.n, math.inf), set(), False)
             self._pose = self._poses_at(p0, free, ctx, np.array([duration_s]))[0]
+            if self._record:
+                self._record_segment(p0, free, ctx, duration_s, t_start)
+            self._odo += reach
             self._contacts = {}
             self._docked[:] = False
             self._stuck[:] = False
-            if self._record:
-                self._record_segment(p0, free, ctx, duration_s, t_start)
             return
         tau = 0.0
         stalls = 0
@@ -452,6 +476,7 @@ class SimulatedPlant:
                 self._stuck &= ~moved
                 if self._record:
                     self._record_segment(p0, motion, ctx, dt, t_start + tau)
+                self._odo += np.where(motion.mode == _FREE, speed * dt, 0.0)  # slides and holds drive nowhere
             if hit is None and dt == slide_ends:
                 for i in np.flatnonzero(motion.slide_end == slide_ends):
                     self._log(t_start + tau + dt, int(i), "slide_off", None, "its corner ran off the face it slid along")
@@ -498,12 +523,35 @@ class SimulatedPlant:
         taus = np.asarray(taus, dtype=np.float64)
         out = np.repeat(p0[None], taus.size, axis=0)
         f = np.flatnonzero(motion.mode == _FREE)
-        if f.size:
+        if f.size and not self._drift.active:
             out[:, f] = move(p0[f][None], speed[f][None, :] * taus[:, None], kappa[f][None, :])
+        elif f.size:
+            out[:, f] = self._drift_poses(p0[f], f, speed[f], kappa[f], taus)
         s = np.flatnonzero(motion.mode == _SLIDE)
         if s.size:
             out[:, s, :2] = p0[s, :2][None] + taus[:, None, None] * motion.slide_v[s][None]
         return out
+
+    def _drift_poses(self, p0, idx, speed, kappa, taus) -> np.ndarray:
+        """Poses ``(K, m, 3)`` of robots ``idx`` driving freely for ``taus`` s from ``p0`` on their base
+        curvature plus the drift's, which is piecewise constant between odometer knots: exact arcs,
+        composed (all robots at once, pieces padded to a common count)."""
+        tmax = float(taus.max())
+        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed)]
+        k = max(len(p[0]) for p in pieces)
+        lengths = np.zeros((len(pieces), k))
+        kd = np.zeros((len(pieces), k))
+        for r, (ln, kv) in enumerate(pieces):
+            lengths[r, : ln.size] = ln
+            kd[r, : ln.size] = kv
+        curv = kappa[:, None] + kd
+        nodes = follow(p0, lengths, curv)  # (m, k + 1, 3): the pose at every knot
+        cum = np.concatenate([np.zeros((len(pieces), 1)), np.cumsum(lengths, axis=1)], axis=1)
+        s = np.minimum(speed[None, :] * taus[:, None], cum[None, :, -1])  # (K, m)
+        last = np.array([p[0].size - 1 for p in pieces])  # each robot's own last piece (not the padding)
+        j = np.minimum((s[..., None] >= cum[None, :, 1:]).sum(axis=-1), last[None, :])  # piece each s lies in
+        rows = np.arange(len(pieces))[None, :]
+        return move(nodes[rows, j], s - cum[rows, j], curv[rows, j])
 
     # -- contact search ------------------------------------------------------------------------------
 
@@ -620,6 +668,7 @@ class SimulatedPlant:
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self._contacts = {}
             return _Motion(mode, slide_v, slide_end, excluded, False)
+        kappa = kappa + self._drift.curvature_at(self._odo)
         probe = move(P, PROBE_UM, kappa)  # each robot alone, a hair further along its own motion
         # Touching pairs and whether each side's motion pushes into the other.
         push: dict[int, list[int]] = {}
@@ -657,36 +706,38 @@ class SimulatedPlant:
         done: set[int] = set(forced)
         slide_partner: dict[int, int] = {}
 
-        # 1. Self-aligning compliance: straight robots pushing into each other head-on.
-        for i in sorted(pushers):
-            for j in push[i]:
-                if j <= i or i in done or j in done or i not in push.get(j, []):
-                    continue
-                if not (straight[i] and straight[j]):
-                    continue
-                if min(approach[(i, j)], approach[(j, i)]) < HEAD_ON_MIN_APPROACH:
-                    continue
-                if math.cos(P[i, 2] - P[j, 2]) >= 0.0:
-                    continue
-                key = self._rule_key(i, j, straight)
-                hit = self._rule_cache.get((i, j))
-                if hit is not None and hit[0] == key:
-                    kind, detail = hit[1]
-                else:
-                    kind, detail = self._self_align(i, j)
-                    self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-                outcomes[(i, j)] = (kind, detail)
-                outcomes[(j, i)] = (kind, detail)
-                mode[i] = mode[j] = _HELD
-                done |= {i, j}
+        # 1. Self-aligning compliance: two free straight robots meeting head-on.
+        for i, j in sorted({(min(a, b), max(a, b)) for a in pushers for b in push[a] if b != ARENA}):
+            if i in done or j in done or not self._head_on(i, j, straight, speed, approach):
+                continue
+            key = self._rule_key(i, j, straight)
+            hit = self._rule_cache.get((i, j))
+            if hit is not None and hit[0] == key:
+                kind, detail = hit[1]
+            else:
+                kind, detail = self._self_align(i, j)
+                self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+            outcomes[(i, j)] = (kind, detail)
+            outcomes[(j, i)] = (kind, detail)
+            mode[i] = mode[j] = _HELD
+            done |= {i, j}
 
         # 2. Each remaining robot that pushes into something.
         for i in sorted(pushers - done):
             cs = push[i]
             mode[i] = _HELD
             if not straight[i]:
+                # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
+                # into its slot on an arc is docked there, and stays docked while it keeps pushing.
+                flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
                 for j in cs:
-                    outcomes[(i, j)] = ("blocked", "a turning robot cannot pivot off an obstacle")
+                    outcomes[(i, j)] = (
+                        ("dock", "arrived flush against the structure") if j in flush
+                        else ("blocked", "a turning robot cannot pivot off an obstacle")
+                    )
+                if flush:
+                    self._docked[i] = True
+                    self._stuck[i] = False
                 continue
             if ARENA in cs:
                 self._arena_hit[i] = True
@@ -712,7 +763,7 @@ class SimulatedPlant:
                     excluded.add((min(i, j), max(i, j)))
                 continue
             if len(cs) > 1 and len(fronts) == len(cs):
-                flush = [j for j in cs if self._flush(i, j)]
+                flush = [j for j in cs if self._flush_cached(i, j, straight)]
                 for j in cs:
                     outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
                 self._docked[i] = bool(flush)
@@ -744,6 +795,25 @@ class SimulatedPlant:
             mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
         )
         return _Motion(mode, slide_v, slide_end, excluded, recheck)
+
+    def _head_on(self, i: int, j: int, straight, speed, approach) -> bool:
+        """Whether touching robots i and j meet head-on (the situation of self-aligning compliance).
+
+        Both drive straight and neither is docked (a structure's member is a static body: rule 4), their
+        headings are opposed, the pair closes (at least one pushes, and together they approach), and
+        every contact point lies in the front half of both bodies: front edge on front edge, a front
+        corner on a front corner, or a front corner on the other's long side near its front. Whether
+        they then form G_1 is decided by the seed's limits (:meth:`_self_align`), not here.
+        """
+        if not (straight[i] and straight[j]) or speed[i] <= 0 or speed[j] <= 0:
+            return False
+        if self._docked[i] or self._docked[j]:
+            return False
+        P = self._pose
+        if math.cos(P[i, 2] - P[j, 2]) >= 0.0 or approach[(i, j)] + approach[(j, i)] <= 0.0:
+            return False
+        pts, _ = self._contact_points(i, j)
+        return bool((_local(pts, P[i])[0] >= 0.0).all() and (_local(pts, P[j])[0] >= 0.0).all())
 
     def _rule_key(self, i: int, j: int, straight) -> bytes:
         """What a contact rule's outcome depends on: the arm kinds of i and j and, bit for bit, the poses
@@ -788,6 +858,19 @@ class SimulatedPlant:
         nrm = max((m for m, out in faces if out >= best - FACE_TIE_UM), key=lambda m: float(-(m @ h)))
         alpha = angle_difference(P[i, 2], _heading_of(-nrm))
         return c, nrm, float(alpha)
+
+    def _flush_cached(self, i: int, j: int, straight) -> bool:
+        """:meth:`_flush`, remembered while nothing near the pair moves (a blocked robot is asked every
+        evaluation); headings not square to each other are not flush (cheap test first)."""
+        d = (self._pose[i, 2] - self._pose[j, 2]) % (0.5 * math.pi)
+        if min(d, 0.5 * math.pi - d) > FLUSH_TOL_RAD:
+            return False
+        key = self._rule_key(i, j, straight)
+        hit = self._flush_cache.get((i, j))
+        if hit is None or hit[0] != key:
+            hit = (key, self._flush(i, j))
+            self._flush_cache[(i, j)] = hit
+        return hit[1]
 
     def _flush(self, i: int, j: int) -> bool:
         pts, own = self._contact_points(i, j)
