@@ -222,9 +222,9 @@ class _Runner:
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None, target=None) -> bool:
         """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge.
 
-        With ``target`` (a gross-motion goal pose), docked bodies are kept :attr:`~stressbots.control.tuning.Tuning.gross_docked_clearance_um`
-        away except within one body length of the target: a robot that touches the structure on the
-        way is turned flush against the wrong edge by docking compliance and cannot pivot off again.
+        With ``target`` (a gross-motion goal pose), docked bodies are kept ``Tuning.gross_docked_clearance_um``
+        away except within one body length of the target: a robot that touches the structure on the way
+        is turned flush against the wrong edge by docking compliance and cannot pivot off again.
         """
         c = self.opts.clearance_um if clearance is None else clearance
         samples = np.asarray(samples, dtype=np.float64)
@@ -531,7 +531,13 @@ class _Runner:
                 continue
             m = self.merge(i, behind, right, psi)
             if m is None:
-                if abs(miss) <= self.tune.small_miss_um and abs(right) <= self.tune.small_miss_um:  # no better without a loop: a small miss (12 um: ~6 um RMS)
+                small = abs(miss) <= self.tune.small_miss_um and abs(right) <= self.tune.small_miss_um  # ~6 um RMS
+                if not small and abs(miss) <= self.tune.late_miss_um and self.loop_blocked(i, k):
+                    # a loop from here would meet the structure (and a turning robot cannot pivot off it):
+                    # drive in with the miss; docking compliance takes the angle, the offset stays
+                    self.log("late", i, f"{self.scn.names[i]} drives in {miss:.0f} um off its line: a loop here would meet the structure")
+                    small = True
+                if small:  # no better without a loop
                     self.drive([(k - 1, (max(behind, 0.0) / v + self.opts.push_s) if last else self.tx)])
                     if last:
                         return self.check_docked(i, k)
@@ -548,6 +554,13 @@ class _Runner:
                 steps += self.interpolated_steps(r / R, min(arc_t, left), k, k - 1)
             self.drive(steps)
         return False
+
+    def loop_blocked(self, i: int, k: int) -> bool:
+        """Whether a full clockwise loop of robot ``i`` from where it is would meet the structure, a lower
+        orbit or the arena edge (measured; no clearance: contact is what traps a turning robot)."""
+        r = float(self.r_hat[i])
+        loop = move(self.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
+        return self.obstacles_hit(loop, i, self.orbiting_below(k), clearance=0.0)
 
     def _before(self, w, a_pose, route_phase, i) -> bool:
         """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route."""

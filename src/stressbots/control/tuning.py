@@ -83,6 +83,9 @@ class Tuning:
         The merge onto the approach line must survive this much less left heading than measured.
     small_miss_um:
         A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS).
+    late_miss_um:
+        A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would
+        meet the structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um).
     orbit_watch_um:
         An orbit closer than this to another orbit, a docked body or the arena edge is logged.
     """
@@ -114,6 +117,7 @@ class Tuning:
     funnel_right_um: float = 60.0
     merge_heading_margin_deg: float = 1.5
     small_miss_um: float = 12.0
+    late_miss_um: float = 25.0
     orbit_watch_um: float = 10.0
 
 
