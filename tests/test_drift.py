@@ -29,7 +29,8 @@ TAIL = 1e-4
 def many_robots(n: int, *, speed=100.0, sigma=SIGMA, heading_deg=0.0) -> Scenario:
     """``n`` identical robots 3 mm apart on a line (no contact within a few mm of driving)."""
     robots = tuple(
-        Robot(f"R{k}", 120.0, 15.0, speed_um_s=speed, turn_radius_um=200.0, start=Pose.from_degrees(3000.0 * k, 0.0, heading_deg))
+        Robot(f"R{k}", 120.0, 15.0, speed_um_s=speed, turn_radius_um=200.0,
+              start=Pose.from_degrees(3000.0 * k, 0.0, heading_deg))
         for k in range(n)
     )
     return Scenario(name="many", robots=robots, electrodes=Electrodes(), arena_um=None, noise=Noise(heading_drift_rad_per_um=sigma))

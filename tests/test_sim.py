@@ -337,7 +337,7 @@ LAYOUTS = sorted((EXAMPLES.parent / "tests" / "data" / "layouts").glob("*.toml")
 
 @pytest.mark.parametrize("path", LAYOUTS, ids=[p.stem for p in LAYOUTS])
 def test_zero_noise_open_loop_docks_every_robot_of_larger_generated_layouts(path):
-    """6-8 robots, every shape the planner plans quickly enough to store: generated layouts and the
+    """6-8 robots, every shape (and a tee or cross stem docking on a rear edge): generated layouts and the
     planner's own plans, written by ``benchmarks/bench_physics.py --write-layouts`` (planning them takes
     seconds to minutes, replaying them a fraction of a second). The wider sweep is that benchmark's."""
     from stressbots.plans import load as load_plan
@@ -352,10 +352,9 @@ def test_zero_noise_open_loop_docks_every_robot_of_larger_generated_layouts(path
     assert {e.kind for e in plant.events} <= {"self_align", "dock"}, plant.events
 
 
-def test_layout_fixtures_cover_six_to_eight_robots_and_every_shape():
-    shapes = {p.stem.split("-")[0] for p in LAYOUTS}
-    counts = {int(p.stem.split("-")[1]) for p in LAYOUTS}
-    assert shapes == {"tee", "cross", "comb", "ladder"} and counts == {6, 7, 8}
+def test_layout_fixtures_cover_six_to_eight_robots_of_every_shape():
+    have = {(p.stem.split("-")[0], int(p.stem.split("-")[1])) for p in LAYOUTS}
+    assert have == {(shape, n) for shape in ("tee", "cross", "comb", "ladder") for n in (6, 7, 8)}
 
 
 def test_open_loop_with_literature_noise_drifts_away(example_plan):

@@ -120,7 +120,9 @@ class HeadingDrift:
         Knot spacing and variance split.
     """
 
-    def __init__(self, n: int, sigma_rad_per_um: float, seed_sequence: np.random.SeedSequence, model: DriftModel = DEFAULT_DRIFT):
+    def __init__(
+        self, n: int, sigma_rad_per_um: float, seed_sequence: np.random.SeedSequence, model: DriftModel = DEFAULT_DRIFT
+    ):
         self.n = int(n)
         self.model = model
         self.sigma = float(sigma_rad_per_um)

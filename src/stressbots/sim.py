@@ -51,8 +51,10 @@ motion pushes (also applied at the end of every Drive, so a contact made on its 
    long side near its front). With incidence ``alpha = theta_i - theta_j - pi`` (wrapped) and lateral
    misalignment ``w_y`` (offset of the two front-edge centres across the meeting axis, the bisector of
    the two headings), if ``|alpha| < 60 deg`` and ``|w_y| < 80 um`` they form G_1 (seed App. 3.5: also
-   when ``w_y`` exceeds the width, so that only a corner meets the other's side): both turn to the mean axis (each by alpha/2, so the pair rotates as a whole) and slide until
-   their front-edge midpoints coincide at the midpoint of the two, collinear and flush. Both are docked.
+   when ``w_y`` exceeds the width, so that only a corner meets the other's side): both turn to the mean
+   axis (each by alpha/2, so the pair rotates as a whole) and slide until their front-edge midpoints
+   coincide at the midpoint of the two, collinear and flush. Both are docked. A front corner that reaches
+   the rear half of the other's side is a sideswipe, not a meeting: rule 5, they slide past.
    Outside those limits, or if the aligned pair would overlap a third body or leave the arena, both stop
    where they met: stuck (H).
 2. **Turning robot** (arm down or chattering) whose motion pushes into anything: blocked; it stops for
@@ -89,8 +91,9 @@ Determinism
 -----------
 Everything random comes from ``np.random.SeedSequence(seed)``, spawned into independent streams for
 the per-run factors, the per-Drive jitter, the camera (so observing more or less often never changes
-the motion) and the drift (one child stream per robot, knot values drawn in knot order). The same seed and the same calls give bit-identical results; :meth:`SimulatedPlant.copy`
-continues bit-identically; :func:`check_determinism` proves it.
+the motion) and the drift (one child stream per robot, knot values drawn in knot order). The same seed
+and the same calls give bit-identical results; :meth:`SimulatedPlant.copy` continues bit-identically;
+:func:`check_determinism` proves it.
 """
 
 from __future__ import annotations
@@ -275,6 +278,9 @@ class SimulatedPlant:
         Start poses (um, rad) instead of the scenario's, e.g. for constructed contacts.
     record : bool
         Keep a sampled trajectory (:meth:`trace`) for pictures; off by default (it costs time).
+    drift : stressbots.drift.DriftModel, optional
+        Knot spacing and bias/walk split of the heading drift (default
+        :data:`stressbots.drift.DEFAULT_DRIFT`); its size is the scenario's ``heading_drift_deg_per_mm``.
 
     Notes
     -----
@@ -283,7 +289,9 @@ class SimulatedPlant:
     must not use them (hardware has no such thing). See the module docstring for the model.
     """
 
-    def __init__(self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None):
+    def __init__(
+        self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None
+    ):
         self.scenario = scenario
         n = scenario.n
         ss = np.random.SeedSequence(seed)
