@@ -13,7 +13,7 @@ import pytest
 
 from stressbots.assessment import shape_error
 from stressbots.control import Plant
-from stressbots.edr import assemble, nominal_plan
+from stressbots.control import assemble, nominal_plan
 from stressbots.scenario import Noise, load
 from stressbots.sim import SimulatedPlant
 
@@ -64,18 +64,28 @@ def test_closed_loop_without_noise_assembles_through_the_protocol(example):
     assert {"success", "seed", "robots"} <= set(d) and all({"name", "final", "goal", "docked"} <= set(r) for r in d["robots"])
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2, 3, 4, 5])
-def test_closed_loop_at_literature_noise_assembles_the_example(example, seed):
-    """Speed sd 5 %, radius sd 3 %, drift 3.7 deg/mm, camera 2 um / 1 deg, 2 % dropouts, t_x = 1 s."""
+def test_closed_loop_at_literature_noise_assembles_the_example(example):
+    """Speed sd 5 %, radius sd 3 %, drift 3.7 deg/mm, camera 2 um / 1 deg, 2 % dropouts, t_x = 1 s.
+
+    Since the simulator's heading drift is a persistent per-robot process (a bias per run plus a random
+    walk, issue 11) the example assembles in about 85-90 % of plant seeds (of seeds 0-19: 18 with the
+    controller before issue 12's changes, 17 after), so a per-seed assertion would test luck: at least 5
+    of seeds 0-5 must assemble, each checked against the plant's truth.
+    """
     scn, plan = example
-    sim = SimulatedPlant(scn, seed=seed)
-    result = assemble(scn, ProtocolOnly(sim), seed=seed, plan=plan)
-    assert result.success, (result.failure, result.events[-6:])
-    independent = _check_truth(scn, plan, sim, result)
-    # the controller's own figure comes from its estimates; it agrees with the truth to camera accuracy
-    assert abs(independent - result.shape_error_rms_um) < 3.0
-    kinds = {e["kind"] for e in result.events}
-    assert {"transfer", "depart", "G_1", "docked"} <= kinds
+    ok = 0
+    for seed in range(6):
+        sim = SimulatedPlant(scn, seed=seed)
+        result = assemble(scn, ProtocolOnly(sim), seed=seed, plan=plan)
+        if not result.success:
+            continue
+        ok += 1
+        independent = _check_truth(scn, plan, sim, result)
+        # the controller's own figure comes from its estimates; it agrees with the truth to camera accuracy
+        assert abs(independent - result.shape_error_rms_um) < 3.0
+        kinds = {e["kind"] for e in result.events}
+        assert {"transfer", "depart", "G_1", "docked"} <= kinds
+    assert ok >= 5, ok
 
 
 def test_same_seed_same_run(example):
@@ -133,16 +143,22 @@ class Blindfolded(ProtocolOnly):
 
 
 def test_recovers_from_dropouts(example):
+    """20 % dropouts and one robot hidden for 5 frames: the controller dead-reckons and goes on. Success
+    is statistical on the drifting simulator (see the test above): at least 2 of 3 plant seeds."""
     scn, plan = example
     heavy = scn.with_noise(replace(scn.noise, camera_dropout=0.2))
-    sim = SimulatedPlant(heavy, seed=3)
     c = scn.names.index("C")
-    plant = Blindfolded(sim, c, after_s=20.0, frames=5)
-    result = assemble(heavy, plant, seed=3, plan=plan)
-    assert plant.hidden == 5
-    assert any(e["kind"] == "lost" for e in result.events)
-    assert result.success, (result.failure, result.events[-6:])
-    _check_truth(heavy, plan, sim, result)
+    ok = 0
+    for seed in (3, 4, 5):
+        sim = SimulatedPlant(heavy, seed=seed)
+        plant = Blindfolded(sim, c, after_s=20.0, frames=5)
+        result = assemble(heavy, plant, seed=seed, plan=plan)
+        assert plant.hidden == 5
+        assert any(e["kind"] == "lost" for e in result.events)
+        if result.success:
+            ok += 1
+            _check_truth(heavy, plan, sim, result)
+    assert ok >= 2, ok
 
 
 class DriftingCamera(ProtocolOnly):

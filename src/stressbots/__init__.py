@@ -19,8 +19,7 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.generate` - random feasible scenarios for tests and benchmarks
 - :mod:`stressbots.sim` - the simulated plant: control error, contact, compliance, camera
 - :mod:`stressbots.assessment` - placement and shape errors after a best rigid alignment
-- :mod:`stressbots.control` - the Plant protocol and closed-loop assembly (seed Appendix 3)
-- :mod:`stressbots.edr` - the closed-loop EDR controller (work in progress)
+- :mod:`stressbots.control` - the Plant protocol and the closed-loop EDR controller (seed Appendix 3; :mod:`stressbots.edr` re-exports it)
 - :mod:`stressbots.bounds` - error bounds, forward projections, regions A_i*
 - :mod:`stressbots.montecarlo` - Monte Carlo studies of closed-loop assembly
 - :mod:`stressbots.store` - the trial store of a campaign (DIR/trials.sqlite)

@@ -48,7 +48,7 @@ from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
 
-__all__ = ["PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s"]
+__all__ = ["PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
 
 
 @dataclass(frozen=True)
@@ -139,8 +139,14 @@ class PlanResult:
 
 
 @dataclass(frozen=True)
-class _Obstacles:
-    """Static obstacles for one robot's route: orbit discs, docked bodies (boxes) and the arena."""
+class Obstacles:
+    """Static obstacles for one robot's route: orbit discs, docked bodies (boxes) and the arena.
+
+    Public routing API (with :func:`route` and :class:`NoRoute`): the closed-loop controller builds one
+    from its estimates (orbits as measured, docked bodies where they are seen) to route around them.
+    Discs are ``(K, 2)`` centres and ``(K,)`` radii (um); boxes are body poses ``(B, 3)`` with their
+    lengths and widths (um); ``arena`` is ``(width_um, height_um)`` or None (no walls).
+    """
 
     disc_centres: np.ndarray
     disc_radii: np.ndarray
@@ -151,8 +157,8 @@ class _Obstacles:
     box_labels: tuple[str, ...]
     arena: tuple[float, float] | None
 
-    def with_disc(self, centre, radius, label) -> "_Obstacles":
-        return _Obstacles(
+    def with_disc(self, centre, radius, label) -> "Obstacles":
+        return Obstacles(
             np.vstack([self.disc_centres, np.reshape(centre, (1, 2))]),
             np.append(self.disc_radii, radius),
             self.disc_labels + (label,),
@@ -233,7 +239,7 @@ class _Obstacles:
         return None
 
 
-def _path_hit(obst: _Obstacles, path: pathlib.Path, length: float, width: float, opts: PlannerOptions) -> str | None:
+def _path_hit(obst: Obstacles, path: pathlib.Path, length: float, width: float, opts: PlannerOptions) -> str | None:
     return obst.first_hit(path.sample(opts.sample_um), length, width, opts.clearance_um)
 
 
@@ -244,7 +250,9 @@ def _path_hit(obst: _Obstacles, path: pathlib.Path, length: float, width: float,
 _KNN = 16  # successors per roadmap node
 
 
-class _NoRoute(Exception):
+class NoRoute(Exception):
+    """No collision-free route exists (at the given clearance); ``reason`` says what blocks it."""
+
     def __init__(self, reason: str):
         super().__init__(reason)
         self.reason = reason
@@ -277,7 +285,7 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     return poses, owner
 
 
-def _edges_clear(obst: "_Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions", recheck=None) -> np.ndarray:
+def _edges_clear(obst: "Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions", recheck=None) -> np.ndarray:
     """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool.
 
     Two stages: coarse samples with the clearance inflated by the most any body point moves between two
@@ -307,7 +315,7 @@ def _edges_clear(obst: "_Obstacles", starts, goals, radius, length, width, opts:
     return clear
 
 
-def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: _Obstacles, length: float, width: float, opts: PlannerOptions) -> np.ndarray:
+def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: Obstacles, length: float, width: float, opts: PlannerOptions) -> np.ndarray:
     """Collision-free waypoint poses: tangent to the orbit discs and uniformly random."""
     x0, y0, x1, y1 = region
     nodes = []
@@ -325,14 +333,14 @@ def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, flo
     return allnodes[~obst.hits(allnodes, length, width, opts.clearance_um)]
 
 
-def _route(
+def route(
     sources: np.ndarray,
     source_costs: np.ndarray,
     target: np.ndarray,
     radius: float,
     length: float,
     width: float,
-    obst: _Obstacles,
+    obst: Obstacles,
     opts: PlannerOptions,
     rng: np.random.Generator,
     who: str,
@@ -344,15 +352,15 @@ def _route(
     ``source_costs`` (um) are added to each source's route length (waiting time times speed).
     ``extra_check(source_index, path)`` may veto a whole route (e.g. time-dependent conflicts).
     Returns ``(source_index, path, waypoints)`` (the roadmap poses the route passes, ending with the
-    target: a closed-loop controller steers from one to the next); raises :class:`_NoRoute`.
+    target: a closed-loop controller steers from one to the next); raises :class:`NoRoute`.
     """
     sources = np.atleast_2d(sources)
     blocked_by = obst.first_hit(target[None, :], length, width, opts.clearance_um)
     if blocked_by is not None:
-        raise _NoRoute(f"{who}: the start of its straight approach is blocked by {blocked_by}")
+        raise NoRoute(f"{who}: the start of its straight approach is blocked by {blocked_by}")
     free = ~obst.hits(sources, length, width, opts.clearance_um)
     if not free.any():
-        raise _NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {obst.first_hit(sources[:1], length, width, opts.clearance_um)}")
+        raise NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {obst.first_hit(sources[:1], length, width, opts.clearance_um)}")
     sources, source_costs = sources[free], np.asarray(source_costs)[free]
     index_of = np.flatnonzero(free)
     # 1. direct shortest paths, cheapest first
@@ -426,7 +434,7 @@ def _route(
             graph = graph.tocsr()
             graph.eliminate_zeros()
     common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
-    raise _NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
+    raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -589,11 +597,11 @@ class _Planner:
     def lab(self, i: int) -> str:
         return _label(self.scn, i, self.rank[i])
 
-    def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> _Obstacles:
+    def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> Obstacles:
         orbiting = list(orbiting)
         docked = list(docked)
         centres = turning_centres(self.tl.poses[orbiting], self.r[orbiting]) if orbiting else np.zeros((0, 2))
-        return _Obstacles(
+        return Obstacles(
             centres,
             self.rstar[orbiting] if orbiting else np.zeros(0),
             tuple(f"the orbit of {self.lab(i)}" for i in orbiting),
@@ -604,7 +612,7 @@ class _Planner:
             self.scn.arena_um,
         )
 
-    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: _Obstacles, who: str, a_max: float | None = None) -> pathlib.Path:
+    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: Obstacles, who: str, a_max: float | None = None) -> pathlib.Path:
         """The final approach of robot ``i`` into its slot, ``a`` um long.
 
         A clockwise arc of radius ``s / phi`` (flown as an interpolated turn, seed App. 3.1) that arrives
@@ -638,7 +646,7 @@ class _Planner:
             hit = obst.first_hit(path.sample(self.opts.sample_um), L, W, self.opts.clearance_um, box_tol=0.5)
             if hit is None:
                 return path
-        raise _NoRoute(f"{who}: the approach into its slot is blocked by {hit}")
+        raise NoRoute(f"{who}: the approach into its slot is blocked by {hit}")
 
     # -- docking of single robots (steps 2..n-1) -------------------------------------------------
 
@@ -657,7 +665,7 @@ class _Planner:
         waits = np.arange(m) * period / m
         p0 = np.repeat(self.tl.poses[i][None, :], m, axis=0)
         sources = advance(p0, np.ones(m, bool), self.v[i], self.r[i], waits)
-        s, path, waypoints = _route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
+        s, path, waypoints = route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
         t0 = self.tl.t
         self.tl.apply(k, float(waits[s]))
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])
@@ -675,7 +683,7 @@ class _Planner:
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
 
-    def _free_run(self, pose: np.ndarray, i: int, obst: _Obstacles, limit_um: float, *, backwards: bool) -> float:
+    def _free_run(self, pose: np.ndarray, i: int, obst: Obstacles, limit_um: float, *, backwards: bool) -> float:
         """Longest straight run (um) of robot ``i`` from ``pose`` (ahead, or behind it) clear of ``obst``."""
         h = np.array([math.sin(pose[2]), math.cos(pose[2])]) * (-1.0 if backwards else 1.0)
         probe = np.arange(0.0, limit_um, self.opts.sample_um)
@@ -708,7 +716,7 @@ class _Planner:
         span = 2.0 * max(self.scn.arena_um or (5000.0, 5000.0))
         d_free = self._free_run(gN, N, obst_low, span, backwards=True)
         if d_free < aN:
-            raise _NoRoute(f"{whoN}: its straight approach into its slot is blocked ({max(d_free, 0.0):.0f} um free behind it)")
+            raise NoRoute(f"{whoN}: its straight approach into its slot is blocked ({max(d_free, 0.0):.0f} um free behind it)")
         # Parking tracks for D_n's runs during the earlier pieces: the final corridor itself (its runs
         # stop short of the slot) and the free line ahead of D_n's start.
         # Candidate tracks start on D_n's start orbit (at quarter turns), so reaching them is cheap.
@@ -740,10 +748,10 @@ class _Planner:
         self._pair_schedule = None
         self._approach_len = approachM.length
         try:
-            _route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
-        except _NoRoute as exc:
+            route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
+        except NoRoute as exc:
             reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
-            raise _NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
+            raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
 
     def _run_starts(self, N: int, durs: Sequence[float], park) -> list[np.ndarray]:
@@ -754,7 +762,7 @@ class _Planner:
             return [final] * len(durs)
         return [np.asarray(park[0], float)] * (len(durs) - 1) + [final]
 
-    def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, park, obst_low: _Obstacles, aM: float):
+    def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, park, obst_low: Obstacles, aM: float):
         """Ways to cut D_{n-1}'s route (duration ``T`` s) into pieces for the G_1 schedule.
 
         The last piece is D_n's run into its slot, so it lasts at most ``d_free / v_n``; the earlier
@@ -894,7 +902,7 @@ class _Planner:
         self._pair_schedule = (N, M, fullM, wait0, tuple(durs), runs, a_paths)
         return None
 
-    def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst, *, route: bool = True) -> pathlib.Path | str:
+    def _timed_path(self, start, goal, v, r, L, W, wait0, period, obst, *, use_route: bool = True) -> pathlib.Path | str:
         """A collision-free path of duration ``wait0 + k * period`` (k >= 0 whole) from start to goal.
 
         Tries the direct paths of those lengths first; with ``route`` it then routes around the
@@ -902,12 +910,12 @@ class _Planner:
         """
         start = np.asarray(start, float)
         goal = np.asarray(goal, float)
-        key = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), round(wait0, 6), tuple(np.round(obst.disc_centres, 3).ravel()), route)
+        key = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), round(wait0, 6), tuple(np.round(obst.disc_centres, 3).ravel()), use_route)
         if key not in self._timed_cache:
-            self._timed_cache[key] = self._timed_path_uncached(start, goal, v, r, L, W, wait0, period, obst, route)
+            self._timed_cache[key] = self._timed_path_uncached(start, goal, v, r, L, W, wait0, period, obst, use_route)
         return self._timed_cache[key]
 
-    def _timed_path_uncached(self, start, goal, v, r, L, W, wait0, period, obst, route) -> pathlib.Path | str:
+    def _timed_path_uncached(self, start, goal, v, r, L, W, wait0, period, obst, use_route) -> pathlib.Path | str:
         base = pathlib.shortest_path(start, goal, r)
         kmin = max(0, math.ceil((base.length / v - wait0) / period - 1e-9))
         wants = [v * (wait0 + k * period) for k in range(kmin, kmin + 4)]
@@ -921,7 +929,7 @@ class _Planner:
             if hit is None:
                 return p
             last = f"blocked by {hit}"
-        if not route:
+        if not use_route:
             return last
         # Route around the obstacles once, then stretch the route's tail to an exact length.
         rkey = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), tuple(np.round(obst.disc_centres, 3).ravel()))
@@ -929,8 +937,8 @@ class _Planner:
             try:
                 # D_n's timed legs are local manoeuvres: small roadmaps, or the G_1 search gets slow
                 light = replace(self.opts, roadmap_nodes=self.opts.roadmap_nodes[:2])
-                self._route_cache[rkey] = _route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")[1]
-            except _NoRoute as exc:
+                self._route_cache[rkey] = route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")[1]
+            except NoRoute as exc:
                 self._route_cache[rkey] = exc.reason.lstrip(": ") or last
         routed = self._route_cache[rkey]
         if isinstance(routed, str):
@@ -1054,7 +1062,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
             for k in range(scn.n - 2, 0, -1):
                 say(f"docking {planner.lab(planner.by_rank[k])}")
                 planner.dock_single(k)
-        except _NoRoute as exc:
+        except NoRoute as exc:
             failures.append(exc.reason)
             continue
         steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)

@@ -1,5 +1,11 @@
 """Control of the group through a plant: the Plant protocol and closed-loop assembly.
 
+Modules: :mod:`~stressbots.control.runner` (the closed loop, :func:`assemble`),
+:mod:`~stressbots.control.queries` (pure geometric queries), :mod:`~stressbots.control.tuning`
+(:class:`ControllerOptions` and the named thresholds :class:`Tuning`), :mod:`~stressbots.control.targets`
+(slots from a nominal plan or the structure alone), :mod:`~stressbots.control.result`
+(:class:`AssemblyResult`) and :mod:`~stressbots.control.determinism` (:func:`check_determinism`).
+
 A *plant* is whatever the voltage signal drives and the camera watches: the built-in simulator
 (:class:`stressbots.sim.SimulatedPlant`) or lab hardware (a waveform generator and a microscope camera).
 The controller talks to it only through :class:`Plant`, so hardware can stand in for the simulator
@@ -13,7 +19,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from .waveform import Segment
+from ..waveform import Segment
 
 __all__ = ["Plant"]
 
@@ -38,9 +44,12 @@ class Plant(Protocol):
     def apply(self, waveform: Sequence[Segment]) -> None: ...
 
 
-# The closed-loop EDR controller (the paper's Appendix 3) lives in :mod:`stressbots.edr` and is
-# re-exported here, beside the Plant protocol it drives. Its measured success rates and known limits
-# are in docs/design.md (section 3.9) and the README's Status section.
-from .edr import AssemblyResult, ControllerOptions, assemble, nominal_plan  # noqa: E402
+# The closed-loop EDR controller (the paper's Appendix 3): its measured success rates and known limits
+# are in docs/design.md and the README's Status section.
+from .determinism import check_determinism  # noqa: E402
+from .result import AssemblyResult  # noqa: E402
+from .runner import assemble  # noqa: E402
+from .targets import Targets, nominal_plan, structure_targets  # noqa: E402
+from .tuning import ControllerOptions, Tuning  # noqa: E402
 
-__all__ += ["AssemblyResult", "ControllerOptions", "assemble", "nominal_plan"]
+__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "Tuning", "assemble", "check_determinism", "nominal_plan", "structure_targets"]

@@ -1,0 +1,242 @@
+"""Benchmark: how general is the closed loop? Generated layouts of 2-8 robots, tuning and held-out sets.
+
+Each layout is :func:`stressbots.generate.random_scenario` with a layout seed: ``n`` from 2 to 8, every
+named shape (``pair`` for n = 2; ``tee``, ``cross``, ``comb``, ``ladder`` otherwise, which cover docking
+on a robot's rear edge and into the gaps between docked teeth), heterogeneous robots (L, W, v, r drawn
+per robot), the structure anywhere in the middle of the arena at any rotation, start orbits anywhere
+around it. Every layout runs ``--plant-seeds`` plant seeds (default 5) at the literature's noise
+(:data:`stressbots.generate.LITERATURE_NOISE`, times ``--noise-scale``) through a protocol-only wrapper
+around the built-in simulator: the controller sees ``observe``/``apply`` and nothing else.
+
+Two disjoint ranges of layout seeds:
+
+- ``tuning`` (layout seeds 1000 + j): what the controller is developed and measured on;
+- ``heldout`` (layout seeds 900000 + j): run only to report, never looked at while tuning.
+
+The layout of index j has ``n = 2 + j % 7`` robots and shape ``(tee, cross, comb, ladder)[(j // 7) % 4]``
+(every combination within 28 layouts). Layouts the planner cannot plan (no nominal plan: issue 15) and
+layouts the generator cannot place are counted separately, not as controller failures.
+
+Reported: successes over all trials with the 95 % Wilson interval; per-layout successes; failure reasons
+grouped (numbers and robot names replaced by ``#`` / ``R``); median and 95th percentile wall time per
+assembly for 4 and 8 robots (controller + simulator; the nominal plan, shared by a layout's trials,
+excluded). Output is incremental (one line per layout as it finishes) and, with ``--jsonl``, one JSON
+record per layout.
+
+Run (long: use ``nice`` and the background)::
+
+    nice python benchmarks/bench_generality.py --set tuning --layouts 60 --jsonl tuning.jsonl > tuning.txt
+    nice python benchmarks/bench_generality.py --set heldout --layouts 60 --noise-scale 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+import time
+import traceback
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
+
+import numpy as np
+
+SETS = {"tuning": 1000, "heldout": 900000}
+"""First layout seed of each set: the two ranges never overlap for up to 899000 layouts."""
+
+SHAPES = ("tee", "cross", "comb", "ladder")
+
+
+class WallTimeCap(Exception):
+    """A trial ran longer (wall time) than the benchmark's cap: counted as a failure of its own kind."""
+
+
+class ProtocolOnly:
+    """A plant offering nothing but ``observe`` and ``apply`` (the controller cannot peek at the truth).
+
+    With ``cap_s`` it also stops a trial that has run longer than that (wall time) by raising
+    :class:`WallTimeCap` from ``apply``: a limit wrapped around the plant, not threaded through the
+    controller (goal 5 of issue 12: no failing trial may cost 10x a normal one).
+    """
+
+    def __init__(self, inner, cap_s: float | None = None):
+        self._inner = inner
+        self._deadline = None if cap_s is None else time.perf_counter() + cap_s
+
+    def observe(self):
+        return self._inner.observe()
+
+    def apply(self, waveform):
+        if self._deadline is not None and time.perf_counter() > self._deadline:
+            raise WallTimeCap("stopped by the benchmark's wall-time cap")
+        self._inner.apply(waveform)
+
+
+def layout_spec(set_name: str, j: int) -> tuple[int, int, str]:
+    """``(layout_seed, n, shape)`` of layout ``j`` of a set."""
+    n = 2 + j % 7
+    shape = "pair" if n == 2 else SHAPES[(j // 7) % 4]
+    return SETS[set_name] + j, n, shape
+
+
+_NUM = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+
+
+def failure_kind(failure: str, names) -> str:
+    """A failure reason with robot names replaced by ``R`` and numbers by ``#`` (to group like failures)."""
+    text = str(failure)
+    for nm in sorted(names, key=len, reverse=True):
+        text = re.sub(rf"\b{re.escape(nm)}\b", "R", text)
+    return _NUM.sub("#", text).strip()
+
+
+def run_layout(set_name: str, j: int, plant_seeds: int, noise_scale: float, cap_s: float | None = None) -> dict:
+    """Plan layout ``j`` and run its plant seeds; a JSON-able record."""
+    from stressbots.control import assemble, nominal_plan, structure_targets
+    from stressbots.errors import PlanningError
+    from stressbots.generate import LITERATURE_NOISE, random_scenario
+    from stressbots.sim import SimulatedPlant
+
+    seed, n, shape = layout_spec(set_name, j)
+    rec: dict = {"set": set_name, "index": j, "layout_seed": seed, "n": n, "shape": shape}
+    try:
+        scn = random_scenario(n, seed, shape=shape, noise=LITERATURE_NOISE.scaled(noise_scale))
+    except (PlanningError, RuntimeError) as exc:
+        rec["status"] = "no-layout"
+        rec["reason"] = str(exc)
+        return rec
+    t0 = time.perf_counter()
+    try:
+        plan = nominal_plan(scn)
+        rec["status"] = "ran"
+    except PlanningError as exc:
+        # counted apart (issue 15): the controller still runs, on the structure's slots alone
+        rec["status"] = "no-plan"
+        rec["reason"] = str(exc)
+        try:
+            plan = structure_targets(scn)
+        except PlanningError as exc2:
+            rec["reason"] += f"; no target structure either: {exc2}"
+            rec["plan_s"] = time.perf_counter() - t0
+            return rec
+    rec["plan_s"] = time.perf_counter() - t0
+    trials = []
+    for ps in range(plant_seeds):
+        t0 = time.perf_counter()
+        try:
+            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan)
+            ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
+        except WallTimeCap as exc:
+            ok, failure, sim_s, shape_err = False, f"wall-time cap: {exc} ({cap_s:g} s)", float("nan"), float("nan")
+        except Exception as exc:  # a controller exception is a failure of the trial, with its type
+            ok, failure, sim_s, shape_err = False, f"controller error: {type(exc).__name__}: {exc}", float("nan"), float("nan")
+            rec.setdefault("tracebacks", []).append(traceback.format_exc(limit=4))
+        trials.append(
+            {
+                "plant_seed": ps,
+                "success": ok,
+                "failure": failure,
+                "kind": None if ok else failure_kind(failure or "", scn.names),
+                "wall_s": time.perf_counter() - t0,
+                "sim_s": sim_s,
+                "shape_error_um": shape_err,
+            }
+        )
+    rec["trials"] = trials
+    rec["successes"] = sum(t["success"] for t in trials)
+    return rec
+
+
+def _wilson(s: int, n: int) -> tuple[float, float]:
+    from stressbots.montecarlo import wilson_interval
+
+    return wilson_interval(s, n)
+
+
+def summarise(records: list[dict], out=sys.stdout) -> dict:
+    """Print (and return) the totals: success with its Wilson interval, failures grouped, wall times."""
+    ran = [r for r in records if r["status"] == "ran"]
+    trials = [t for r in ran for t in r["trials"]]
+    ok = sum(t["success"] for t in trials)
+    lo, hi = _wilson(ok, len(trials))
+    worst = sorted(ran, key=lambda r: r["successes"])[:8]
+    kinds = Counter(t["kind"] for t in trials if not t["success"])
+    print(f"\nlayouts: {len(records)} ({len(ran)} ran, {sum(r['status'] == 'no-plan' for r in records)} not planned, "
+          f"{sum(r['status'] == 'no-layout' for r in records)} not generated)", file=out)
+    print(f"success: {ok}/{len(trials)} = {ok / max(len(trials), 1):.3f}  Wilson 95 % [{lo:.3f}, {hi:.3f}]", file=out)
+    if ran:
+        k = len(ran[0]["trials"])
+        below = [r for r in ran if r["successes"] < k]
+        print(f"layouts below {k}/{k}: {len(below)}; worst: " + ", ".join(f"{r['layout_seed']} ({r['n']} {r['shape']}) {r['successes']}/{k}" for r in worst if r["successes"] < k), file=out)
+        by_n = {}
+        for r in ran:
+            by_n.setdefault(r["n"], [0, 0])
+            by_n[r["n"]][0] += r["successes"]
+            by_n[r["n"]][1] += len(r["trials"])
+        print("by n: " + ", ".join(f"{n}: {s}/{t}" for n, (s, t) in sorted(by_n.items())), file=out)
+    for kind, c in kinds.most_common():
+        print(f"  {c:>3} x {kind[:150]}", file=out)
+    walls = {}
+    for n in (4, 8):
+        w = np.array([t["wall_s"] for r in ran if r["n"] == n for t in r["trials"]])
+        if w.size:
+            walls[n] = (float(np.median(w)), float(np.percentile(w, 95)), float(w.max()))
+            print(f"wall per assembly, {n} robots: median {walls[n][0]:.2f} s, 95th {walls[n][1]:.2f} s, max {walls[n][2]:.2f} s ({w.size} trials)", file=out)
+    for r in records:
+        if r["status"] == "no-plan":
+            got = f"controller alone {r['successes']}/{len(r['trials'])}" if r.get("trials") else "not run"
+            print(f"  not planned: {r['layout_seed']} ({r['n']} {r['shape']}), {got}: {r['reason'][:120]}", file=out)
+    return {"successes": ok, "trials": len(trials), "wilson": (lo, hi), "walls": walls}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--set", choices=sorted(SETS), default="tuning")
+    ap.add_argument("--layouts", type=int, default=60, help="number of layouts (indices --first .. --first + N - 1)")
+    ap.add_argument("--first", type=int, default=0, help="first layout index")
+    ap.add_argument("--only", default="", help="comma-separated layout indices (overrides --layouts/--first)")
+    ap.add_argument("--plant-seeds", type=int, default=5)
+    ap.add_argument("--noise-scale", type=float, default=1.0, help="multiple of the literature's noise")
+    ap.add_argument("--workers", type=int, default=2, help="processes (at most 2 on the shared machine)")
+    ap.add_argument("--jsonl", default="", help="append one JSON record per layout to this file")
+    ap.add_argument("--cap-s", type=float, default=60.0, help="wall-time cap per trial (s); a capped trial fails")
+    ap.add_argument("--summarise", default="", help="only print the summary of the records in this JSONL file")
+    a = ap.parse_args(argv)
+    if a.summarise:
+        with open(a.summarise) as fh:
+            recs = {}
+            for line in fh:
+                r = json.loads(line)
+                recs[(r["set"], r["index"])] = r  # a re-run layout replaces the earlier record
+        summarise(sorted(recs.values(), key=lambda r: (r["set"], r["index"])))
+        return
+    idx = [int(x) for x in a.only.split(",")] if a.only else list(range(a.first, a.first + a.layouts))
+    workers = max(1, min(a.workers, 2))
+    print(f"set {a.set}, {len(idx)} layouts x {a.plant_seeds} plant seeds, noise x{a.noise_scale:g}, {workers} processes, "
+          f"wall-time cap {a.cap_s:g} s per trial", flush=True)
+    records = []
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futs = {pool.submit(run_layout, a.set, j, a.plant_seeds, a.noise_scale, a.cap_s or None): j for j in idx}
+        for fut in as_completed(futs):
+            rec = fut.result()
+            records.append(rec)
+            if rec.get("trials"):
+                fails = [f"{t['plant_seed']}: {t['failure']}" for t in rec["trials"] if not t["success"]]
+                walls = [t["wall_s"] for t in rec["trials"]]
+                tag = "" if rec["status"] == "ran" else " (no nominal plan: slots only)"
+                print(f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6} {rec['successes']}/{len(rec['trials'])}{tag}"
+                      f"  wall med {np.median(walls):.2f} s  plan {rec['plan_s']:.1f} s", flush=True)
+                for f in fails:
+                    print(f"      {f[:160]}", flush=True)
+            else:
+                print(f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6} {rec['status']}: {rec['reason'][:140]}", flush=True)
+            if a.jsonl:
+                with open(a.jsonl, "a") as fh:
+                    fh.write(json.dumps(rec) + "\n")
+    records.sort(key=lambda r: r["index"])
+    summarise(records)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,75 @@
+"""What the controller aims at: the slots of the target structure, from a nominal plan or without one."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..collision import arena_gap, bodies_hit_discs
+from ..electrostatics import analyse_scenario
+from ..errors import PlanningError
+from ..robots import orbit_radii, turning_centres
+
+__all__ = ["PLAN_CLEARANCE_UM", "Targets", "nominal_plan", "structure_targets"]
+
+PLAN_CLEARANCE_UM = 40.0
+"""Clearance of the nominal plans the controller follows: room for tens of um of control error."""
+
+
+def nominal_plan(scenario, *, seed: int = 0):
+    """The nominal plan a closed-loop run follows: planned with a wide clearance, else the default one."""
+    from ..planning import PlannerOptions, plan_assembly
+
+    try:
+        return plan_assembly(scenario, PlannerOptions(clearance_um=PLAN_CLEARANCE_UM, seed=seed))
+    except PlanningError:
+        return plan_assembly(scenario, PlannerOptions(seed=seed))
+
+
+@dataclass(frozen=True)
+class Targets:
+    """What the controller takes from a nominal plan: the slots and (optionally) the planned phases.
+
+    A :class:`stressbots.planning.PlanResult` provides both; :func:`structure_targets` provides the slots
+    of the target structure alone, for layouts the planner cannot plan.
+    """
+
+    goals: np.ndarray
+    phases: tuple = ()
+
+
+def structure_targets(scenario) -> Targets:
+    """The slots of the scenario's target structure without a nominal plan.
+
+    Of the candidate structures (a named shape's variants, or the explicit goals), the one whose slots
+    lie inside the arena and clear of the start orbits of every robot that docks after them, with the
+    least lower bound on the plan's duration (:func:`stressbots.planning.lower_bound_s`).
+    """
+    from ..planning import lower_bound_s
+    from ..structures import target_structures
+
+    analysis = analyse_scenario(scenario)
+    if not analysis.is_string:
+        raise PlanningError("closed-loop assembly needs a STRING design: " + "; ".join(analysis.reasons))
+    n = scenario.n
+    rank = np.empty(n, dtype=int)
+    for k, i in enumerate(analysis.order_index):
+        rank[i] = k + 1
+    robots = [scenario.robots[i] for i in analysis.order_index]
+    L, W, R = scenario.lengths_um, scenario.widths_um, scenario.turn_radii_um
+    centres, rs = turning_centres(scenario.starts, R), orbit_radii(L, W, R)
+    best = None
+    for st in target_structures(robots, scenario.structure):
+        g = st.goal_poses(scenario.names)
+        clear = scenario.arena_um is None or bool((arena_gap(g, L, W, scenario.arena_um) >= 0.0).all())
+        for a in range(n):
+            later = [b for b in range(n) if rank[b] < rank[a]]
+            if later and bodies_hit_discs(g[a][None, :], L[a], W[a], centres[later], rs[later]).any():
+                clear = False
+        key = (not clear, lower_bound_s(scenario, st, rank))
+        if best is None or key < best[0]:
+            best = (key, g)
+    if best is None:
+        raise PlanningError("no target structure for these robots")
+    return Targets(np.asarray(best[1], dtype=np.float64))
