@@ -75,6 +75,13 @@ class PlannerOptions:
         Seed of the roadmap's random waypoints (the plan is a deterministic function of it).
     time_budget_s:
         Wall time after which no further structure variant is tried.
+    pair_candidates:
+        How many schedulable direct departures of D_{n-1} are compared when forming G_1 (the shortest
+        schedule is kept); 1 takes the first, as the seed does.
+    variants_compared:
+        How many plannable structure variants (a named shape's mirror images and assignments) are
+        planned in full, cheapest lower bound first; the shortest plan is returned. A variant whose
+        lower bound is already longer than the best plan is skipped. 1 returns the first plan found.
     """
 
     clearance_um: float = 10.0
@@ -85,6 +92,8 @@ class PlannerOptions:
     max_pieces: int = 6
     seed: int = 0
     time_budget_s: float = 120.0
+    pair_candidates: int = 4
+    variants_compared: int = 3
 
 
 @dataclass(frozen=True)
@@ -722,16 +731,19 @@ class _Planner:
         on_orbit = advance(np.repeat(self.tl.poses[N][None, :], 4, axis=0), np.ones(4, bool), vN, rN, quarter)
         tracks = [(p, self._free_run(p, N, obst_park, span, backwards=False)) for p in on_orbit]
         tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
-        parks.extend(tracks[:2])
+        parks.extend(tracks[:2] if opts.max_pieces > 1 else [])
         attempts: list[str] = []
         budget = [24]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
+        one_piece = [False]  # schedule only the seed's one-piece scheme
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
-            for park in parks:
+            for park in parks[:1] if one_piece[0] else parks:
                 for durs in self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM):
+                    if one_piece[0] and len(durs) > 1:
+                        break
                     if budget[0] <= 0:
                         return attempts[-1] if attempts else "no schedule"
                     budget[0] -= 1
@@ -743,12 +755,56 @@ class _Planner:
 
         self._pair_schedule = None
         self._approach_len = approachM.length
+        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route)
+        if best is None or len(best[4]) > 1:
+            # A detour of D_{n-1} that D_n's corridor covers in one piece is often faster than pieces.
+            one_piece[0], budget[0] = True, 24
+            light = replace(opts, roadmap_nodes=opts.roadmap_nodes[:2])
+            try:
+                route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, light, self.rng, whoM, extra_check=try_route)
+                if best is None or self._pair_duration(self._pair_schedule) < self._pair_duration(best):
+                    best = self._pair_schedule
+            except NoRoute:
+                pass
+            one_piece[0] = False
+        if best is not None:
+            self._pair_schedule = best
+            self._run_pair_schedule()
+            return
+        budget[0] = 24
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
             reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
+
+    def _best_direct_pair(self, sourcesM, preM, rM, M, obst_low, try_route):
+        """The shortest G_1 schedule over D_{n-1}'s direct routes from its departure phases, or None.
+
+        ``route`` takes the first departure whose route can be scheduled, ordered by D_{n-1}'s own travel;
+        but the pair's duration is set by D_n (its first path lasts a whole number of D_{n-1}'s periods
+        and every extra piece adds a loop back), so up to ``pair_candidates`` schedulable departures are
+        scheduled and the one that forms G_1 soonest is kept.
+        """
+        order = np.argsort(pathlib.shortest_path_lengths(sourcesM, np.broadcast_to(preM, sourcesM.shape), rM), kind="stable")
+        found = []
+        for s in order:
+            if len(found) >= self.opts.pair_candidates:
+                break
+            p = pathlib.shortest_path(sourcesM[s], preM, rM)
+            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+                continue
+            self._pair_schedule = None
+            if try_route(int(s), p) is None and self._pair_schedule is not None:
+                found.append((self._pair_duration(self._pair_schedule), len(found), self._pair_schedule))
+        self._pair_schedule = None
+        return min(found)[2] if found else None
+
+    def _pair_duration(self, schedule) -> float:
+        """Duration (s) of a G_1 schedule: D_n's timed paths plus D_{n-1}'s pieces."""
+        N, _, _, _, durs, _, a_paths = schedule
+        return float(sum(p.length for p in a_paths) / self.v[N] + sum(durs))
 
     def _run_starts(self, N: int, durs: Sequence[float], park) -> list[np.ndarray]:
         """Start pose of D_n's straight run in every piece: the parking track, the final corridor last."""
@@ -823,6 +879,8 @@ class _Planner:
                 continue
             bounds = [0.0] + sorted(c for c in cuts if c > 1e-9) + [total]
             durs = tuple((b - a) / vM for a, b in zip(bounds[:-1], bounds[1:]))
+            if len(durs) > opts.max_pieces:
+                continue
             key = tuple(round(x, 6) for x in durs)
             if key not in seen:
                 seen.add(key)
@@ -933,19 +991,42 @@ class _Planner:
             try:
                 # D_n's timed legs are local manoeuvres: small roadmaps, or the G_1 search gets slow
                 light = replace(self.opts, roadmap_nodes=self.opts.roadmap_nodes[:2])
-                self._route_cache[rkey] = route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")[1]
+                _, path, way = route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")
+                self._route_cache[rkey] = (path, (start,) + tuple(way))
             except NoRoute as exc:
                 self._route_cache[rkey] = exc.reason.lstrip(": ") or last
-        routed = self._route_cache[rkey]
-        if isinstance(routed, str):
-            return routed
+        cached = self._route_cache[rkey]
+        if isinstance(cached, str):
+            return cached
+        routed, nodes = cached
         for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
             if routed.length > want + 1e-9:
                 continue
-            stretched = self._stretch(routed, want, obst, L, W)
+            stretched = self._stretch(routed, want, obst, L, W) or self._stretch_leg(nodes, r, want, obst, L, W)
             if stretched is not None:
                 return stretched
         return last
+
+    def _stretch_leg(self, nodes, r: float, want: float, obst, L, W) -> pathlib.Path | None:
+        """Lengthen a route through ``nodes`` (start, waypoints, goal) to ``want`` um in one of its legs.
+
+        The tail stretch (:meth:`_stretch`) replaces everything after a node, so it cuts across the
+        obstacles the route went around; here every other leg stays a shortest path and the one leg
+        that gets the extra length is chosen, longest first (most room to bend).
+        """
+        legs = [pathlib.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:])]
+        extra = want - sum(p.length for p in legs)
+        if extra < -1e-9:
+            return None
+        for j in sorted(range(len(legs)), key=lambda q: -legs[q].length):
+            try:
+                leg = pathlib.path_of_length(nodes[j], nodes[j + 1], r, legs[j].length + extra)
+            except pathlib.InfeasibleLengthError:
+                continue
+            if _path_hit(obst, leg, L, W, self.opts) is None:
+                segs = tuple(sg for q, p in enumerate(legs) for sg in (leg.segments if q == j else p.segments))
+                return pathlib.Path(tuple(float(x) for x in nodes[0]), r, segs)
+        return None
 
     def _stretch(self, path: pathlib.Path, want: float, obst, L, W) -> pathlib.Path | None:
         """Lengthen a route to exactly ``want`` um by replacing its tail with a path of a set length."""
@@ -1005,6 +1086,49 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
     return tuple(PlanPrimitive(p.name, tuple(p.turning)) for p in analysis.primitives)
 
 
+def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say) -> "PlanResult | str":
+    """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
+    t0 = time.perf_counter()
+    planner = _Planner(scn, analysis, st, opts)
+    try:
+        say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
+        planner.form_pair()
+        for k in range(scn.n - 2, 0, -1):
+            say(f"docking {planner.lab(planner.by_rank[k])}")
+            planner.dock_single(k)
+    except NoRoute as exc:
+        return exc.reason
+    steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
+    from .outputs import provenance
+
+    plan = Plan(
+        robots=scn.names,
+        primitives=_plan_primitives(analysis),
+        steps=steps,
+        goals={nm: Pose(*st.goal_poses([nm])[0]) for nm in scn.names},
+        provenance=provenance(opts.seed),
+    )
+    accessible = {frozenset(p.turning) for p in analysis.primitives}
+    rep = replay(plan, scn, accessible_turning=accessible)
+    if not rep.ok:
+        return "internal: the plan failed its replay: " + "; ".join(rep.problems[:3])
+    duration = plan.duration_s
+    summary = {
+        "structure": st.shape,
+        "variant": st.variant,
+        "order": list(analysis.order),
+        "duration_s": duration,
+        "steps": len(steps),
+        "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
+        "lower_bound_s": lb,
+        "efficiency": lb / duration if duration > 0 else 1.0,
+        "planning_time_s": time.perf_counter() - t0,
+        "candidates": candidates,
+        "notes": planner.notes,
+    }
+    return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes), tuple(planner.tl.phases))
+
+
 def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: Callable[[str], None] | None = None) -> PlanResult:
     """Plan the assembly of ``scenario``'s target structure from its start poses.
 
@@ -1042,51 +1166,23 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         raise PlanningError(first_reason or "no structure fits", source=scn.source)
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
+    best: PlanResult | None = None
+    tried = 0
     t_start = time.perf_counter()
     for lb, _, st in scored:
-        if failures and time.perf_counter() - t_start > opts.time_budget_s:
+        if best is not None and (tried + 1 >= opts.variants_compared or lb >= best.summary["duration_s"]):
+            break
+        if best is None and failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
-        t0 = time.perf_counter()
-        planner = _Planner(scn, analysis, st, opts)
-        try:
-            say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
-            planner.form_pair()
-            for k in range(scn.n - 2, 0, -1):
-                say(f"docking {planner.lab(planner.by_rank[k])}")
-                planner.dock_single(k)
-        except NoRoute as exc:
-            failures.append(exc.reason)
+        tried += best is not None
+        result = _plan_structure(scn, analysis, st, lb, len(structures), opts, say)
+        if isinstance(result, str):
+            failures.append(result)
             continue
-        steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
-        from .outputs import provenance
-
-        plan = Plan(
-            robots=scn.names,
-            primitives=_plan_primitives(analysis),
-            steps=steps,
-            goals={nm: Pose(*st.goal_poses([nm])[0]) for nm in scn.names},
-            provenance=provenance(opts.seed),
-        )
-        accessible = {frozenset(p.turning) for p in analysis.primitives}
-        rep = replay(plan, scn, accessible_turning=accessible)
-        if not rep.ok:
-            failures.append("internal: the plan failed its replay: " + "; ".join(rep.problems[:3]))
-            continue
-        duration = plan.duration_s
-        summary = {
-            "structure": st.shape,
-            "variant": st.variant,
-            "order": list(analysis.order),
-            "duration_s": duration,
-            "steps": len(steps),
-            "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
-            "lower_bound_s": lb,
-            "efficiency": lb / duration if duration > 0 else 1.0,
-            "planning_time_s": time.perf_counter() - t0,
-            "candidates": len(structures),
-            "notes": planner.notes,
-        }
-        return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes), tuple(planner.tl.phases))
+        if best is None or result.summary["duration_s"] < best.summary["duration_s"] - 1e-9:
+            best = result
+    if best is not None:
+        return best
     reason = max(set(failures), key=failures.count) if failures else "no plan found"
     raise PlanningError(reason, source=scn.source)
