@@ -30,6 +30,7 @@ returned.
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
@@ -82,6 +83,9 @@ class PlannerOptions:
         How many plannable structure variants (a named shape's mirror images and assignments) are
         planned in full, cheapest lower bound first; the shortest plan is returned. A variant whose
         lower bound is already longer than the best plan is skipped. 1 returns the first plan found.
+    orbit_phases:
+        When D_n's whole-period path between two runs of G_1 is blocked, how many phases of its own
+        orbit it may first orbit to before leaving (0: never, as in the seed's scheme).
     """
 
     clearance_um: float = 10.0
@@ -94,6 +98,7 @@ class PlannerOptions:
     time_budget_s: float = 120.0
     pair_candidates: int = 4
     variants_compared: int = 3
+    orbit_phases: int = 16
 
 
 @dataclass(frozen=True)
@@ -371,11 +376,14 @@ def route(
     # 1. direct shortest paths, cheapest first
     direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
     reasons: list[str] = []
+    vetoes: list[str] = []  # reasons extra_check gave for collision-free routes
     for s in np.argsort(direct, kind="stable"):
         p = pathlib.shortest_path(sources[s], target, radius)
         hit = _path_hit(obst, p, length, width, opts)
         if hit is None and extra_check is not None:
             hit = extra_check(int(index_of[s]), p)
+            if hit is not None:
+                vetoes.append(hit)
         if hit is None:
             return int(index_of[s]), p, (np.asarray(target, float),)
         reasons.append(hit)
@@ -433,11 +441,15 @@ def route(
             if veto is None:
                 return int(index_of[seq[0]]), path, tuple(nodes[q].copy() for q in seq[1:])
             reasons.append(veto)
+            vetoes.append(veto)
             # forbid this route's first leg and look for another
             graph = graph.tolil()
             graph[seq[0], seq[1] if len(seq) > 1 else ti] = 0
             graph = graph.tocsr()
             graph.eliminate_zeros()
+    if extra_check is not None and vetoes:
+        common = max(set(vetoes), key=vetoes.count)
+        raise NoRoute(f"{who}: no usable route found ({common})")
     common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
     raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
 
@@ -697,7 +709,22 @@ class _Planner:
         return float(probe[np.argmax(blocked)] - self.opts.sample_um) if blocked.any() else float(probe[-1])
 
     def form_pair(self) -> None:
-        """Step 1: D_n and D_{n-1} form G_1 (see the module docstring for the scheme)."""
+        """Step 1: D_n and D_{n-1} form G_1 (see the module docstring for the scheme).
+
+        First without D_n orbiting before its whole-period paths (those schedules are shorter); when
+        that finds no schedule, again with it (:meth:`_orbit_first`): more layouts are plannable.
+        """
+        self._orbit_first_on = False
+        try:
+            self._form_pair_once()
+        except NoRoute:
+            if self.opts.orbit_phases <= 0:
+                raise
+            self._orbit_first_on = True
+            self._timed_cache.clear()
+            self._form_pair_once()
+
+    def _form_pair_once(self) -> None:
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         gN, gM = self.goals[N], self.goals[M]
@@ -984,7 +1011,7 @@ class _Planner:
                 return p
             last = f"blocked by {hit}"
         if not use_route:
-            return last
+            return self._orbit_first(start, goal, v, r, L, W, wait0, period, obst) or last
         # Route around the obstacles once, then stretch the route's tail to an exact length.
         rkey = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), tuple(np.round(obst.disc_centres, 3).ravel()))
         if rkey not in self._route_cache:
@@ -996,16 +1023,45 @@ class _Planner:
             except NoRoute as exc:
                 self._route_cache[rkey] = exc.reason.lstrip(": ") or last
         cached = self._route_cache[rkey]
-        if isinstance(cached, str):
-            return cached
-        routed, nodes = cached
-        for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
-            if routed.length > want + 1e-9:
+        if not isinstance(cached, str):
+            routed, nodes = cached
+            for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
+                if routed.length > want + 1e-9:
+                    continue
+                stretched = self._stretch(routed, want, obst, L, W) or self._stretch_leg(nodes, r, want, obst, L, W)
+                if stretched is not None:
+                    return stretched
+        # last resort: spend part of the time on its own orbit, then leave at a phase that clears
+        return self._orbit_first(start, goal, v, r, L, W, wait0, period, obst) or (cached if isinstance(cached, str) else last)
+
+    def _orbit_first(self, start, goal, v, r, L, W, wait0, period, obst) -> pathlib.Path | None:
+        """A path of duration ``wait0 + k * period`` that first orbits at ``start`` for a while.
+
+        The mover turns under the same primitive that keeps its partner orbiting, so it can spend part
+        of the time on its own orbit and leave it at the phase from which a path of the remaining length
+        is clear: :attr:`PlannerOptions.orbit_phases` phases of one orbit, the four shortest k each.
+        """
+        m = self.opts.orbit_phases
+        if m <= 0 or not self._orbit_first_on:
+            return None
+        own = 2.0 * math.pi * r / v
+        taus = (np.arange(1, m) / m) * own
+        ring = advance(np.repeat(np.asarray(start, float)[None, :], len(taus), axis=0), np.ones(len(taus), bool), v, r, taus)
+        base = pathlib.shortest_path_lengths(ring, np.broadcast_to(goal, ring.shape), r)
+        cands = []
+        for j, tau in enumerate(taus):
+            kmin = max(0, math.ceil((tau + base[j] / v - wait0) / period - 1e-9))
+            cands.extend((wait0 + k * period, j) for k in range(kmin, kmin + 3))
+        for total, j in sorted(cands):
+            want = v * (total - taus[j])
+            try:
+                p = pathlib.path_of_length(ring[j], goal, r, want)
+            except pathlib.InfeasibleLengthError:
                 continue
-            stretched = self._stretch(routed, want, obst, L, W) or self._stretch_leg(nodes, r, want, obst, L, W)
-            if stretched is not None:
-                return stretched
-        return last
+            full = pathlib.Path(tuple(float(x) for x in start), r, (("R", v * taus[j]),) + p.segments)
+            if _path_hit(obst, full, L, W, self.opts) is None:
+                return full
+        return None
 
     def _stretch_leg(self, nodes, r: float, want: float, obst, L, W) -> pathlib.Path | None:
         """Lengthen a route through ``nodes`` (start, waypoints, goal) to ``want`` um in one of its legs.
@@ -1185,4 +1241,26 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     if best is not None:
         return best
     reason = max(set(failures), key=failures.count) if failures else "no plan found"
-    raise PlanningError(reason, source=scn.source)
+    raise PlanningError(reason + advice(reason), source=scn.source)
+
+
+_ADVICE = (
+    (re.compile(r"the orbit of (D\d+ \('[^']*'\))"), "move the start of {0} (its orbit disc is in the way) or enlarge the arena"),
+    (re.compile(r"too long for (D\d+ \('[^']*'\))'s free corridor"), "start the G_1 robots closer to their slots, or clear the line behind {0}'s slot"),
+    (re.compile(r"the arena edge"), "enlarge the arena or move the structure (or the starts) away from its edge"),
+    (re.compile(r"the docked body of (D\d+ \('[^']*'\))|approach into its slot is blocked"), "change the structure (a slot whose approach is clear of the robots docked before it)"),
+    (re.compile(r"meets (D\d+ \('[^']*'\))"), "move the start of {0} away from its partner's straight runs"),
+)
+
+
+def advice(reason: str) -> str:
+    """What would make a layout plannable, from the failure ``reason`` (``"; to make it plannable: ..."``).
+
+    The reason names the robot and the obstacle; the advice names the change (move that start, enlarge
+    the arena, change the structure). The first matching obstacle kind wins; empty when none matches.
+    """
+    for pattern, text in _ADVICE:
+        m = pattern.search(reason)
+        if m:
+            return "; to make it plannable: " + text.format(*m.groups())
+    return ""
