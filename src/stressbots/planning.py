@@ -1232,7 +1232,10 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
         tried += best is not None
-        result = _plan_structure(scn, analysis, st, lb, len(structures), opts, say)
+        # Variants compared after a plan exists get a lighter search (no largest roadmap, no second G_1
+        # pass): they only replace the plan when they are easy, and hard ones would dominate the time.
+        light = opts if best is None else replace(opts, roadmap_nodes=opts.roadmap_nodes[:2], orbit_phases=0)
+        result = _plan_structure(scn, analysis, st, lb, len(structures), light, say)
         if isinstance(result, str):
             failures.append(result)
             continue
