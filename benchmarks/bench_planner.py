@@ -7,6 +7,8 @@ a comb whose first tooth site is filled after its neighbours, see :func:`gap_sce
 planned twice, each in its own ``nice``-d subprocess with a wall-time limit (at most ``--jobs`` at once):
 
 - ``full``: the planner with its default options;
+- ``short``: the planner with :data:`stressbots.planning.SHORTEST` (compares G_1 schedules and
+  structure variants: shorter plans, longer planning);
 - ``seed``: the planner restricted to the seed's scheme (:data:`SEED_SCHEME`: D_{n-1}'s route in one
   piece from its start, D_n on one straight run, docking robots leave their orbit where they are).
 
@@ -132,6 +134,7 @@ def run_one(lay: Layout, mode: str) -> dict:
     from stressbots import plans
     from stressbots.errors import PlanningError, ScenarioError
     from stressbots.outputs import versions
+    from stressbots import planning
     from stressbots.planning import PlannerOptions, lower_bound_s, plan_assembly
     from stressbots.replay import replay
 
@@ -143,7 +146,8 @@ def run_one(lay: Layout, mode: str) -> dict:
         rec.update(status="no-layout", reason=str(exc))
         return rec
     known = PlannerOptions.__dataclass_fields__  # older planners lack some options: use those they have
-    opts = PlannerOptions(**{k: v for k, v in SEED_SCHEME.items() if k in known} if mode == "seed" else {})
+    over = {"seed": SEED_SCHEME, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
+    opts = PlannerOptions(**{k: v for k, v in over.items() if k in known})
     t0 = time.perf_counter()
     try:
         res = plan_assembly(scn, opts)
@@ -211,7 +215,7 @@ def run_all(todo: list[tuple[Layout, str]], jobs: int, timeout: float, out: Path
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
-    for mode in ("full", "seed"):
+    for mode in ("full", "short", "seed"):
         rs = [r for r in records if r["mode"] == mode]
         if not rs:
             continue
@@ -245,7 +249,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("bench_planner.jsonl"), help="JSONL file (appended)")
     ap.add_argument("--jobs", type=int, default=2, help="layouts planned at once (<= 2 on the shared machine)")
     ap.add_argument("--timeout", type=float, default=120.0, help="wall-time limit per layout and mode (s)")
-    ap.add_argument("--modes", default="full,seed", help="comma-separated: full, seed")
+    ap.add_argument("--modes", default="full,seed", help="comma-separated: full, short, seed")
     ap.add_argument("--only", default="", help="n range, e.g. 2..8, or a comma list of layout keys")
     ap.add_argument("--summary", type=Path, help="only summarise an existing JSONL file")
     ap.add_argument("--one", help=argparse.SUPPRESS)

@@ -49,7 +49,7 @@ from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
 
-__all__ = ["PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
+__all__ = ["SHORTEST", "PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
 
 
 @dataclass(frozen=True)
@@ -78,14 +78,19 @@ class PlannerOptions:
         Wall time after which no further structure variant is tried.
     pair_candidates:
         How many schedulable direct departures of D_{n-1} are compared when forming G_1 (the shortest
-        schedule is kept); 1 takes the first, as the seed does.
+        schedule is kept, and one-piece schedules around roadmap routes are tried too); 1 takes the
+        first schedulable route, as the seed does. Default 1 for now: see :data:`SHORTEST`.
     variants_compared:
         How many plannable structure variants (a named shape's mirror images and assignments) are
         planned in full, cheapest lower bound first; the shortest plan is returned. A variant whose
-        lower bound is already longer than the best plan is skipped. 1 returns the first plan found.
+        lower bound is already longer than the best plan is skipped. 1 returns the first plan found
+        (default for now: see :data:`SHORTEST`).
     orbit_phases:
         When D_n's whole-period path between two runs of G_1 is blocked, how many phases of its own
         orbit it may first orbit to before leaving (0: never, as in the seed's scheme).
+    extended_search:
+        When no variant is plannable, search again with the wider G_1 search: routed whole-period paths
+        stretched in one leg, and ``orbit_phases`` (False: the standard search only).
     """
 
     clearance_um: float = 10.0
@@ -96,9 +101,18 @@ class PlannerOptions:
     max_pieces: int = 6
     seed: int = 0
     time_budget_s: float = 120.0
-    pair_candidates: int = 4
-    variants_compared: int = 3
+    pair_candidates: int = 1
+    variants_compared: int = 1
     orbit_phases: int = 16
+    extended_search: bool = True
+
+
+SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
+"""PlannerOptions overrides for shorter plans (issue 15): compare G_1 schedules and structure variants.
+
+Not the default yet: the closed-loop controller's tests on the example (tests/test_edr.py, seed 0)
+fail on the shorter plan it gives, so the default stays the plan the controller was tuned on.
+"""
 
 
 @dataclass(frozen=True)
@@ -589,7 +603,8 @@ def _pre_approach(goal: np.ndarray, a: float) -> np.ndarray:
 
 
 class _Planner:
-    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions):
+    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False):
+        self.extended = extended  # the wider G_1 search (leg stretch, orbit first): after all variants failed
         self.scn = scn
         self.analysis = analysis
         self.struct = struct
@@ -718,7 +733,7 @@ class _Planner:
         try:
             self._form_pair_once()
         except NoRoute:
-            if self.opts.orbit_phases <= 0:
+            if self.opts.orbit_phases <= 0 or not self.extended:
                 raise
             self._orbit_first_on = True
             self._timed_cache.clear()
@@ -782,8 +797,8 @@ class _Planner:
 
         self._pair_schedule = None
         self._approach_len = approachM.length
-        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route)
-        if best is None or len(best[4]) > 1:
+        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route) if opts.pair_candidates > 1 else None
+        if opts.pair_candidates > 1 and (best is None or len(best[4]) > 1):
             # A detour of D_{n-1} that D_n's corridor covers in one piece is often faster than pieces.
             one_piece[0], budget[0] = True, 24
             light = replace(opts, roadmap_nodes=opts.roadmap_nodes[:2])
@@ -1028,7 +1043,9 @@ class _Planner:
             for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
                 if routed.length > want + 1e-9:
                     continue
-                stretched = self._stretch(routed, want, obst, L, W) or self._stretch_leg(nodes, r, want, obst, L, W)
+                stretched = self._stretch(routed, want, obst, L, W)
+                if stretched is None and self.extended:
+                    stretched = self._stretch_leg(nodes, r, want, obst, L, W)
                 if stretched is not None:
                     return stretched
         # last resort: spend part of the time on its own orbit, then leave at a phase that clears
@@ -1142,10 +1159,10 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
     return tuple(PlanPrimitive(p.name, tuple(p.turning)) for p in analysis.primitives)
 
 
-def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say) -> "PlanResult | str":
+def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say, extended: bool = False) -> "PlanResult | str":
     """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
     t0 = time.perf_counter()
-    planner = _Planner(scn, analysis, st, opts)
+    planner = _Planner(scn, analysis, st, opts, extended=extended)
     try:
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
         planner.form_pair()
@@ -1222,9 +1239,24 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         raise PlanningError(first_reason or "no structure fits", source=scn.source)
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
+    t_start = time.perf_counter()
+    best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False)
+    if best is None and opts.extended_search:
+        best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True)
+    if best is not None:
+        return best
+    reason = max(set(failures), key=failures.count) if failures else "no plan found"
+    raise PlanningError(reason + advice(reason), source=scn.source)
+
+
+def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *, extended: bool) -> "PlanResult | None":
+    """The shortest plan over up to ``variants_compared`` plannable variants (cheapest bound first).
+
+    ``extended`` turns on the wider G_1 search (one-leg stretch, orbit first); plan_assembly uses it
+    only when no variant is plannable without it, so layouts the standard search solves keep its plans.
+    """
     best: PlanResult | None = None
     tried = 0
-    t_start = time.perf_counter()
     for lb, _, st in scored:
         if best is not None and (tried + 1 >= opts.variants_compared or lb >= best.summary["duration_s"]):
             break
@@ -1235,16 +1267,13 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         # Variants compared after a plan exists get a lighter search (no largest roadmap, no second G_1
         # pass): they only replace the plan when they are easy, and hard ones would dominate the time.
         light = opts if best is None else replace(opts, roadmap_nodes=opts.roadmap_nodes[:2], orbit_phases=0)
-        result = _plan_structure(scn, analysis, st, lb, len(structures), light, say)
+        result = _plan_structure(scn, analysis, st, lb, candidates, light, say, extended)
         if isinstance(result, str):
             failures.append(result)
             continue
         if best is None or result.summary["duration_s"] < best.summary["duration_s"] - 1e-9:
             best = result
-    if best is not None:
-        return best
-    reason = max(set(failures), key=failures.count) if failures else "no plan found"
-    raise PlanningError(reason + advice(reason), source=scn.source)
+    return best
 
 
 _ADVICE = (
