@@ -22,6 +22,20 @@ planned.
 Run: nice python benchmarks/bench_planner.py --out bench_planner.jsonl [--jobs 2] [--timeout 120]
      [--only n=2..8] [--modes full,seed]
 Timings on the shared 2-core machine are under contention.
+
+Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspect), 45 s per layout:
+- baseline (branch start 9d10d32): full planned 30/62 (23/32 of n = 2-8, 5/25 of n = 10-16; 23
+  timeouts), no replay failure, planning time median 3.5 s (n = 2-8: 1.4 s), lower bound / duration
+  median 0.48; seed scheme planned 5/62 (full / seed duration on those 5: median 1.00, total 1.22).
+  Layout errors: tee-12/13/14 generate a slot outside the arena (generator, not planner).
+- 'short' as of 511dfe9 (SHORTEST with the extended search inside), n = 2-8 only: planned 20/32
+  (comb-3-s1053 newly; five layouts lost to the 45 s limit: planning time median 8.2 s vs 1.4 s),
+  no replay failure; duration vs baseline on the 18 both planned: median 0.82, total 0.83; vs seed
+  scheme on the 5 both planned: median 0.89, total 0.85; lower bound / duration median 0.51 (0.43).
+- default at 92e38e0 (standard search, extended search only on failure) on the baseline's failures
+  of n <= 8 (90 s limit, lighter load): comb-3-s1053 planned (180.7 s, 27 s planning); ladder-4-s1071,
+  cross-8-s1137, ladder-8-s1139 still fail (arena edge, with advice); tee-8-s1136 timed out; tee-7-s1119
+  planned in 7 s (the baseline timed out at 45 s under heavier load: the same search, not a gain).
 """
 
 from __future__ import annotations
