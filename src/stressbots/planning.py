@@ -30,6 +30,7 @@ returned.
 from __future__ import annotations
 
 import math
+import re
 import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
@@ -48,7 +49,7 @@ from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
 
-__all__ = ["PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
+__all__ = ["SHORTEST", "PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,21 @@ class PlannerOptions:
     max_candidates:
         Most structure variants tried (None: all). A deterministic budget: unlike ``time_budget_s`` it
         gives the same result on a loaded machine, so tests use it.
+    pair_candidates:
+        How many schedulable direct departures of D_{n-1} are compared when forming G_1 (the shortest
+        schedule is kept, and one-piece schedules around roadmap routes are tried too); 1 takes the
+        first schedulable route, as the seed does. Default 1 for now: see :data:`SHORTEST`.
+    variants_compared:
+        How many plannable structure variants (a named shape's mirror images and assignments) are
+        planned in full, cheapest lower bound first; the shortest plan is returned. A variant whose
+        lower bound is already longer than the best plan is skipped. 1 returns the first plan found
+        (default for now: see :data:`SHORTEST`).
+    orbit_phases:
+        When D_n's whole-period path between two runs of G_1 is blocked, how many phases of its own
+        orbit it may first orbit to before leaving (0: never, as in the seed's scheme).
+    extended_search:
+        When no variant is plannable, search again with the wider G_1 search: routed whole-period paths
+        stretched in one leg, and ``orbit_phases`` (False: the standard search only).
     """
 
     clearance_um: float = 10.0
@@ -89,6 +105,18 @@ class PlannerOptions:
     seed: int = 0
     time_budget_s: float = 120.0
     max_candidates: int | None = None
+    pair_candidates: int = 1
+    variants_compared: int = 1
+    orbit_phases: int = 16
+    extended_search: bool = True
+
+
+SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
+"""PlannerOptions overrides for shorter plans (issue 15): compare G_1 schedules and structure variants.
+
+Not the default yet: the closed-loop controller's tests on the example (tests/test_edr.py, seed 0)
+fail on the shorter plan it gives, so the default stays the plan the controller was tuned on.
+"""
 
 
 @dataclass(frozen=True)
@@ -366,11 +394,14 @@ def route(
     # 1. direct shortest paths, cheapest first
     direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
     reasons: list[str] = []
+    vetoes: list[str] = []  # reasons extra_check gave for collision-free routes
     for s in np.argsort(direct, kind="stable"):
         p = pathlib.shortest_path(sources[s], target, radius)
         hit = _path_hit(obst, p, length, width, opts)
         if hit is None and extra_check is not None:
             hit = extra_check(int(index_of[s]), p)
+            if hit is not None:
+                vetoes.append(hit)
         if hit is None:
             return int(index_of[s]), p, (np.asarray(target, float),)
         reasons.append(hit)
@@ -428,11 +459,15 @@ def route(
             if veto is None:
                 return int(index_of[seq[0]]), path, tuple(nodes[q].copy() for q in seq[1:])
             reasons.append(veto)
+            vetoes.append(veto)
             # forbid this route's first leg and look for another
             graph = graph.tolil()
             graph[seq[0], seq[1] if len(seq) > 1 else ti] = 0
             graph = graph.tocsr()
             graph.eliminate_zeros()
+    if extra_check is not None and vetoes:
+        common = max(set(vetoes), key=vetoes.count)
+        raise NoRoute(f"{who}: no usable route found ({common})")
     common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
     raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
 
@@ -572,7 +607,8 @@ def _pre_approach(goal: np.ndarray, a: float) -> np.ndarray:
 
 
 class _Planner:
-    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions):
+    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False):
+        self.extended = extended  # the wider G_1 search (leg stretch, orbit first): after all variants failed
         self.scn = scn
         self.analysis = analysis
         self.struct = struct
@@ -692,7 +728,22 @@ class _Planner:
         return float(probe[np.argmax(blocked)] - self.opts.sample_um) if blocked.any() else float(probe[-1])
 
     def form_pair(self) -> None:
-        """Step 1: D_n and D_{n-1} form G_1 (see the module docstring for the scheme)."""
+        """Step 1: D_n and D_{n-1} form G_1 (see the module docstring for the scheme).
+
+        First without D_n orbiting before its whole-period paths (those schedules are shorter); when
+        that finds no schedule, again with it (:meth:`_orbit_first`): more layouts are plannable.
+        """
+        self._orbit_first_on = False
+        try:
+            self._form_pair_once()
+        except NoRoute:
+            if self.opts.orbit_phases <= 0 or not self.extended:
+                raise
+            self._orbit_first_on = True
+            self._timed_cache.clear()
+            self._form_pair_once()
+
+    def _form_pair_once(self) -> None:
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         gN, gM = self.goals[N], self.goals[M]
@@ -726,16 +777,19 @@ class _Planner:
         on_orbit = advance(np.repeat(self.tl.poses[N][None, :], 4, axis=0), np.ones(4, bool), vN, rN, quarter)
         tracks = [(p, self._free_run(p, N, obst_park, span, backwards=False)) for p in on_orbit]
         tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
-        parks.extend(tracks[:2])
+        parks.extend(tracks[:2] if opts.max_pieces > 1 else [])
         attempts: list[str] = []
         budget = [24]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
+        one_piece = [False]  # schedule only the seed's one-piece scheme
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
-            for park in parks:
+            for park in parks[:1] if one_piece[0] else parks:
                 for durs in self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM):
+                    if one_piece[0] and len(durs) > 1:
+                        break
                     if budget[0] <= 0:
                         return attempts[-1] if attempts else "no schedule"
                     budget[0] -= 1
@@ -747,12 +801,56 @@ class _Planner:
 
         self._pair_schedule = None
         self._approach_len = approachM.length
+        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route) if opts.pair_candidates > 1 else None
+        if opts.pair_candidates > 1 and (best is None or len(best[4]) > 1):
+            # A detour of D_{n-1} that D_n's corridor covers in one piece is often faster than pieces.
+            one_piece[0], budget[0] = True, 24
+            light = replace(opts, roadmap_nodes=opts.roadmap_nodes[:2])
+            try:
+                route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, light, self.rng, whoM, extra_check=try_route)
+                if best is None or self._pair_duration(self._pair_schedule) < self._pair_duration(best):
+                    best = self._pair_schedule
+            except NoRoute:
+                pass
+            one_piece[0] = False
+        if best is not None:
+            self._pair_schedule = best
+            self._run_pair_schedule()
+            return
+        budget[0] = 24
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
             reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
+
+    def _best_direct_pair(self, sourcesM, preM, rM, M, obst_low, try_route):
+        """The shortest G_1 schedule over D_{n-1}'s direct routes from its departure phases, or None.
+
+        ``route`` takes the first departure whose route can be scheduled, ordered by D_{n-1}'s own travel;
+        but the pair's duration is set by D_n (its first path lasts a whole number of D_{n-1}'s periods
+        and every extra piece adds a loop back), so up to ``pair_candidates`` schedulable departures are
+        scheduled and the one that forms G_1 soonest is kept.
+        """
+        order = np.argsort(pathlib.shortest_path_lengths(sourcesM, np.broadcast_to(preM, sourcesM.shape), rM), kind="stable")
+        found = []
+        for s in order:
+            if len(found) >= self.opts.pair_candidates:
+                break
+            p = pathlib.shortest_path(sourcesM[s], preM, rM)
+            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+                continue
+            self._pair_schedule = None
+            if try_route(int(s), p) is None and self._pair_schedule is not None:
+                found.append((self._pair_duration(self._pair_schedule), len(found), self._pair_schedule))
+        self._pair_schedule = None
+        return min(found)[2] if found else None
+
+    def _pair_duration(self, schedule) -> float:
+        """Duration (s) of a G_1 schedule: D_n's timed paths plus D_{n-1}'s pieces."""
+        N, _, _, _, durs, _, a_paths = schedule
+        return float(sum(p.length for p in a_paths) / self.v[N] + sum(durs))
 
     def _run_starts(self, N: int, durs: Sequence[float], park) -> list[np.ndarray]:
         """Start pose of D_n's straight run in every piece: the parking track, the final corridor last."""
@@ -827,6 +925,8 @@ class _Planner:
                 continue
             bounds = [0.0] + sorted(c for c in cuts if c > 1e-9) + [total]
             durs = tuple((b - a) / vM for a, b in zip(bounds[:-1], bounds[1:]))
+            if len(durs) > opts.max_pieces:
+                continue
             key = tuple(round(x, 6) for x in durs)
             if key not in seen:
                 seen.add(key)
@@ -930,26 +1030,80 @@ class _Planner:
                 return p
             last = f"blocked by {hit}"
         if not use_route:
-            return last
+            return self._orbit_first(start, goal, v, r, L, W, wait0, period, obst) or last
         # Route around the obstacles once, then stretch the route's tail to an exact length.
         rkey = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), tuple(np.round(obst.disc_centres, 3).ravel()))
         if rkey not in self._route_cache:
             try:
                 # D_n's timed legs are local manoeuvres: small roadmaps, or the G_1 search gets slow
                 light = replace(self.opts, roadmap_nodes=self.opts.roadmap_nodes[:2])
-                self._route_cache[rkey] = route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")[1]
+                _, path, way = route(start[None, :], np.zeros(1), goal, r, L, W, obst, light, self.rng, "")
+                self._route_cache[rkey] = (path, (start,) + tuple(way))
             except NoRoute as exc:
                 self._route_cache[rkey] = exc.reason.lstrip(": ") or last
-        routed = self._route_cache[rkey]
-        if isinstance(routed, str):
-            return routed
-        for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
-            if routed.length > want + 1e-9:
+        cached = self._route_cache[rkey]
+        if not isinstance(cached, str):
+            routed, nodes = cached
+            for want in wants + [v * (wait0 + k * period) for k in range(kmin + 4, kmin + 8)]:
+                if routed.length > want + 1e-9:
+                    continue
+                stretched = self._stretch(routed, want, obst, L, W)
+                if stretched is None and self.extended:
+                    stretched = self._stretch_leg(nodes, r, want, obst, L, W)
+                if stretched is not None:
+                    return stretched
+        # last resort: spend part of the time on its own orbit, then leave at a phase that clears
+        return self._orbit_first(start, goal, v, r, L, W, wait0, period, obst) or (cached if isinstance(cached, str) else last)
+
+    def _orbit_first(self, start, goal, v, r, L, W, wait0, period, obst) -> pathlib.Path | None:
+        """A path of duration ``wait0 + k * period`` that first orbits at ``start`` for a while.
+
+        The mover turns under the same primitive that keeps its partner orbiting, so it can spend part
+        of the time on its own orbit and leave it at the phase from which a path of the remaining length
+        is clear: :attr:`PlannerOptions.orbit_phases` phases of one orbit, the four shortest k each.
+        """
+        m = self.opts.orbit_phases
+        if m <= 0 or not self._orbit_first_on:
+            return None
+        own = 2.0 * math.pi * r / v
+        taus = (np.arange(1, m) / m) * own
+        ring = advance(np.repeat(np.asarray(start, float)[None, :], len(taus), axis=0), np.ones(len(taus), bool), v, r, taus)
+        base = pathlib.shortest_path_lengths(ring, np.broadcast_to(goal, ring.shape), r)
+        cands = []
+        for j, tau in enumerate(taus):
+            kmin = max(0, math.ceil((tau + base[j] / v - wait0) / period - 1e-9))
+            cands.extend((wait0 + k * period, j) for k in range(kmin, kmin + 3))
+        for total, j in sorted(cands):
+            want = v * (total - taus[j])
+            try:
+                p = pathlib.path_of_length(ring[j], goal, r, want)
+            except pathlib.InfeasibleLengthError:
                 continue
-            stretched = self._stretch(routed, want, obst, L, W)
-            if stretched is not None:
-                return stretched
-        return last
+            full = pathlib.Path(tuple(float(x) for x in start), r, (("R", v * taus[j]),) + p.segments)
+            if _path_hit(obst, full, L, W, self.opts) is None:
+                return full
+        return None
+
+    def _stretch_leg(self, nodes, r: float, want: float, obst, L, W) -> pathlib.Path | None:
+        """Lengthen a route through ``nodes`` (start, waypoints, goal) to ``want`` um in one of its legs.
+
+        The tail stretch (:meth:`_stretch`) replaces everything after a node, so it cuts across the
+        obstacles the route went around; here every other leg stays a shortest path and the one leg
+        that gets the extra length is chosen, longest first (most room to bend).
+        """
+        legs = [pathlib.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:])]
+        extra = want - sum(p.length for p in legs)
+        if extra < -1e-9:
+            return None
+        for j in sorted(range(len(legs)), key=lambda q: -legs[q].length):
+            try:
+                leg = pathlib.path_of_length(nodes[j], nodes[j + 1], r, legs[j].length + extra)
+            except pathlib.InfeasibleLengthError:
+                continue
+            if _path_hit(obst, leg, L, W, self.opts) is None:
+                segs = tuple(sg for q, p in enumerate(legs) for sg in (leg.segments if q == j else p.segments))
+                return pathlib.Path(tuple(float(x) for x in nodes[0]), r, segs)
+        return None
 
     def _stretch(self, path: pathlib.Path, want: float, obst, L, W) -> pathlib.Path | None:
         """Lengthen a route to exactly ``want`` um by replacing its tail with a path of a set length."""
@@ -1009,6 +1163,49 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
     return tuple(PlanPrimitive(p.name, tuple(p.turning)) for p in analysis.primitives)
 
 
+def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say, extended: bool = False) -> "PlanResult | str":
+    """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
+    t0 = time.perf_counter()
+    planner = _Planner(scn, analysis, st, opts, extended=extended)
+    try:
+        say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
+        planner.form_pair()
+        for k in range(scn.n - 2, 0, -1):
+            say(f"docking {planner.lab(planner.by_rank[k])}")
+            planner.dock_single(k)
+    except NoRoute as exc:
+        return exc.reason
+    steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
+    from .outputs import provenance
+
+    plan = Plan(
+        robots=scn.names,
+        primitives=_plan_primitives(analysis),
+        steps=steps,
+        goals={nm: Pose(*st.goal_poses([nm])[0]) for nm in scn.names},
+        provenance=provenance(opts.seed),
+    )
+    accessible = {frozenset(p.turning) for p in analysis.primitives}
+    rep = replay(plan, scn, accessible_turning=accessible)
+    if not rep.ok:
+        return "internal: the plan failed its replay: " + "; ".join(rep.problems[:3])
+    duration = plan.duration_s
+    summary = {
+        "structure": st.shape,
+        "variant": st.variant,
+        "order": list(analysis.order),
+        "duration_s": duration,
+        "steps": len(steps),
+        "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
+        "lower_bound_s": lb,
+        "efficiency": lb / duration if duration > 0 else 1.0,
+        "planning_time_s": time.perf_counter() - t0,
+        "candidates": candidates,
+        "notes": planner.notes,
+    }
+    return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes), tuple(planner.tl.phases))
+
+
 def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: Callable[[str], None] | None = None) -> PlanResult:
     """Plan the assembly of ``scenario``'s target structure from its start poses.
 
@@ -1047,53 +1244,62 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
     t_start = time.perf_counter()
-    for tried, (lb, _, st) in enumerate(scored):
-        if opts.max_candidates is not None and tried >= opts.max_candidates:
+    best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False)
+    if best is None and opts.extended_search:
+        best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True)
+    if best is not None:
+        return best
+    reason = max(set(failures), key=failures.count) if failures else "no plan found"
+    raise PlanningError(reason + advice(reason), source=scn.source)
+
+
+def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *, extended: bool) -> "PlanResult | None":
+    """The shortest plan over up to ``variants_compared`` plannable variants (cheapest bound first).
+
+    ``extended`` turns on the wider G_1 search (one-leg stretch, orbit first); plan_assembly uses it
+    only when no variant is plannable without it, so layouts the standard search solves keep its plans.
+    """
+    best: PlanResult | None = None
+    tried = 0
+    for attempt, (lb, _, st) in enumerate(scored):
+        if best is None and opts.max_candidates is not None and attempt >= opts.max_candidates:
             failures.append(f"no plan within the first {opts.max_candidates} candidate structures")
             break
-        if failures and time.perf_counter() - t_start > opts.time_budget_s:
+        if best is not None and (tried + 1 >= opts.variants_compared or lb >= best.summary["duration_s"]):
+            break
+        if best is None and failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
-        t0 = time.perf_counter()
-        planner = _Planner(scn, analysis, st, opts)
-        try:
-            say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
-            planner.form_pair()
-            for k in range(scn.n - 2, 0, -1):
-                say(f"docking {planner.lab(planner.by_rank[k])}")
-                planner.dock_single(k)
-        except NoRoute as exc:
-            failures.append(exc.reason)
+        tried += best is not None
+        # Variants compared after a plan exists get a lighter search (no largest roadmap, no second G_1
+        # pass): they only replace the plan when they are easy, and hard ones would dominate the time.
+        light = opts if best is None else replace(opts, roadmap_nodes=opts.roadmap_nodes[:2], orbit_phases=0)
+        result = _plan_structure(scn, analysis, st, lb, candidates, light, say, extended)
+        if isinstance(result, str):
+            failures.append(result)
             continue
-        steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
-        from .outputs import provenance
+        if best is None or result.summary["duration_s"] < best.summary["duration_s"] - 1e-9:
+            best = result
+    return best
 
-        plan = Plan(
-            robots=scn.names,
-            primitives=_plan_primitives(analysis),
-            steps=steps,
-            goals={nm: Pose(*st.goal_poses([nm])[0]) for nm in scn.names},
-            provenance=provenance(opts.seed),
-        )
-        accessible = {frozenset(p.turning) for p in analysis.primitives}
-        rep = replay(plan, scn, accessible_turning=accessible)
-        if not rep.ok:
-            failures.append("internal: the plan failed its replay: " + "; ".join(rep.problems[:3]))
-            continue
-        duration = plan.duration_s
-        summary = {
-            "structure": st.shape,
-            "variant": st.variant,
-            "order": list(analysis.order),
-            "duration_s": duration,
-            "steps": len(steps),
-            "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
-            "lower_bound_s": lb,
-            "efficiency": lb / duration if duration > 0 else 1.0,
-            "planning_time_s": time.perf_counter() - t0,
-            "candidates": len(structures),
-            "notes": planner.notes,
-        }
-        return PlanResult(plan, st, analysis, rep, summary, tuple(planner.notes), tuple(planner.tl.phases))
-    reason = max(set(failures), key=failures.count) if failures else "no plan found"
-    raise PlanningError(reason, source=scn.source)
+
+_ADVICE = (
+    (re.compile(r"the orbit of (D\d+ \('[^']*'\))"), "move the start of {0} (its orbit disc is in the way) or enlarge the arena"),
+    (re.compile(r"too long for (D\d+ \('[^']*'\))'s free corridor"), "start the G_1 robots closer to their slots, or clear the line behind {0}'s slot"),
+    (re.compile(r"the arena edge"), "enlarge the arena or move the structure (or the starts) away from its edge"),
+    (re.compile(r"the docked body of (D\d+ \('[^']*'\))|approach into its slot is blocked"), "change the structure (a slot whose approach is clear of the robots docked before it)"),
+    (re.compile(r"meets (D\d+ \('[^']*'\))"), "move the start of {0} away from its partner's straight runs"),
+)
+
+
+def advice(reason: str) -> str:
+    """What would make a layout plannable, from the failure ``reason`` (``"; to make it plannable: ..."``).
+
+    The reason names the robot and the obstacle; the advice names the change (move that start, enlarge
+    the arena, change the structure). The first matching obstacle kind wins; empty when none matches.
+    """
+    for pattern, text in _ADVICE:
+        m = pattern.search(reason)
+        if m:
+            return "; to make it plannable: " + text.format(*m.groups())
+    return ""
