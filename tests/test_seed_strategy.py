@@ -26,7 +26,13 @@ from stressbots.paths import arc_through, interpolation_deviation, shortest_path
 from stressbots.robots import angle_difference
 from stressbots.scenario import Noise, load, to_toml
 from stressbots.seed_fine_motion import arc_back, s2f_duty, s2f_steps, s3f_duty, s3f_radii, s3f_steps
-from stressbots.seed_strategy import assemble_seed, in_proximity, intermediate_reason, nominal_intermediate, region_path
+from stressbots.seed_strategy import (
+    assemble_seed,
+    in_proximity,
+    intermediate_reason,
+    nominal_intermediate,
+    region_path,
+)
 from stressbots.sim import SimulatedPlant
 from stressbots.strategies import STRATEGIES, assemble_with
 

@@ -8,9 +8,9 @@ import re
 
 import numpy as np
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import shapely
 from shapely.geometry import Point, Polygon
 
 from stressbots.errors import PlanningError, ScenarioError

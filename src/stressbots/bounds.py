@@ -90,8 +90,9 @@ seed.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -196,7 +197,7 @@ class ErrorModel:
     drift_walk_rad_per_sqrt_um: float = 0.0
 
     @classmethod
-    def from_noise(cls, noise, k: float = DEFAULT_K, *, jitter: float = SEGMENT_JITTER) -> "ErrorModel":
+    def from_noise(cls, noise, k: float = DEFAULT_K, *, jitter: float = SEGMENT_JITTER) -> ErrorModel:
         """``k``-sigma bounds of a :class:`~stressbots.scenario.Noise` (see the module notes)."""
         if not (math.isfinite(k) and k >= 0):
             raise ValueError(f"k must be a finite number >= 0, got {k!r}")
@@ -1370,7 +1371,7 @@ class BoundsReport:
             "provenance": provenance(None),
         }
 
-    def with_coverage(self, coverage: Coverage) -> "BoundsReport":
+    def with_coverage(self, coverage: Coverage) -> BoundsReport:
         return replace(self, coverage=coverage)
 
 

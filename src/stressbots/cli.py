@@ -12,7 +12,7 @@ import contextlib
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import typer
@@ -136,7 +136,7 @@ def run(
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default from the layout (a few crossings).",
         show_default=False
     ),
@@ -235,7 +235,7 @@ def design(
     ties: bool = typer.Option(
         False, "--ties/--no-ties", help="Let consecutive robots share V_d or V_u (not both): fits about twice as many robots."
     ),
-    sd_v: Optional[float] = typer.Option(
+    sd_v: float | None = typer.Option(
         None, "--sd-V", help="Also estimate the yield when every threshold scatters with this standard deviation (V).", show_default=False
     ),
     resolution_v: float = typer.Option(
@@ -245,7 +245,7 @@ def design(
     trials: int = typer.Option(10000, "--trials", min=1, max=10_000_000, help="Monte Carlo trials for the yield."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Random seed for the yield (same seed, same estimate)."),
     as_json: bool = typer.Option(False, "--json", help="Write JSON instead of a TOML scenario fragment."),
-    out_file: Optional[Path] = typer.Option(
+    out_file: Path | None = typer.Option(
         None, "--out", help="Write to this file (atomically) instead of stdout; .json implies --json.", show_default=False
     ),
 ) -> None:
@@ -309,10 +309,10 @@ def waveform(
         ..., "--out", help="Output file: .json (segments, small), .npy (samples, columns t_s and volts) or .csv (same).",
         show_default=False,
     ),
-    steps: Optional[str] = typer.Option(
+    steps: str | None = typer.Option(
         None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False
     ),
-    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (as `stressbots plan` writes) instead of --steps.",
+    plan: Path | None = typer.Option(None, "--plan", help="A plan.json (as `stressbots plan` writes) instead of --steps.",
                                         show_default=False),
     rate_hz: float = typer.Option(100_000.0, "--rate-hz", min=1.0, max=10_000_000.0,
                                   help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
@@ -401,7 +401,7 @@ def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bo
         )
 
 
-def _waveform_of(scenario: Path, steps: Optional[str], plan: Optional[Path], out_file: Path, suffixes: tuple[str, ...], command: str):
+def _waveform_of(scenario: Path, steps: str | None, plan: Path | None, out_file: Path, suffixes: tuple[str, ...], command: str):
     """The scenario, its voltage analysis and the waveform of ``--steps`` or ``--plan`` (shared by ``waveform``
     and ``awg``), after checking ``--out`` (not an input, not a folder, a known suffix)."""
     from .electrostatics import analyse_scenario
@@ -428,11 +428,11 @@ def plan(
         0, "--seed", min=0, max=MAX_SEED,
         help="Seed of the route search's random waypoints (recorded in plan.json); `run`, `simulate` and `demo` plan with 0.",
     ),
-    clearance_um: Optional[float] = typer.Option(
+    clearance_um: float | None = typer.Option(
         None, "--clearance-um", min=0.0, max=1000.0,
         help="Distance kept from orbits, the structure and the arena edge (um); default the controller's setting.", show_default=False,
     ),
-    approach_um: Optional[float] = typer.Option(
+    approach_um: float | None = typer.Option(
         None, "--approach-um", min=1.0, max=5000.0,
         help="Final approach into every slot (um): a gentle clockwise arc, then a short straight push; default the controller's.",
         show_default=False,
@@ -552,13 +552,13 @@ def simulate(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and the pictures.", show_default=False),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of every random draw of the simulated plant (same seed, same run)."),
-    plan: Optional[Path] = typer.Option(
+    plan: Path | None = typer.Option(
         None, "--plan", help="Execute this plan.json open loop instead of the closed-loop controller.", show_default=False
     ),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Closed loop: simulated time budget (s); default from the layout (a few crossings).",
         show_default=False
     ),
@@ -793,7 +793,7 @@ def _finite_nonneg(value: float, option: str) -> float:
 @app.command()
 def bounds(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.", show_default=False),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
+    out_dir: Path | None = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only the bounds.json object on stdout."),
     k: float = typer.Option(3.0, "--k", help="Standard deviations of each noise factor the bounds cover (k-sigma box)."),
     critical: bool = typer.Option(
@@ -921,18 +921,18 @@ def montecarlo(
     trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
-    sweep: Optional[str] = typer.Option(
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    sweep: str | None = typer.Option(
         None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Simulated time budget per trial (s); default the controller's.", show_default=False
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
     resume: bool = typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made with other settings)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: Optional[str] = typer.Option(
+    dask: str | None = typer.Option(
         None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
         "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
     ),
@@ -1042,7 +1042,14 @@ from contextlib import contextmanager as _contextmanager  # noqa: E402 - kept wi
 def _campaign_progress(show: bool, label: str = "trials"):
     """A progress bar with ETA for a campaign; it appears at the first report (after the store is
     checked, so a refusal prints only its error line). No refresh thread: workers may be forked."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
                    console=err, disable=not show, auto_refresh=False, transient=False)
@@ -1088,7 +1095,7 @@ def _write_trials_csv(folder: Path) -> Path:
 def export(
     store_dir: Path = typer.Argument(..., metavar="DIR", help="A campaign's folder (or its trials.sqlite).", show_default=False),
     fmt: str = typer.Option("csv", "--format", help="csv, or parquet (needs pyarrow)."),
-    out_file: Optional[Path] = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
+    out_file: Path | None = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
 ) -> None:
     """Export a campaign's trial store (finished, interrupted or still running) for pandas & co.
 
@@ -1118,10 +1125,10 @@ def export(
 def study(
     study_file: Path = typer.Argument(..., metavar="STUDY.toml", help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.", show_default=False),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
     resume: bool = typer.Option(False, "--resume", help="Continue the study in DIR/trials.sqlite: run only its missing trials (refused if the study changed)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: Optional[str] = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    dask: str | None = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
 ) -> None:
@@ -1193,17 +1200,17 @@ def awg(
         ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) or .npy (int16 codes).",
         show_default=False,
     ),
-    steps: Optional[str] = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
-    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
+    steps: str | None = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
+    plan: Path | None = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
     gain: float = typer.Option(20.0, "--gain", help="Voltage gain of the amplifier between generator and electrodes (V/V)."),
     offset_V: float = typer.Option(0.0, "--offset-V", help="Electrode level (V) at generator output 0 V (amplifier offset)."),
     sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz", help="Generator sample rate (Hz); at least twice the drive frequency."),
     awg_max_V: float = typer.Option(10.0, "--awg-max-V", help="The generator's output limit (V): every level must stay within +-this."),
     name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
-    upload_to: Optional[str] = typer.Option(
+    upload_to: str | None = typer.Option(
         None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).", show_default=False
     ),
-    visa_library: Optional[str] = typer.Option(
+    visa_library: str | None = typer.Option(
         None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.", show_default=False
     ),
     ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
@@ -1301,7 +1308,7 @@ def track(
                   soft_wrap=True)
 
 
-def _upload_program(prog, resource: str, visa_library: Optional[str], *, name: str, ascii_data: bool, output_on: bool) -> None:
+def _upload_program(prog, resource: str, visa_library: str | None, *, name: str, ascii_data: bool, output_on: bool) -> None:
     """Open the VISA resource and upload (errors from PyVISA become one ``error:`` line)."""
     from .lab.awg import upload
 
@@ -1349,7 +1356,7 @@ _UsageError = _click_base("UsageError")
 _ClickException = _click_base("ClickException")
 
 
-def main(argv: Optional[list[str]] = None) -> None:
+def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the CLI, mapping every failure to one ``error:`` line.
 
     Exit status: 0 done, 1 internal error (a bug: ``error: internal error: ...``; set

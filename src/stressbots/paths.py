@@ -234,7 +234,7 @@ class Path:
         return tuple((k == "R", v / speed_um_s) for k, v in self.segments)
 
     @classmethod
-    def _trusted(cls, x: float, y: float, theta: float, radius: float, segments) -> "Path":
+    def _trusted(cls, x: float, y: float, theta: float, radius: float, segments) -> Path:
         """A path from values already checked (finite floats, radius > 0, lengths >= 0): no numpy."""
         t = theta % TWO_PI
         path = object.__new__(cls)
@@ -243,12 +243,12 @@ class Path:
         object.__setattr__(path, "segments", _normalise_segments(segments))
         return path
 
-    def then(self, *segments) -> "Path":
+    def then(self, *segments) -> Path:
         """This path followed by more ``(kind, length_um)`` segments."""
         return Path(self.start, self.radius, self.segments + tuple(segments))
 
 
-def sub_path(path: "Path", s0_um: float, s1_um: float) -> "Path":
+def sub_path(path: Path, s0_um: float, s1_um: float) -> Path:
     """The part of ``path`` between arc lengths ``s0_um`` and ``s1_um`` (um), as a path of its own.
 
     Used to cut a planned route into the pieces a robot drives between two measurements or phases.

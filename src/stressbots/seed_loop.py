@@ -7,9 +7,9 @@ see :mod:`stressbots.seed_strategy` for the strategy as a whole.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Sequence
 
 import numpy as np
 import shapely

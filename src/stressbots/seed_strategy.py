@@ -48,7 +48,16 @@ import numpy as np
 from .assessment import shape_error
 from .control import AssemblyResult, ControllerOptions, nominal_plan
 from .robots import TWO_PI, angle_difference
-from .seed_loop import SeedLoop, SeedSettings, SeedStop, dock_single, in_proximity, intermediate_reason, nominal_intermediate, region_path
+from .seed_loop import (
+    SeedLoop,
+    SeedSettings,
+    SeedStop,
+    dock_single,
+    in_proximity,
+    intermediate_reason,
+    nominal_intermediate,
+    region_path,
+)
 from .seed_pair import form_pair
 
 __all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity", "nominal_intermediate", "region_path"]

@@ -100,8 +100,9 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -433,7 +434,7 @@ class SimulatedPlant:
             p = np.concatenate([p, self._pose[None]])
         return t, p
 
-    def copy(self) -> "SimulatedPlant":
+    def copy(self) -> SimulatedPlant:
         """An independent copy that continues bit-identically (random streams included)."""
         new = object.__new__(type(self))
         new.__dict__ = {k: (v if k == "scenario" else copy.deepcopy(v)) for k, v in self.__dict__.items()}

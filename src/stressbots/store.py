@@ -36,9 +36,10 @@ import io
 import json
 import math
 import sqlite3
-from datetime import datetime, timezone
+from collections.abc import Iterable, Mapping
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 from .errors import StressbotsError
 
@@ -84,7 +85,7 @@ _BUSY_TIMEOUT_MS = 30_000  # a reader (pandas, sqlite3 shell) may hold the file 
 
 
 def _utc_now() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def _db_value(v: Any) -> Any:
@@ -179,7 +180,7 @@ class TrialStore:
 
     @classmethod
     def open(cls, path: Path | str, settings: Mapping[str, Any], *, resume: bool = False, overwrite: bool = False,
-             info: Mapping[str, Any] | None = None, cells: Iterable[tuple[str, Mapping[str, Any]]] = ()) -> "TrialStore":
+             info: Mapping[str, Any] | None = None, cells: Iterable[tuple[str, Mapping[str, Any]]] = ()) -> TrialStore:
         """Create a store, or reopen one for ``--resume`` after checking it was made with ``settings``.
 
         ``path`` may be ``":memory:"`` (a campaign that keeps nothing). An existing store is refused
@@ -238,7 +239,7 @@ class TrialStore:
             return "unknown number of"
 
     @classmethod
-    def _reopen(cls, p: Path, settings: dict) -> "TrialStore":
+    def _reopen(cls, p: Path, settings: dict) -> TrialStore:
         con = _open_readonly(p)
         try:
             row = con.execute("SELECT value FROM campaign WHERE key = 'settings'").fetchone()
@@ -285,7 +286,7 @@ class TrialStore:
     def close(self) -> None:
         self._con.close()
 
-    def __enter__(self) -> "TrialStore":
+    def __enter__(self) -> TrialStore:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -375,7 +375,7 @@ class Structure:
         r_star = self.slot(name).orbit_radius_um if orbit_radius_um is None else float(orbit_radius_um)
         return self.docking_object(name).buffer(2.0 * r_star)
 
-    def moved(self, rotation_rad: float = 0.0, translation_um=(0.0, 0.0), about_um=(0.0, 0.0)) -> "Structure":
+    def moved(self, rotation_rad: float = 0.0, translation_um=(0.0, 0.0), about_um=(0.0, 0.0)) -> Structure:
         """The same structure after a rigid motion: rotate clockwise by ``rotation_rad`` about
         ``about_um`` (heading convention: theta grows clockwise), then translate. Re-validated."""
         poses = _rigid(self.goal_poses(self.docking_order), rotation_rad, translation_um, about_um)
@@ -1058,7 +1058,7 @@ def named_structure(
 
 def candidate_structures(
     robots_in_voltage_order: Sequence[Robot],
-    spec: "StructureSpec",
+    spec: StructureSpec,
     *,
     approach_margin_um: float = APPROACH_MARGIN_UM,
 ) -> list[Structure]:
@@ -1112,7 +1112,7 @@ def candidate_structures(
 
 def target_structures(
     robots_in_voltage_order: Sequence[Robot],
-    spec: "StructureSpec | None" = None,
+    spec: StructureSpec | None = None,
     *,
     approach_margin_um: float = APPROACH_MARGIN_UM,
 ) -> list[Structure]:

@@ -49,21 +49,36 @@ placement error is reported beside it.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
 from .. import paths as pathlib
 from .. import se2
 from ..assessment import shape_error
-from ..collision import arena_gap, bodies_hit_discs, outside_arena, penetration_depth, point_rectangle_distance
+from ..collision import (
+    arena_gap,
+    bodies_hit_discs,
+    outside_arena,
+    penetration_depth,
+    point_rectangle_distance,
+)
 from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
 from ..estimation import Estimator
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
 from ..waveform import synthesize
-from .queries import best_departure, in_funnel, line_coords, line_pose, merge, pose_on_orbit, trim_steps, turn_fraction
+from .queries import (
+    best_departure,
+    in_funnel,
+    line_coords,
+    line_pose,
+    merge,
+    pose_on_orbit,
+    trim_steps,
+    turn_fraction,
+)
 from .result import AssemblyResult
 from .targets import Targets, nominal_plan, structure_targets
 from .tuning import ControllerOptions

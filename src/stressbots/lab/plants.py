@@ -12,8 +12,9 @@ closed-loop controller (:func:`stressbots.control.assemble`) runs on them unchan
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
