@@ -87,7 +87,7 @@ def test_drift_is_the_integral_of_the_knot_curvatures_and_bends_the_path_accordi
     lengths, kappas = drift.segments(0, 0.0, 730.0)
     assert lengths.size == math.ceil(730.0 / DEFAULT_DRIFT.knot_um) and np.all(lengths <= DEFAULT_DRIFT.knot_um + 1e-9)
     x, y, th = 0.0, 0.0, 0.0  # composed arcs, written out
-    for s, k in zip(lengths, kappas):
+    for s, k in zip(lengths, kappas, strict=False):
         t = k * s
         x += (math.cos(th) - math.cos(th + t)) / k if k else 0.0
         y += (math.sin(th + t) - math.sin(th)) / k if k else s

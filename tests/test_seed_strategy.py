@@ -103,7 +103,7 @@ def test_s3f_radii_match_a_simulated_interleaving_for_both_robots(rhos):
     endN = _drive(start, steps, {n}, v, rN)
     endM = _drive(start, steps, {n, n - 1}, v, rM)
     expected = s3f_radii(rhos, rN, rM)
-    for end, want in zip((endN, endM), expected):
+    for end, want in zip((endN, endM), expected, strict=False):
         turn = float(np.mod(end[2] - start[2], 2 * math.pi))
         chord = float(np.hypot(*(end[:2] - start[:2])))
         measured = math.inf if turn < 1e-12 else chord / (2 * math.sin(turn / 2))

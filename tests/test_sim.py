@@ -196,7 +196,7 @@ def test_zero_noise_camera_sees_the_truth():
 def _chunks(waveform, k):
     """A waveform cut into k consecutive pieces at segment boundaries."""
     cuts = np.linspace(0, len(waveform), k + 1).astype(int)
-    return [waveform[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    return [waveform[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
 
 
 def test_same_seed_is_bit_identical_and_copies_continue_identically(example_plan):

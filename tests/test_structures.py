@@ -443,7 +443,7 @@ def test_named_shape_moves_with_its_frame(phi, dx, dy):
     ref = candidate_structures(robots, StructureSpec("comb", Pose(0.0, 0.0, 0.0)))
     mov = candidate_structures(robots, StructureSpec("comb", Pose(dx, dy, phi)))
     assert len(ref) == len(mov)
-    for r, m in zip(ref, mov):
+    for r, m in zip(ref, mov, strict=False):
         want = _move({k: tuple(p) for k, p in r.goals().items()}, phi, dx, dy)
         got = m.goals()
         for k in want:

@@ -27,7 +27,7 @@ def reference_render(poses, lengths, widths, cal: Calibration, shape, rng, *, su
     rr = (np.arange(rows * sub) + 0.5) / sub - 0.5
     X = (cc[None, :] - cal.origin_px[0]) * cal.um_per_px
     Y = (cal.origin_px[1] - rr[:, None]) * cal.um_per_px
-    for (x, y, th), L, W in zip(poses, lengths, widths):
+    for (x, y, th), L, W in zip(poses, lengths, widths, strict=False):
         h = np.array([math.sin(th), math.cos(th)])  # heading
         right = np.array([math.cos(th), -math.sin(th)])
         u = (X - x) * h[0] + (Y - y) * h[1]

@@ -48,7 +48,7 @@ def replay_samples(v: np.ndarray, vd, vu) -> np.ndarray:
     s = tuple(0 for _ in vd)
     starts = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
     ends = np.r_[starts[1:], v.size]
-    for a, b in zip(starts, ends):
+    for a, b in zip(starts, ends, strict=False):
         s = hysteresis(s, float(v[a]), vd, vu)
         states[a:b] = s
     return states
@@ -150,7 +150,7 @@ def test_general_designs_synthesise_or_refuse_for_a_reason(design, data):
     m = e.margin_V
     flips = any(
         (s == 0 and e.drive_high_V > d - m) or (s == 1 and e.drive_low_V < u + m) or (s == 0 and e.drive_high_V >= d) or (s == 1 and e.drive_low_V <= u)
-        for s, d, u in zip(target, vd, vu)
+        for s, d, u in zip(target, vd, vu, strict=False)
     )
     reachable = brute_shortest(vd, vu, e.max_V, e.margin_V, [0] * len(vd), target) is not None
     assert reachable  # every accessible state is reachable from all-up, by definition

@@ -1223,12 +1223,12 @@ def empirical_coverage(
             trial_seed = int(children[t].generate_state(1, np.uint64)[0] >> np.uint64(11))
             plant = plant_factory(solo, seed=trial_seed)
             state = None
-            for seq, curve in zip(seqs, curves):
+            for seq, curve in zip(seqs, curves, strict=True):
                 p0 = np.asarray(plant.true_poses(), dtype=np.float64)[0]
                 ends_t = np.cumsum(seq.durations_s)
                 nominal = sequence_poses(p0, seq.turning, seq.durations_s, v, r, np.zeros((1, 3)), ends_t)[0]
                 bxy, bth = curve.at(ends_t)
-                for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s)):
+                for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s, strict=True)):
                     prim = analysis.primitive("P1" if turn else "P0")
                     plant.apply(synthesize(analysis, [(prim, float(dur))], initial=state))
                     state = np.array(prim.state, dtype=np.uint8)

@@ -645,8 +645,8 @@ def simulate(
         **{k: v for k, v in summary.items() if k != "success"},
         "events": [e.as_dict() for e in plant.events],
         "plant": {
-            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist())),
-            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist())),
+            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist(), strict=True)),
+            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist(), strict=True)),
         },
         "wall_time_s": wall,
         "provenance": provenance(plant.seed),

@@ -596,7 +596,7 @@ def shortest_path(start, goal, radius, *, approach_um=0.0) -> Path:
     if ell > 0.0:
         x2, y2 = x2 - ell * math.sin(t2), y2 - ell * math.cos(t2)
     word, seg = _solve_scalar(x1, y1, t1, x2, y2, t2, r)
-    segments = tuple(zip(word, seg)) + ((("S", ell),) if ell > 0.0 else ())
+    segments = tuple(zip(word, seg, strict=False)) + ((("S", ell),) if ell > 0.0 else ())
     return Path._trusted(x1, y1, t1, r, segments)
 
 

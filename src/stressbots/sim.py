@@ -546,7 +546,7 @@ class SimulatedPlant:
         curvature plus the drift's, which is piecewise constant between odometer knots: exact arcs,
         composed (all robots at once, pieces padded to a common count)."""
         tmax = float(taus.max())
-        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed)]
+        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed, strict=False)]
         k = max(len(p[0]) for p in pieces)
         lengths = np.zeros((len(pieces), k))
         kd = np.zeros((len(pieces), k))
@@ -596,7 +596,7 @@ class SimulatedPlant:
             near = centre - self._hd[I] - self._hd[J] < reach
             I, J = I[near], J[near]
             if motion.excluded and I.size:
-                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(I, J)], dtype=bool)
+                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(I, J, strict=True)], dtype=bool)
                 I, J = I[ok], J[ok]
         else:
             I, J = I[:0], J[:0]
@@ -652,7 +652,7 @@ class SimulatedPlant:
             else:
                 lo = mid[-1]
         Gh = self._gaps(self._poses_at(p0, motion, ctx, np.array([hi])), ci, cj)[0]
-        pairs = [(int(x), int(y)) for x, y, g, t in zip(ci, cj, Gh, thr) if g < t]
+        pairs = [(int(x), int(y)) for x, y, g, t in zip(ci, cj, Gh, thr, strict=False) if g < t]
         return lo, pairs
 
     # -- contact rules -------------------------------------------------------------------------------
@@ -689,7 +689,7 @@ class SimulatedPlant:
                 a, b = I[t], J[t]
                 da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
                 db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
-                for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist()):
+                for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist(), strict=False):
                     touching.setdefault(x, []).append(y)
                     touching.setdefault(y, []).append(x)
                     approach[(x, y)] = rx / PROBE_UM
@@ -703,7 +703,7 @@ class SimulatedPlant:
             for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
                 push.setdefault(i, []).append(ARENA)
         close = np.flatnonzero(d0 > -NEAR_UM)
-        near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close])}
+        near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close], strict=True)}
         arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
 
         def near(a: int, b: int) -> bool:
@@ -1086,7 +1086,7 @@ def _first_difference(a: dict[str, Any], b: dict[str, Any], names: Sequence[str]
         x, y = a[key], b[key]
         if key == "events":
             if x != y:
-                k = next((m for m, (p, q) in enumerate(zip(x, y)) if p != q), min(len(x), len(y)))
+                k = next((m for m, (p, q) in enumerate(zip(x, y, strict=False)) if p != q), min(len(x), len(y)))
                 px = x[k] if k < len(x) else "nothing"
                 py = y[k] if k < len(y) else "nothing"
                 return f"event {k} differs: {px} vs {py}"

@@ -295,7 +295,7 @@ class TrialStore:
 
 def _rows(con: sqlite3.Connection) -> list[dict[str, Any]]:
     cur = con.execute(f"SELECT {', '.join(_NAMES)} FROM trials ORDER BY trial")
-    return [dict(zip(_NAMES, r)) for r in cur]
+    return [dict(zip(_NAMES, r, strict=True)) for r in cur]
 
 
 def _cells(con: sqlite3.Connection) -> list[dict[str, Any]]:

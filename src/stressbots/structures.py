@@ -499,7 +499,7 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     for j in range(k):
         for e in range(4):
             length = float(lens[j, e])
-            covered = sorted((float(a), float(b)) for a, b in zip(lo[j, e], hi[j, e]) if b - a > 0.0)
+            covered = sorted((float(a), float(b)) for a, b in zip(lo[j, e], hi[j, e], strict=True) if b - a > 0.0)
             spans = []
             cur = 0.0
             for a, b in covered + [(length, length)]:

@@ -80,7 +80,7 @@ class StudySpec:
     def points(self) -> list[dict[str, Any]]:
         """Every grid point (a dict key -> value), the last axis varying fastest."""
         keys = [k for k, _ in self.axes]
-        return [dict(zip(keys, combo)) for combo in itertools.product(*(v for _, v in self.axes))]
+        return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(v for _, v in self.axes))]
 
     @property
     def cells(self) -> int:
@@ -308,7 +308,7 @@ def plan_cells(cells, planner: Callable, progress: Callable[[int, int], None] | 
     distinct = list(dict.fromkeys(keys))
     plans: dict[str, tuple[Any, str | None]] = {}
     out = []
-    for cell, key in zip(cells, keys):
+    for cell, key in zip(cells, keys, strict=True):
         if key not in plans:
             try:
                 plans[key] = (planner(cell.scenario), None)
@@ -351,11 +351,11 @@ def paired_comparison(this: Sequence[bool], baseline: Sequence[bool]) -> dict[st
 
     if len(this) != len(baseline):
         raise ValueError("paired cells need the same trials")
-    gained = sum(1 for a, b in zip(this, baseline) if a and not b)
-    lost = sum(1 for a, b in zip(this, baseline) if b and not a)
+    gained = sum(1 for a, b in zip(this, baseline, strict=True) if a and not b)
+    lost = sum(1 for a, b in zip(this, baseline, strict=True) if b and not a)
     n = gained + lost
     p = 1.0 if n == 0 else min(1.0, 2.0 * float(binom.cdf(min(gained, lost), n, 0.5)))
-    return {"gained": gained, "lost": lost, "both": sum(1 for a, b in zip(this, baseline) if a and b), "mcnemar_p": p}
+    return {"gained": gained, "lost": lost, "both": sum(1 for a, b in zip(this, baseline, strict=True) if a and b), "mcnemar_p": p}
 
 
 def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:

@@ -113,7 +113,7 @@ def failure_chart(summary: Mapping[str, Any], top: int = 6):
              for r in rows]
         if any(w):
             ax.barh(y, w, left=left, label=kind[:70])
-            left = [a + b for a, b in zip(left, w)]
+            left = [a + b for a, b in zip(left, w, strict=True)]
     ax.set_yticks(y, [r["label"] for r in rows], fontsize=7)
     ax.set_xlim(0, 1)
     ax.set_xlabel("fraction of the cell's trials")

@@ -1224,7 +1224,7 @@ class _Runner:
         if self.scn.arena_um is not None:
             w, h = self.scn.arena_um
             ok &= (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance) & (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
-        others = [*zip(turning_centres(self.est[lower], self.r_hat[lower]), self.rstar[lower])] if lower else []
+        others = [*zip(turning_centres(self.est[lower], self.r_hat[lower]), self.rstar[lower], strict=True)] if lower else []
         for cc, rr in [*others, *discs]:
             ok &= np.hypot(*(c - cc).T) >= rs + float(rr) + clearance
         for j in np.flatnonzero(self.docked):
