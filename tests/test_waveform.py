@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import doctest
 import json
 
@@ -79,7 +80,7 @@ def test_segments_validate(make, words):
 def test_segments_are_frozen_values():
     h = Hold(10, 1)
     assert h == Hold(10.0, 1.0) and isinstance(h.volts, float)
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         h.volts = 3.0  # type: ignore[misc]
 
 

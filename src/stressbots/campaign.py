@@ -434,7 +434,7 @@ def _sigterm_as_interrupt():
         yield
         return
 
-    def handler(signum, frame):
+    def handler(_signum, _frame):
         raise KeyboardInterrupt
 
     old = signal.signal(signal.SIGTERM, handler)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +46,7 @@ out = Console()
 err = Console(stderr=True)
 
 
-class StrategyChoice(str, Enum):
+class StrategyChoice(StrEnum):
     """The --strategy choices of simulate and run (stressbots.strategies.STRATEGIES)."""
 
     rendezvous = "rendezvous"
@@ -58,7 +58,7 @@ def _strategy_option():
 
     return typer.Option(StrategyChoice.rendezvous, "--strategy", help=STRATEGY_HELP)
 
-class CameraChoice(str, Enum):
+class CameraChoice(StrEnum):
     """The --camera choices of simulate and run: what the controller sees."""
 
     poses = "poses"
@@ -69,7 +69,7 @@ CAMERA_HELP = ("What the controller sees: 'poses' (the simulator's noisy pose ca
                "frames tracked by stressbots.tracking: image in the loop; needs the [lab] extra).")
 
 
-class NoiseChoice(str, Enum):
+class NoiseChoice(StrEnum):
     """The --noise choices of simulate and run."""
 
     scenario = "scenario"
@@ -847,7 +847,7 @@ def bounds(
         with Progress(TextColumn("coverage"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
                       disable=not show, transient=True) as bar:
             task = bar.add_task("coverage", total=coverage_trials * scn.n)
-            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, t: bar.update(task, completed=d))
+            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, _total: bar.update(task, completed=d))
         report = report.with_coverage(cov)
     doc = report.to_dict()
     if scales is not None:

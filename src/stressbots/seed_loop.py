@@ -453,7 +453,7 @@ def dock_single(loop: SeedLoop, k: int, goal, co, waypoints) -> None:
     def inside() -> bool:
         return intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone) is None
 
-    for attempt in range(cfg.fine_attempts):
+    for _attempt in range(cfg.fine_attempts):
         if not gross_motion(loop, i, k, k - 1, route + [a_pose], inside, orbiting):
             why = intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone)
             loop.log("retry", i, f"ended outside A_i ({why}): re-plans to a_i")

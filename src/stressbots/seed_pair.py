@@ -429,7 +429,7 @@ def partial_stage2(loop: SeedLoop, nominal: PairNominal, duration_s: float) -> N
             break
 
 
-def check_pair(loop: SeedLoop, gN, gM) -> None:
+def check_pair(loop: SeedLoop, _gN, _gM) -> None:
     """Push both straight until they stop: G_1 formed (both docked) or the strategy ends in H."""
     n = loop.n
     N, M = loop.by_rank[n], loop.by_rank[n - 1]

@@ -66,7 +66,7 @@ __all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity
 # -- the whole assembly ----------------------------------------------------------------------------
 
 
-def _rigid_goals(goals: np.ndarray, nominal: np.ndarray, N: int, M: int, measured: np.ndarray):
+def _rigid_goals(nominal: np.ndarray, N: int, M: int, measured: np.ndarray):
     """``(phi, c_nom, c_meas)``: the rigid motion that takes the pair's nominal slots onto the measured pair."""
     nom_axis = nominal[M, :2] - nominal[N, :2]
     meas_axis = measured[M, :2] - measured[N, :2]
@@ -81,7 +81,7 @@ def _run(loop: SeedLoop, plan) -> np.ndarray:
     nominal = plan.plan.goal_array()
     N, M = loop.by_rank[n], loop.by_rank[n - 1]
     form_pair(loop, structure, nominal)
-    phi, c_nom, c_meas = _rigid_goals(nominal, nominal, N, M, loop.est)
+    phi, c_nom, c_meas = _rigid_goals(nominal, N, M, loop.est)
     moved = structure.moved(phi, c_meas - c_nom, c_nom)
     goals = moved.goal_poses(loop.scn.names)
     goals[N], goals[M] = loop.est[N], loop.est[M]

@@ -508,11 +508,11 @@ class SimulatedPlant:
     def _quiet(self, bound: np.ndarray, duration_s: float) -> bool:
         """Whether no body can come within :data:`NEAR_UM` of another or of the arena edge in
         ``duration_s`` (bounding circles grown by each body's largest travel)."""
-        P, I, J = self._pose, self._I, self._J
+        P, ii, jj = self._pose, self._I, self._J
         travel = bound * duration_s
-        if I.size:
-            centre = np.hypot(P[I, 0] - P[J, 0], P[I, 1] - P[J, 1])
-            if (centre - self._hd[I] - self._hd[J] - travel[I] - travel[J] <= NEAR_UM).any():
+        if ii.size:
+            centre = np.hypot(P[ii, 0] - P[jj, 0], P[ii, 1] - P[jj, 1])
+            if (centre - self._hd[ii] - self._hd[jj] - travel[ii] - travel[jj] <= NEAR_UM).any():
                 return False
         if self.scenario.arena_um is not None:
             if (_arena_gap(P, self._hl, self._hw, self.scenario.arena_um) - travel <= NEAR_UM).any():
@@ -587,20 +587,20 @@ class SimulatedPlant:
         if horizon <= 0.0 or not moving.any():
             return None
         U = np.where(moving, np.where(motion.mode == _SLIDE, np.hypot(*motion.slide_v.T), ctx[3]), 0.0)
-        I, J = self._I, self._J
-        keep = moving[I] | moving[J]
+        ii, jj = self._I, self._J
+        keep = moving[ii] | moving[jj]
         if keep.any():
-            I, J = I[keep], J[keep]
-            reach = (U[I] + U[J]) * horizon + 1.0
-            centre = np.hypot(p0[I, 0] - p0[J, 0], p0[I, 1] - p0[J, 1])
-            near = centre - self._hd[I] - self._hd[J] < reach
-            I, J = I[near], J[near]
-            if motion.excluded and I.size:
-                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(I, J, strict=True)], dtype=bool)
-                I, J = I[ok], J[ok]
+            ii, jj = ii[keep], jj[keep]
+            reach = (U[ii] + U[jj]) * horizon + 1.0
+            centre = np.hypot(p0[ii, 0] - p0[jj, 0], p0[ii, 1] - p0[jj, 1])
+            near = centre - self._hd[ii] - self._hd[jj] < reach
+            ii, jj = ii[near], jj[near]
+            if motion.excluded and ii.size:
+                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(ii, jj, strict=True)], dtype=bool)
+                ii, jj = ii[ok], jj[ok]
         else:
-            I, J = I[:0], J[:0]
-        ci, cj = I, J
+            ii, jj = ii[:0], jj[:0]
+        ci, cj = ii, jj
         if self.scenario.arena_um is not None:
             m = np.flatnonzero(moving)
             g0a = _arena_gap(p0[m], self._hl[m], self._hw[m], self.scenario.arena_um)
@@ -670,9 +670,9 @@ class SimulatedPlant:
         slide_v = np.zeros((n, 2))
         slide_end = np.full(n, math.inf)
         excluded: set = set()
-        I, J = self._I, self._J
+        ii, jj = self._I, self._J
         arena = self.scenario.arena_um
-        d0 = _depth(P[I], P[J], hl[I], hw[I], hl[J], hw[J]) if I.size else np.zeros(0)
+        d0 = _depth(P[ii], P[jj], hl[ii], hw[ii], hl[jj], hw[jj]) if ii.size else np.zeros(0)
         g0 = _arena_gap(P, hl, hw, arena) if arena is not None else np.full(n, np.inf)
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self._contacts = {}
@@ -683,10 +683,10 @@ class SimulatedPlant:
         push: dict[int, list[int]] = {}
         approach: dict[tuple[int, int], float] = {}
         touching: dict[int, list[int]] = {}
-        if I.size:
+        if ii.size:
             t = np.flatnonzero(d0 > -TOUCH_UM)
             if t.size:
-                a, b = I[t], J[t]
+                a, b = ii[t], jj[t]
                 da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
                 db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
                 for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist(), strict=False):
@@ -703,7 +703,7 @@ class SimulatedPlant:
             for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
                 push.setdefault(i, []).append(ARENA)
         close = np.flatnonzero(d0 > -NEAR_UM)
-        near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close], strict=True)}
+        near_pairs = {(int(a), int(b)) for a, b in zip(ii[close], jj[close], strict=True)}
         arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
 
         def near(a: int, b: int) -> bool:
@@ -849,7 +849,7 @@ class SimulatedPlant:
             own = np.array([True, False])
         return pts, own
 
-    def _front_face(self, i: int, j: int, pts, own):
+    def _front_face(self, i: int, j: int, pts):
         """For robot i pressing its front on body j: ``(contact point, outward normal of j's face, alpha)``,
         or ``None`` when the contact is not on i's front edge."""
         P = self._pose
@@ -883,7 +883,7 @@ class SimulatedPlant:
 
     def _flush(self, i: int, j: int) -> bool:
         pts, own = self._contact_points(i, j)
-        ff = self._front_face(i, j, pts, own)
+        ff = self._front_face(i, j, pts)
         return ff is not None and abs(ff[2]) <= FLUSH_TOL_RAD
 
     def _dock_rule(self, i: int, j: int, ctx, touching: Iterable[int]):
@@ -894,7 +894,7 @@ class SimulatedPlant:
         P = self._pose
         speed = ctx[0]
         pts, own = self._contact_points(i, j)
-        ff = self._front_face(i, j, pts, own)
+        ff = self._front_face(i, j, pts)
         name_j = self._names[j]
         if ff is None:
             u, v = _local(pts, P[i])

@@ -35,7 +35,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -118,7 +118,7 @@ class Drive:
         object.__setattr__(self, "duration_s", d)
 
 
-Segment = Union[Hold, Drive]
+Segment = Hold | Drive
 
 
 def duration(waveform: Sequence[Segment]) -> float:

@@ -470,7 +470,7 @@ class _Runner:
                 ready = None
             else:
                 a_pose = self.line_pose(goal, back, 20.0, -math.radians(6.0))
-                ready = lambda: self.in_funnel(i, back)  # noqa: E731
+                ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
                 self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
@@ -483,7 +483,7 @@ class _Runner:
             if back is not None and not self.in_funnel(i, back):
                 self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
-            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k, orbiting)
+            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k)
             if ok:
                 return
             if self._missed:
@@ -597,7 +597,7 @@ class _Runner:
         rot = np.array([d[0] * cph + d[1] * sph, -d[0] * sph + d[1] * cph])
         return np.array([c_meas[0] + rot[0], c_meas[1] + rot[1], float(np.mod(pose[2] + phi, TWO_PI))])
 
-    def fine_dock(self, i: int, k: int, orbiting) -> bool:
+    def fine_dock(self, i: int, k: int) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""
         for _ in range(60):
             v, r = self.v_hat[i], self.r_hat[i]
@@ -863,19 +863,19 @@ class _Runner:
                         break
             else:
                 self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} first takes a clear track")
-                if not self.arrive_timed(N, M, lambda: arg, th_dep, lower):
+                if not self.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower):
                     # D_{n-1} still orbits where it was: choose again from where D_n is now
                     self.log("retry", N, f"{self.scn.names[N]} could not reach its track in time; the leg is planned again")
                     failed_runs += 1
                     if failed_runs >= 4:
                         raise _Replan(f"{self.scn.names[N]} cannot reach a clear track in time for {self.scn.names[M]}'s move")
                     continue
-                self.wait_straight(N, M, th_dep)
+                self.wait_straight(M, th_dep)
             self.straight_leg(N, M, c_next, lower)
         miss = float(np.hypot(*(c_star - self.centre(M))))
         self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
 
-    def wait_straight(self, N: int, M: int, th_dep: float) -> None:
+    def wait_straight(self, M: int, th_dep: float) -> None:
         """D_n straight (P_{n-1}) while D_{n-1} orbits on to heading ``th_dep``."""
         n = self.n
         for _ in range(40):
@@ -1155,7 +1155,7 @@ class _Runner:
         th_dep = float(self.goals[M, 2])
         if not self.arrive_timed(N, M, lambda: self.approach_pose(N, M, self.centre(M), D), th_dep, lower):
             raise _Replan(f"{self.scn.names[N]} found no timed path to its approach line")
-        return self.depart_and_meet(N, M, lower)
+        return self.depart_and_meet(N, M)
 
     def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float | None = None) -> bool:
         """D_n drives to ``target_fn()`` (a pose on a line it then runs straight along), arriving ``early``
@@ -1205,7 +1205,7 @@ class _Runner:
             if path is None:
                 # no timed way from here: go where D_n can wait on its orbit near the target, then retry
                 holds += 1
-                if holds > 3 or not self.to_holding(N, M, q, lower, disc):
+                if holds > 3 or not self.to_holding(N, q, lower, disc):
                     return False
                 continue
             self.replans += 1
@@ -1247,7 +1247,7 @@ class _Runner:
         c = np.stack([cx.ravel(), cy.ravel()], axis=1)
         return c[self.orbits_free(i, c, discs, lower, clearance)]
 
-    def to_holding(self, N: int, M: int, q, lower, disc) -> bool:
+    def to_holding(self, N: int, q, lower, disc) -> bool:
         """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
         n = self.n
         # the same clearances as the timed paths' checks, so that waiting there passes them
@@ -1268,7 +1268,7 @@ class _Runner:
         self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=self.tune.g1_clearance_um)
         return not self._stuck
 
-    def depart_and_meet(self, N: int, M: int, lower) -> bool:
+    def depart_and_meet(self, N: int, M: int) -> bool:
         """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
         n = self.n
         for _ in range(40):
