@@ -279,7 +279,8 @@ def test_cli_help_teaches():
 
     from stressbots.cli import app
 
-    for cmd, words in [("design", ["--sd-V", "(V)", "Examples"]), ("states", ["--json", "margin_V", "Example"]), ("waveform", ["--steps", "P1:2.5", "--rate-hz"])]:
+    for cmd, words in [("design", ["--sd-V", "(V)", "Examples"]), ("states", ["--json", "margin_V", "Example"]),
+                       ("waveform", ["--steps", "P1:2.5", "--rate-hz"])]:
         r = CliRunner().invoke(app, [cmd, "--help"], env={"COLUMNS": "200", "TERM": "dumb"})
         assert r.exit_code == 0
         for w in words:

@@ -88,7 +88,8 @@ def test_eq1_arc_through_the_docking_point_flown_as_s2f(x, y, th, dist, bearing,
     # each symmetric cycle of the mean duty lands on the arc up to (r'-r)(beta - 2 sin(beta/2)) along it
     beta = v * period_s / fine.radius_um
     cycles = math.ceil(duration / period_s)
-    tol = cycles * (fine.radius_um - r) * (beta - 2 * math.sin(beta / 2)) * 2 + interpolation_deviation(fine.radius_um, r, v * period_s) + 1e-6
+    tol = cycles * (fine.radius_um - r) * (beta - 2 * math.sin(beta / 2)) * 2 + interpolation_deviation(fine.radius_um, r,
+                                                                                                        v * period_s) + 1e-6
     assert np.hypot(*(end[:2] - point)) <= tol
     assert abs(float(angle_difference(end[2], fine.arrival_rad))) <= 1e-6 + tol / fine.radius_um
 

@@ -199,7 +199,8 @@ def test_cli_track_folder_of_pngs(run_cli, tmp_path, tee):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert_user_error(run_cli("track", empty, "--scenario", scn, "--um-per-px", "3", "--origin-px", "0", "0", "--out", out), "no .png")
-    assert_user_error(run_cli("track", folder, "--scenario", scn, "--um-per-px", "-1", "--origin-px", "0", "0", "--out", out), "--um-per-px")
+    assert_user_error(run_cli("track", folder, "--scenario", scn, "--um-per-px", "-1", "--origin-px", "0", "0", "--out", out),
+                      "--um-per-px")
 
 
 def test_docstring_examples():

@@ -150,7 +150,8 @@ def test_general_designs_synthesise_or_refuse_for_a_reason(design, data):
     target = a.accessible_states[data.draw(st.integers(0, a.count - 1))]
     m = e.margin_V
     flips = any(
-        (s == 0 and e.drive_high_V > d - m) or (s == 1 and e.drive_low_V < u + m) or (s == 0 and e.drive_high_V >= d) or (s == 1 and e.drive_low_V <= u)
+        (s == 0 and e.drive_high_V > d - m) or (s == 1 and e.drive_low_V < u + m)
+        or (s == 0 and e.drive_high_V >= d) or (s == 1 and e.drive_low_V <= u)
         for s, d, u in zip(target, vd, vu, strict=False)
     )
     reachable = brute_shortest(vd, vu, e.max_V, e.margin_V, [0] * len(vd), target) is not None
@@ -322,7 +323,8 @@ def test_steps_from_plan(four):
     bad = plans.from_dict(plan_dict(primitives=[{"name": "P0", "turning": []}, {"name": "Q", "turning": ["C"]}]))
     with pytest.raises(WaveformError, match=r"primitives\[1\] \(Q\)\.turning: turning \['C'\] is not an accessible"):
         steps_from_plan(bad, four, source="p.json")
-    other = plans.from_dict(plan_dict(robots=["A", "B", "C", "E"], primitives=[{"name": "P0", "turning": []}, {"name": "Q", "turning": []}]))
+    other = plans.from_dict(plan_dict(robots=["A", "B", "C", "E"], primitives=[{"name": "P0", "turning": []}, {"name": "Q",
+                                                                                                               "turning": []}]))
     with pytest.raises(WaveformError, match="robots: robot 'D' of the scenario is not in the plan"):
         steps_from_plan(other, four, source="p.json")
 

@@ -1029,7 +1029,8 @@ def intermediate_region(
                     f"r_alpha = {erosion_radius_um:.0f} um: no pose of the preimage of G* outside C_O keeps that "
                     f"clearance from its boundary (heading margin {math.degrees(erosion_height_rad):.1f} deg)"
                 )
-    return Region(robot, goal, xs, ys, hs, mask, pre, float(erosion_radius_um), float(erosion_height_rad), float(cone_rad), float(min_radius_um), reason)
+    return Region(robot, goal, xs, ys, hs, mask, pre, float(erosion_radius_um), float(erosion_height_rad), float(cone_rad),
+                  float(min_radius_um), reason)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1082,7 +1083,8 @@ class Cone:
         }
 
 
-def fine_motion_cone(radius_min_um: float, radius_max_um: float, length_um: float, *, n: int = 65, label: str = "", robot: str = "", duties=("", "")) -> Cone:
+def fine_motion_cone(radius_min_um: float, radius_max_um: float, length_um: float, *, n: int = 65, label: str = "", robot: str = "",
+                     duties=("", "")) -> Cone:
     """The cone of positions reachable by arcs of radius ``r_min <= r' <= r_max`` up to ``length_um``.
 
     Arcs from one pose with one tangent are nested circles touching only at the start, so up to half a
@@ -1516,7 +1518,8 @@ def analyse_bounds(
         d_turn = deviation_envelope(turning_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
         d_str = deviation_envelope(straight_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
         tx = float(scenario.control.replan_interval_s)
-        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence, straight_sequence)]
+        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence,
+                                                                                                               straight_sequence)]
         d_tx = (max(a for a, _ in short), max(b for _, b in short))
         say(f"sampling A_{idx}* ({nm})")
         region, ok, reason = _verdict(

@@ -114,7 +114,8 @@ class Campaign:
         return out
 
 
-def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None = None, source: str = "--strategy") -> tuple[tuple[str, Any], ...]:
+def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None = None,
+                      source: str = "--strategy") -> tuple[tuple[str, Any], ...]:
     """The extra controller arguments of a cell, checked against what ``assemble`` accepts.
 
     A strategy other than ``"default"`` is passed as ``ControllerOptions.strategy`` when the options have

@@ -130,8 +130,10 @@ def demo(
 
 @app.command()
 def run(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].", show_default=False),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].",
+                                    show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.",
+                                 show_default=False),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the simulated plant (same seed, same run)."),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
@@ -316,7 +318,8 @@ def waveform(
                                         show_default=False),
     rate_hz: float = typer.Option(100_000.0, "--rate-hz", min=1.0, max=10_000_000.0,
                                   help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
-    large: bool = typer.Option(False, "--large", help=f"Allow a sampled output of more than {LARGE_SAMPLES:,} samples (tens of MB or more)."),
+    large: bool = typer.Option(False, "--large",
+                               help=f"Allow a sampled output of more than {LARGE_SAMPLES:,} samples (tens of MB or more)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Synthesise the voltage waveform of a list of primitives and write it.
@@ -551,7 +554,8 @@ def _noise_dict(noise) -> dict[str, float]:
 def simulate(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and the pictures.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of every random draw of the simulated plant (same seed, same run)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED,
+                             help="Seed of every random draw of the simulated plant (same seed, same run)."),
     plan: Path | None = typer.Option(
         None, "--plan", help="Execute this plan.json open loop instead of the closed-loop controller.", show_default=False
     ),
@@ -731,7 +735,8 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     if quiet:
         return
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: "
+              f"{res.duration_s:.1f} s simulated, "
               f"{res.replans} re-plans; the command took {time.perf_counter() - t_command:.1f} s (wall time)",
               highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))
@@ -792,7 +797,8 @@ def _finite_nonneg(value: float, option: str) -> float:
 
 @app.command()
 def bounds(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.",
+                                    show_default=False),
     out_dir: Path | None = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only the bounds.json object on stdout."),
     k: float = typer.Option(3.0, "--k", help="Standard deviations of each noise factor the bounds cover (k-sigma box)."),
@@ -800,7 +806,8 @@ def bounds(
         False, "--critical", help="Also find, per robot, the largest multiple of [noise] at which it is still guaranteed (a few s)."
     ),
     coverage_trials: int = typer.Option(
-        0, "--coverage-trials", min=0, max=10_000, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
+        0, "--coverage-trials", min=0, max=10_000,
+            help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
@@ -921,7 +928,8 @@ def montecarlo(
     trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
-    workers: int | None = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256,
+                                       help="Worker processes (default: every core; 1 = in this process).", show_default=False),
     sweep: str | None = typer.Option(
         None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
     ),
@@ -930,8 +938,11 @@ def montecarlo(
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made with other settings)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    resume: bool = typer.Option(False, "--resume",
+                                help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made "
+                                     "with other settings)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
     dask: str | None = typer.Option(
         None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
         "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
@@ -1095,7 +1106,8 @@ def _write_trials_csv(folder: Path) -> Path:
 def export(
     store_dir: Path = typer.Argument(..., metavar="DIR", help="A campaign's folder (or its trials.sqlite).", show_default=False),
     fmt: str = typer.Option("csv", "--format", help="csv, or parquet (needs pyarrow)."),
-    out_file: Path | None = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
+    out_file: Path | None = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).",
+                                         show_default=False),
 ) -> None:
     """Export a campaign's trial store (finished, interrupted or still running) for pandas & co.
 
@@ -1123,12 +1135,19 @@ def export(
 
 @app.command()
 def study(
-    study_file: Path = typer.Argument(..., metavar="STUDY.toml", help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.", show_default=False),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
-    resume: bool = typer.Option(False, "--resume", help="Continue the study in DIR/trials.sqlite: run only its missing trials (refused if the study changed)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: str | None = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    study_file: Path = typer.Argument(..., metavar="STUDY.toml",
+                                      help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.",
+                                 show_default=False),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).",
+                                       show_default=False),
+    resume: bool = typer.Option(False, "--resume",
+                                help="Continue the study in DIR/trials.sqlite: run only its missing trials "
+                                     "(refused if the study changed)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: str | None = typer.Option(None, "--dask", metavar="ADDRESS",
+                                    help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
 ) -> None:
@@ -1174,7 +1193,8 @@ def study(
 
     lo, hi = summary["success_rate_ci95"]
     out.print(f"[bold]{summary['name']}[/bold]: {len(summary['cells'])} cells x {summary['trials_per_cell']} paired trials, "
-              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s", highlight=False, soft_wrap=True)
+              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s",
+                  highlight=False, soft_wrap=True)
     axes = list(summary["axes"])
     t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
     for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
@@ -1186,7 +1206,8 @@ def study(
                   f"{r['success_rate']:.2f}", f"{r['success_rate_ci95'][0]:.2f}-{r['success_rate_ci95'][1]:.2f}",
                   top if len(top) <= 40 else top[:39] + "...")
     out.print(t)
-    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")), highlight=False, soft_wrap=True)
+    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")),
+              highlight=False, soft_wrap=True)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1195,23 +1216,28 @@ def study(
 
 @app.command()
 def awg(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.",
+                                    show_default=False),
     out_file: Path = typer.Option(
-        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) or .npy (int16 codes).",
+        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) "
+                           "or .npy (int16 codes).",
         show_default=False,
     ),
     steps: str | None = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
     plan: Path | None = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
     gain: float = typer.Option(20.0, "--gain", help="Voltage gain of the amplifier between generator and electrodes (V/V)."),
     offset_V: float = typer.Option(0.0, "--offset-V", help="Electrode level (V) at generator output 0 V (amplifier offset)."),
-    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz", help="Generator sample rate (Hz); at least twice the drive frequency."),
+    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz",
+                                         help="Generator sample rate (Hz); at least twice the drive frequency."),
     awg_max_V: float = typer.Option(10.0, "--awg-max-V", help="The generator's output limit (V): every level must stay within +-this."),
     name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
     upload_to: str | None = typer.Option(
-        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).", show_default=False
+        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).",
+            show_default=False
     ),
     visa_library: str | None = typer.Option(
-        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.", show_default=False
+        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.",
+            show_default=False
     ),
     ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
     output_on: bool = typer.Option(False, "--output-on", help="Switch the generator's output on after a clean upload (off by default)."),
@@ -1223,8 +1249,9 @@ def awg(
     wave at the scenario's drive frequency), mapped to `u` and quantised to int16 DAC codes
     (-32767 = VOLT:LOW, +32767 = VOLT:HIGH). Before anything is written or sent it refuses electrode
     levels outside [0, max_V], generator levels outside +-awg_max_V and more points than the generator
-    holds (saying how to split the plan). --upload sends the SCPI sequence documented in the README ("Running on your hardware") to channel 1 and
-    checks SYST:ERR? after the data and after the settings; the output stays off unless --output-on.
+    holds (saying how to split the plan). --upload sends the SCPI sequence documented in the README
+    ("Running on your hardware") to channel 1 and checks SYST:ERR? after the data and after the settings;
+    the output stays off unless --output-on.
 
     Examples: `stressbots awg examples/four-robots.toml --steps P1:0.5,P0:0.5 --out wf.arb`;
     dry run against the simulated instrument: `stressbots awg examples/four-robots.toml --steps P1:0.5
@@ -1240,7 +1267,8 @@ def awg(
     ev = prog.electrode_volts()
     out.print(
         f"wrote {out_file}: {prog.points} points at {prog.sample_rate_hz:g} Hz ({prog.duration_s:g} s); generator "
-        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset {offset_V:g} V",
+        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset "
+        f"{offset_V:g} V",
         highlight=False, soft_wrap=True,
     )
     if upload_to is not None:
@@ -1251,12 +1279,14 @@ def awg(
 @app.command()
 def track(
     frames: Path = typer.Argument(..., help="A folder of PNG frames (tracked in name order) or a video file.", show_default=False),
-    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.", show_default=False),
+    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.",
+                                  show_default=False),
     um_per_px: float = typer.Option(..., "--um-per-px", help="Camera calibration: micrometres per pixel.", show_default=False),
     origin_px: tuple[float, float] = typer.Option(
         ..., "--origin-px", help="Camera calibration: the pixel (column, row) of the arena origin (x = y = 0).", show_default=False
     ),
-    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).", show_default=False),
+    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).",
+                                  show_default=False),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Track the robots in camera frames: one pose per robot and frame, identities kept from frame to frame.

@@ -405,7 +405,8 @@ def montecarlo_summary(scenario, outcomes: dict[float, list[TrialOutcome]], seed
     summary.update(summarise(outcomes[1.0]))
     summary["ci_method"] = "Wilson score interval, 95 %"
     summary["seed"] = int(seed)
-    summary["trial_seeds"] = "trial i: int(SeedSequence(seed).spawn(trials)[i].generate_state(1, uint64)[0] >> 11), for plant and controller"
+    summary["trial_seeds"] = ("trial i: int(SeedSequence(seed).spawn(trials)[i].generate_state(1, uint64)[0] >> 11), "
+                              "for plant and controller")
     summary["noise"] = _noise_dict(scenario.noise)
     pl = getattr(plan, "plan", plan)
     summary["nominal_plan"] = {

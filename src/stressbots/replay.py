@@ -86,7 +86,8 @@ def replay(
     n = len(names)
     problems: list[str] = []
     if sorted(plan.robots) != sorted(names):
-        return ReplayReport(False, ("plan robots differ from the scenario's",), np.full((n, 3), np.nan), np.zeros(n, bool), np.full(n, np.nan))
+        return ReplayReport(False, ("plan robots differ from the scenario's",), np.full((n, 3), np.nan), np.zeros(n, bool),
+                            np.full(n, np.nan))
     order = [plan.robots.index(nm) for nm in names]  # plan column of each scenario robot
     turning_all = plan.turning_matrix()[:, order]
     if accessible_turning is not None:
@@ -183,7 +184,8 @@ def replay(
                 i, j = int(pairs_i[p]), int(pairs_j[p])
                 note(
                     ("overlap", i, j),
-                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, p].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, {step.primitive})",
+                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, p].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, "
+                    f"{step.primitive})",
                 )
         if arena is not None:
             K = traj.shape[0]

@@ -340,7 +340,8 @@ def stage1(loop: SeedLoop, dep: Departure, lower) -> None:
             if plan is None:
                 committed = timed_path(loop, N, dep.a_n_prime, durations, lower, disc)
                 if committed is None:
-                    raise SeedStop(f"G_1 stage 1: {loop.label(N)} has no clear path to A_n' timed to {loop.label(M)}'s departure (within {MAX_PERIODS} orbit periods)")
+                    raise SeedStop(f"G_1 stage 1: {loop.label(N)} has no clear path to A_n' timed to {loop.label(M)}'s departure (within "
+                                   f"{MAX_PERIODS} orbit periods)")
                 loop.log("timed", N, f"follows a lengthened path of {committed.length:.0f} um (open loop until its last {2 * loop.tx:g} s)")
                 _follow(loop, N, committed, n, n - 1)
                 departed = True
@@ -401,10 +402,14 @@ def stage2(loop: SeedLoop, nominal: PairNominal) -> bool:
         if in_N and in_M:
             return True
         if in_M:
-            loop.log("replan", M, f"{loop.label(M)} entered A_(n-1) before {loop.label(N)} entered A_n (its path was shorter than nominal): re-plans sigma_1")
+            loop.log("replan", M,
+                     f"{loop.label(M)} entered A_(n-1) before {loop.label(N)} entered A_n (its path was shorter than nominal): re-plans "
+                     "sigma_1")
             return False
         if in_N or passed:
-            loop.log("replan", N, f"{loop.label(N)} reached A_n before {loop.label(M)} entered A_(n-1) (its path was longer than nominal): re-plans sigma_1")
+            loop.log("replan", N,
+                     f"{loop.label(N)} reached A_n before {loop.label(M)} entered A_(n-1) (its path was longer than nominal): re-plans "
+                     "sigma_1")
             return False
     raise SeedStop(f"G_1 stage 2: {loop.label(M)} did not reach A_(n-1) in {loop.cfg.max_cycles} re-plans")
 
@@ -442,9 +447,12 @@ def check_pair(loop: SeedLoop, _gN, _gM) -> None:
             off = abs(float(angle_difference(loop.est[N, 2], loop.est[M, 2] + math.pi)))
             if gap <= PAIR_TOL_UM and off <= math.radians(PAIR_TOL_DEG):
                 loop.docked[[N, M]] = True
-                loop.log("G_1", None, f"{loop.label(N)} and {loop.label(M)} formed G_1 (front edges {gap:.1f} um apart, {math.degrees(off):.1f} deg from head-on)")
+                loop.log("G_1", None,
+                         f"{loop.label(N)} and {loop.label(M)} formed G_1 (front edges {gap:.1f} um apart, {math.degrees(off):.1f} deg "
+                         "from head-on)")
                 return
-            raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} stopped with front edges {gap:.0f} um apart, {math.degrees(off):.0f} deg from head-on (failure region H)")
+            raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} stopped with front edges {gap:.0f} um apart, "
+                           f"{math.degrees(off):.0f} deg from head-on (failure region H)")
     raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} kept moving after their S_3f arcs (they missed each other)")
 
 
@@ -485,23 +493,32 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
     gN, gM = nominal_goals[N], nominal_goals[M]
     nominal = pair_nominal(loop, structure, gN, gM, lower)
     if nominal is None:
-        raise SeedStop(f"G_1: no S_3f arcs into the slots of {loop.label(N)} and {loop.label(M)} start outside C_O and clear of the other robots (A_n* empty)")
-    loop.log("a_n", None, f"S_3f{tuple(round(r, 2) for r in nominal.rhos)}, {nominal.duration_s:.1f} s; a_n = ({nominal.a_n[0]:.0f}, {nominal.a_n[1]:.0f}), a_(n-1) = ({nominal.a_m[0]:.0f}, {nominal.a_m[1]:.0f}); {loop.cylinder_note(N)}")
+        raise SeedStop(f"G_1: no S_3f arcs into the slots of {loop.label(N)} and {loop.label(M)} start outside C_O and clear of the other "
+                       "robots (A_n* empty)")
+    loop.log("a_n", None,
+             f"S_3f{tuple(round(r, 2) for r in nominal.rhos)}, {nominal.duration_s:.1f} s; a_n = ({nominal.a_n[0]:.0f}, "
+             f"{nominal.a_n[1]:.0f}), a_(n-1) = ({nominal.a_m[0]:.0f}, {nominal.a_m[1]:.0f}); {loop.cylinder_note(N)}")
     replans = partials = 0
     while True:
         dep = departure(loop, nominal, lower)
         if dep is None:
             if partials >= cfg.partial_stages:
-                raise SeedStop(f"G_1 did not form: no clear straight stage-2 run for {loop.label(N)} after {partials} partial stages (the seed's two-stage scheme; SPEC 5's known limit)")
+                raise SeedStop(f"G_1 did not form: no clear straight stage-2 run for {loop.label(N)} after {partials} partial stages (the "
+                               "seed's two-stage scheme; SPEC 5's known limit)")
             dep = partial_departure(loop, nominal, lower)
             if dep is None:
-                raise SeedStop(f"G_1: no departure of {loop.label(M)} from its orbit gives {loop.label(N)} a clear straight stage-2 run (the seed's two-stage scheme; SPEC 5's known limit)")
+                raise SeedStop(f"G_1: no departure of {loop.label(M)} from its orbit gives {loop.label(N)} a clear straight stage-2 run "
+                               "(the seed's two-stage scheme; SPEC 5's known limit)")
             partials += 1
-            loop.log("sigma_1", N, f"no clear straight run to A_n: partial stage 2 ({dep.t2_s:.1f} s of {loop.label(M)}'s path) from a run at ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f})")
+            loop.log("sigma_1", N,
+                     f"no clear straight run to A_n: partial stage 2 ({dep.t2_s:.1f} s of {loop.label(M)}'s path) from a run at "
+                     f"({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f})")
             stage1_partial(loop, dep)
             partial_stage2(loop, nominal, dep.t2_s)
             continue
-        loop.log("sigma_1", N, f"stage 1 to A_n' ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f}); stage 2 {dep.t2_s:.1f} s from heading {math.degrees(dep.heading):.0f} deg")
+        loop.log("sigma_1", N,
+                 f"stage 1 to A_n' ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f}); stage 2 {dep.t2_s:.1f} s from heading "
+                 f"{math.degrees(dep.heading):.0f} deg")
         stage1(loop, dep, lower)
         if stage2(loop, nominal):
             loop.log("A_n", None, "both in A_n x A_(n-1): fine motion (S_3f)")
@@ -509,4 +526,5 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
                 return
         replans += 1
         if replans > cfg.pair_replans:
-            raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine motion")
+            raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine "
+                           "motion")

@@ -86,7 +86,8 @@ def _run(loop: SeedLoop, plan) -> np.ndarray:
     goals = moved.goal_poses(loop.scn.names)
     goals[N], goals[M] = loop.est[N], loop.est[M]
     if abs(math.degrees(phi)) > 0.5 or np.hypot(*(c_meas - c_nom)) > 5.0:
-        loop.log("retarget", None, f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
+        loop.log("retarget", None,
+                 f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
     for k in range(n - 2, 0, -1):
         i = loop.by_rank[k]
         route = next((p for p in plan.phases if p.kind == "route" and p.mover == i), None)
@@ -101,7 +102,8 @@ def _moved_pose(pose, phi: float, c_nom, c_meas) -> np.ndarray:
     return np.array([c_meas[0] + d[0] * c + d[1] * s, c_meas[1] - d[0] * s + d[1] * c, float(np.mod(pose[2] + phi, TWO_PI))])
 
 
-def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options: ControllerOptions | None = None, settings: SeedSettings | None = None) -> AssemblyResult:
+def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None,
+                  options: ControllerOptions | None = None, settings: SeedSettings | None = None) -> AssemblyResult:
     """Assemble ``scenario``'s structure through ``plant`` with the seed's two-step EDR strategy.
 
     Same interface and result as :func:`stressbots.control.assemble` (``options`` gives t_x, the time

@@ -928,7 +928,8 @@ class SimulatedPlant:
             dist = float(np.max((on_face - c) @ t)) + SLIDE_OVERSHOOT_UM
             if dist > 0.0 and not self._slide_blocked(i, vel, [k for k in touching if k != j]):
                 self._stuck[i] = False
-                return "slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {name_j} (H)", (vel, dist / float(np.linalg.norm(vel)))
+                return ("slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {name_j} (H)",
+                        (vel, dist / float(np.linalg.norm(vel))))
             self._stuck[i] = True
             return "stuck", f"incidence {deg:.1f} deg outside the sticking cone and cannot slide (H)", None
         self._stuck[i] = True

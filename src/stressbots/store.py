@@ -299,7 +299,8 @@ def _rows(con: sqlite3.Connection) -> list[dict[str, Any]]:
 
 
 def _cells(con: sqlite3.Connection) -> list[dict[str, Any]]:
-    return [{"cell": c, "label": lab, "params": json.loads(p)} for c, lab, p in con.execute("SELECT cell, label, params FROM cells ORDER BY cell")]
+    return [{"cell": c, "label": lab, "params": json.loads(p)} for c, lab,
+            p in con.execute("SELECT cell, label, params FROM cells ORDER BY cell")]
 
 
 def read_rows(path: Path | str) -> list[dict[str, Any]]:

@@ -49,7 +49,8 @@ from typing import Any
 
 from .errors import StressbotsError
 
-__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary", "paired_comparison", "run_study"]
+__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary",
+           "paired_comparison", "run_study"]
 
 _ROBOT_KEY = re.compile(r"^robots\[(\d+)\]\.(\w+)$")
 _TOP_KEYS = {"name", "trials", "seed", "time_budget_s", "layouts", "grid", "fixed"}
@@ -181,7 +182,8 @@ def _layouts(raw: Any, base: Path, source: str) -> tuple[Layout, ...]:
         seeds = gen.get("seeds", [gen.get("seed", 0)])
         for s in seeds:
             try:
-                scn = random_scenario(int(gen["n"]), int(s), shape=str(gen.get("shape", "tee")), heterogeneous=bool(gen.get("heterogeneous", True)),
+                scn = random_scenario(int(gen["n"]), int(s), shape=str(gen.get("shape", "tee")),
+                                      heterogeneous=bool(gen.get("heterogeneous", True)),
                                       noise=LITERATURE_NOISE)
             except StressbotsError as exc:
                 raise StressbotsError(f"cannot generate this layout: {exc.problem}", source=source, field=where) from None
@@ -263,7 +265,8 @@ def _controller_options(values: Mapping[str, Any], source: str):
     names = {f.name: f for f in dataclasses.fields(ControllerOptions)}
     for k, v in values.items():
         if k not in names:
-            raise StressbotsError(f"ControllerOptions has no field {k!r}; it has {', '.join(names)}", source=source, field=f"controller.{k}")
+            raise StressbotsError(f"ControllerOptions has no field {k!r}; it has {', '.join(names)}", source=source,
+                                  field=f"controller.{k}")
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise StressbotsError(f"must be a number or a name, got {v!r}", source=source, field=f"controller.{k}")
     return ControllerOptions(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v) for k, v in values.items()})
@@ -373,7 +376,8 @@ def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
         base = by_cell[baseline[cell.params["layout"]]]
         paired = None
         if baseline[cell.params["layout"]] != c and [o.index for o in base] == [o.index for o in mine]:
-            paired = {"baseline_cell": baseline[cell.params["layout"]], **paired_comparison([o.success for o in mine], [o.success for o in base])}
+            paired = {"baseline_cell": baseline[cell.params["layout"]], **paired_comparison([o.success for o in mine],
+                                                                                            [o.success for o in base])}
         rows.append({"cell": c, "label": cell.label, "layout": cell.params["layout"],
                      "params": {k: v for k, v in cell.params.items() if k != "layout"}, "trials": st["trials"],
                      "successes": st["successes"], "success_rate": st["success_rate"], "success_rate_ci95": st["success_rate_ci95"],

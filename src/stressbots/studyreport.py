@@ -109,7 +109,8 @@ def failure_chart(summary: Mapping[str, Any], top: int = 6):
     y = list(range(len(rows)))[::-1]
     left = [0.0] * len(rows)
     for kind in kinds + ["other"]:
-        w = [(r["failures"].get(kind, 0) if kind != "other" else sum(n for k, n in r["failures"].items() if k not in kinds)) / max(r["trials"], 1)
+        w = [(r["failures"].get(kind, 0) if kind != "other"
+              else sum(n for k, n in r["failures"].items() if k not in kinds)) / max(r["trials"], 1)
              for r in rows]
         if any(w):
             ax.barh(y, w, left=left, label=kind[:70])
@@ -133,7 +134,8 @@ def build_study_report(summary: Mapping[str, Any]) -> str:
     varying = [k for k, v in summary["axes"].items() if len(v) > 1]
     curves = "".join(f"<h3>{_e(k)}</h3>{img(plot_axis(summary, k), f'success rate vs {k}')}" for k in varying)
     overview = img(_layout_chart(summary), "success rate per cell")
-    fails = img(failure_chart(summary), "failure reasons per cell") if any(r["failures"] for r in summary["cells"]) else "<p>No failures.</p>"
+    fails = img(failure_chart(summary),
+                "failure reasons per cell") if any(r["failures"] for r in summary["cells"]) else "<p>No failures.</p>"
     table_rows = []
     for r in summary["cells"]:
         lo, hi = r["success_rate_ci95"]

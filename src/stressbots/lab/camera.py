@@ -72,7 +72,8 @@ class Camera:
         body_c = np.zeros(self.shape, np.float32)
         arm_c = np.zeros(self.shape, np.float32)
         upx = cal.um_per_px
-        for p, L, W in zip(np.asarray(poses, np.float64), np.asarray(lengths_um, np.float64), np.asarray(widths_um, np.float64), strict=True):
+        for p, L, W in zip(np.asarray(poses, np.float64), np.asarray(lengths_um, np.float64), np.asarray(widths_um, np.float64),
+                           strict=True):
             if not np.all(np.isfinite(p)):
                 continue
             hl, hw = L / 2, W / 2
