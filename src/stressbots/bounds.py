@@ -1203,7 +1203,9 @@ def empirical_coverage(
     from .waveform import synthesize
 
     if plant_factory is None:
-        from .sim import SimulatedPlant as plant_factory  # noqa: N813
+        from .sim import SimulatedPlant
+
+        plant_factory = SimulatedPlant
     model = ErrorModel.from_noise(scenario.noise, k)
     step = float(step_s if step_s is not None else scenario.control.replan_interval_s)
     children = np.random.SeedSequence(int(seed)).spawn(int(trials))
@@ -1458,6 +1460,7 @@ def _prepare(scenario, structure, notes: list[str], say):
     if structure is None:
         say("resolving the target structure")
         structure = _resolve_structure(scenario, analysis, notes)
+    assert analysis.order is not None  # a STRING design always has its order
     return list(analysis.order), structure
 
 

@@ -126,6 +126,7 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
     import inspect
 
     out: dict[str, Any] = {}
+    params: Mapping[str, inspect.Parameter]
     try:
         params = inspect.signature(assemble).parameters
     except (TypeError, ValueError):  # pragma: no cover - builtins

@@ -705,7 +705,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     budget = finite_budget(time_budget_s)
     scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
     folder = prepare_dir(out_dir, inputs=[scenario])
-    names = ("result.json", "trajectory.png", "structure.png", "animation.html")
+    names: tuple[str, ...] = ("result.json", "trajectory.png", "structure.png", "animation.html")
     for name in names:
         check_not_input(folder / name, [scenario])
     if not scn.has_starts:

@@ -173,13 +173,13 @@ def default_planner() -> Callable:
     when it offers one, else :func:`stressbots.planning.plan_assembly`. A trial then follows exactly the
     plan ``assemble(..., plan=None)`` would have made."""
     try:
-        from .control import nominal_plan  # type: ignore[attr-defined]
+        from .control import nominal_plan
 
         return nominal_plan
     except ImportError:
         pass
     try:  # the controller's module, where control.assemble comes from
-        from .edr import nominal_plan  # type: ignore[no-redef]
+        from .edr import nominal_plan
 
         return nominal_plan
     except ImportError:

@@ -122,14 +122,14 @@ def replay(
     for k, step in enumerate(plan.steps):
         dur = step.duration_s
         turning = turning_all[k]
-        for i in np.flatnonzero(docked & turning):
+        for i in np.flatnonzero(docked & turning).tolist():
             note(("turn-docked", i), f"step {k} ({step.primitive}): docked robot {names[i]} receives a turning primitive")
         if dur <= 0:
             continue
         moving = ~docked
         # Docking events: straight-moving robots whose slot lies ahead on their line within this step.
         t_dock = np.full(n, np.inf)
-        for i in np.flatnonzero(moving & ~turning & np.isfinite(goals[:, 0])):
+        for i in np.flatnonzero(moving & ~turning & np.isfinite(goals[:, 0])).tolist():
             g = goals[i]
             dth = (g[2] - pose[i, 2] + math.pi) % TWO_PI - math.pi
             if abs(dth) > heading_tol_rad:
@@ -150,7 +150,7 @@ def replay(
         # partner that docks at the same moment (G_1).
         accepted = np.zeros(n, dtype=bool)
         cand = np.flatnonzero(np.isfinite(t_dock))
-        for i in cand:
+        for i in cand.tolist():
             gi = goals[i]
             touching = False
             for j in range(n):
@@ -164,7 +164,7 @@ def replay(
                         break
             if touching:
                 accepted[i] = True
-        for i in np.flatnonzero(accepted):
+        for i in np.flatnonzero(accepted).tolist():
             after = t >= t_dock[i]
             h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
             stop = pose[i, :2] + speed[i] * t_dock[i] * h
@@ -179,22 +179,22 @@ def replay(
                 a, np.tile(length[pairs_i], K), np.tile(width[pairs_i], K), b, np.tile(length[pairs_j], K), np.tile(width[pairs_j], K)
             ).reshape(K, -1)
             bad = depth > tol_um
-            for p in np.flatnonzero(bad.any(axis=0)):
-                kk = int(np.argmax(bad[:, p]))
-                i, j = int(pairs_i[p]), int(pairs_j[p])
+            for pk in np.flatnonzero(bad.any(axis=0)).tolist():
+                kk = int(np.argmax(bad[:, pk]))
+                i, j = int(pairs_i[pk]), int(pairs_j[pk])
                 note(
                     ("overlap", i, j),
-                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, p].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, "
+                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, pk].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, "
                     f"{step.primitive})",
                 )
         if arena is not None:
             K = traj.shape[0]
             out = outside_arena(traj.reshape(-1, 3), np.tile(length, K), np.tile(width, K), arena, tol_um=tol_um).reshape(K, n)
-            for i in np.flatnonzero((out > 0).any(axis=0)):
+            for i in np.flatnonzero((out > 0).any(axis=0)).tolist():
                 kk = int(np.argmax(out[:, i] > 0))
                 note(("arena", int(i)), f"{names[i]} leaves the arena by {out[:, i].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k})")
         pose = traj[-1].copy()
-        for i in np.flatnonzero(accepted):
+        for i in np.flatnonzero(accepted).tolist():
             docked[i] = True
             dock_time[i] = t_now + t_dock[i]
         if trace_every_um is not None:
@@ -206,7 +206,7 @@ def replay(
                 trace_p.append(traj[-1])
         t_now += dur
 
-    for i in np.flatnonzero(~docked):
+    for i in np.flatnonzero(~docked).tolist():
         if np.isfinite(goals[i, 0]):
             dist = float(np.hypot(*(pose[i, :2] - goals[i, :2])))
             problems.append(f"{names[i]} is not docked at its slot at the end (ends {dist:.1f} um from it)")

@@ -199,6 +199,7 @@ class SeedLoop:
         n = scenario.n
         self.n = n
         self.rank = np.empty(n, dtype=int)
+        assert self.analysis.order_index is not None  # a STRING design always has its order
         for k, i in enumerate(self.analysis.order_index):
             self.rank[i] = k + 1
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
@@ -286,7 +287,7 @@ class SeedLoop:
             hits = bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii) + c).any(axis=0)
             if hits.any():
                 return labels[int(np.argmax(hits))]
-        for j in np.flatnonzero(self.docked):
+        for j in np.flatnonzero(self.docked).tolist():
             if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c).any():
                 return f"docked {self.name(j)}"
         if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():

@@ -33,7 +33,7 @@ import numpy as np
 from . import paths
 from .collision import penetration_depth
 from .kinematics import move
-from .robots import TWO_PI, angle_difference, front_midpoints, turning_centres
+from .robots import TWO_PI, Pose, angle_difference, front_midpoints, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s3f_duty, s3f_radii, s3f_steps
 from .seed_loop import SeedLoop, SeedStop, in_proximity
 
@@ -95,7 +95,8 @@ def pair_nominal(loop: SeedLoop, structure, gN, gM, lower) -> PairNominal | None
             continue
         for k in range(int(good[0]), min(int(good[0]) + 24, T.size), 4):
             if _sweeps_clear(loop, N, M, gN, gM, rN, rM, float(T[k]), lower):
-                return PairNominal(aN[k], aM[k], tuple(float(x) for x in rhos), float(T[k]))
+                r1, r2, r3 = (float(x) for x in rhos)
+                return PairNominal(aN[k], aM[k], (r1, r2, r3), float(T[k]))
     return None
 
 
@@ -181,8 +182,8 @@ def _orbit_free(loop: SeedLoop, i: int, centre, lower, centres=(), radii=()) -> 
     c = loop.cfg.clearance_um
     cs = [*turning_centres(loop.est[lower], loop.r_hat[lower])] if lower else []
     rs = list(loop.rstar[lower]) if lower else []
-    cs, rs = np.array(cs + list(centres)).reshape(-1, 2), np.array(rs + list(radii))
-    clear = (np.hypot(*(cs - centre).T) >= rs + loop.rstar[i] + c).all() if cs.size else True
+    cs_all, rs_all = np.array(cs + list(centres)).reshape(-1, 2), np.array(rs + list(radii))
+    clear = (np.hypot(*(cs_all - centre).T) >= rs_all + loop.rstar[i] + c).all() if cs_all.size else True
     return bool(clear) and _inside_arena(loop, centre, float(loop.rstar[i]) + c)
 
 
@@ -292,7 +293,7 @@ def orbit_then_go(loop: SeedLoop, N: int, target, durations, lower, disc) -> tup
                 if abs(total(w) - v * d) > 0.1 * v:  # more than 0.1 s off: a discontinuity, not a root
                     continue
                 rest = paths.shortest_path(move(start, w, 1.0 / r), target, r)
-                path = paths.Path(tuple(start), r, (("R", w),) + rest.segments)
+                path = paths.Path(Pose(*start), r, (("R", w),) + rest.segments)
                 if loop.hit(path.sample(10.0), N, lower, discs=disc) is None:
                     return w / v, path
     return None
@@ -312,7 +313,7 @@ def timed_path(loop: SeedLoop, N: int, target, durations, lower, disc) -> paths.
                 rest = paths.path_of_length(move(start, wait_um, 1.0 / r), target, r, v * duration - wait_um)
             except ValueError:
                 continue
-            cand = paths.Path(tuple(start), r, (("R", wait_um),) + rest.segments)
+            cand = paths.Path(Pose(*start), r, (("R", wait_um),) + rest.segments)
             if loop.hit(cand.sample(10.0), N, lower, discs=disc) is None:
                 return cand
     return None
@@ -469,10 +470,10 @@ def fine_pair(loop: SeedLoop, gN, gM) -> bool:
             why = "no arc of radius >= r through a docking point"
         elif max(abs(float(angle_difference(fN.arrival_rad, gN[2]))), abs(float(angle_difference(fM.arrival_rad, gM[2])))) > cone:
             why = "an arc arrives outside the self-alignment limit"
-        rhos = None if why else s3f_duty(float(loop.r_hat[N]), fN.radius_um, float(loop.r_hat[M]), fM.radius_um)
+        rhos = None if why or fN is None or fM is None else s3f_duty(float(loop.r_hat[N]), fN.radius_um, float(loop.r_hat[M]), fM.radius_um)
         if why is None and rhos is None:
             why = f"outside the S_3f cones ({loop.label(N)} would have to turn more than {loop.label(M)})"
-        if why is not None:
+        if why is not None or fN is None or fM is None:
             loop.log("preimage", None, f"the pair left the S_3f preimage: {why}")
             return False
         loop.replans += 1

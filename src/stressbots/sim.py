@@ -791,14 +791,14 @@ class SimulatedPlant:
                 outcomes[(i, j)] = ("contact", "stopped against a moving robot")
         # Log changes of outcome. Outcomes are remembered while the pair stays within NEAR_UM, so two
         # robots jostling against each other do not log every touch.
-        for key in sorted(outcomes):
-            kind, detail = outcomes[key]
-            if self._contacts.get(key) != kind:
-                self._log(t_abs, key[0], kind, key[1], detail)
+        for pair in sorted(outcomes):
+            kind, detail = outcomes[pair]
+            if self._contacts.get(pair) != kind:
+                self._log(t_abs, pair[0], kind, pair[1], detail)
         memory = {k: v[0] for k, v in outcomes.items()}
-        for key, kind in self._contacts.items():
-            if key not in memory and near(*key):
-                memory[key] = kind
+        for pair, kind in self._contacts.items():
+            if pair not in memory and near(*pair):
+                memory[pair] = kind
         self._contacts = memory
         recheck = any(
             mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
@@ -1137,7 +1137,8 @@ def check_determinism(
     for k, wf in enumerate(wfs):
         if k == half:
             twin = a.copy()
-        sa, sb = [], []
+        sa: list[Any] = []
+        sb: list[Any] = []
         for plant, out in ((a, sa), (b, sb)):
             plant.apply(wf)
             out.append(_state(plant, plant.observe() if observe else None))

@@ -36,7 +36,7 @@ import io
 import json
 import math
 import sqlite3
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -171,7 +171,7 @@ class TrialStore:
     Use :meth:`open`; close with :meth:`close` or a ``with`` block.
     """
 
-    def __init__(self, path: Path, con: sqlite3.Connection, settings: dict):
+    def __init__(self, path: Path, con: sqlite3.Connection, settings: Mapping[str, Any]):
         self.path = path
         self._con = con
         self.settings = settings
@@ -239,7 +239,7 @@ class TrialStore:
             return "unknown number of"
 
     @classmethod
-    def _reopen(cls, p: Path, settings: dict) -> TrialStore:
+    def _reopen(cls, p: Path, settings: Mapping[str, Any]) -> TrialStore:
         con = _open_readonly(p)
         try:
             row = con.execute("SELECT value FROM campaign WHERE key = 'settings'").fetchone()
@@ -334,7 +334,7 @@ def csv_text(rows: Iterable[Mapping[str, Any]], cells: Iterable[Mapping[str, Any
     return buf.getvalue()
 
 
-def write_parquet(rows: list[Mapping[str, Any]], cells: Iterable[Mapping[str, Any]], path: Path | str) -> Path:
+def write_parquet(rows: Sequence[Mapping[str, Any]], cells: Iterable[Mapping[str, Any]], path: Path | str) -> Path:
     """Write the trials as a Parquet file (needs pyarrow, imported here only). Atomic, like every output."""
     try:
         import pyarrow as pa

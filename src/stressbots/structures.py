@@ -520,14 +520,14 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     # Group pieces on one line with one outward normal, then merge touching runs along it.
     cos_tol = math.cos(2.0 * ANG_TOL_RAD)
     groups: list[list[int]] = []
-    for idx, (nrm, off, *_rest) in enumerate(pieces):
+    for piece, (nrm, off, *_rest) in enumerate(pieces):
         for grp in groups:
             n0, off0 = pieces[grp[0]][0], pieces[grp[0]][1]
             if float(np.dot(nrm, n0)) >= cos_tol and abs(off - off0) <= POS_TOL_UM:
-                grp.append(idx)
+                grp.append(piece)
                 break
         else:
-            groups.append([idx])
+            groups.append([piece])
 
     sides: list[tuple[tuple[int, int, float], Side]] = []
     for grp in groups:
@@ -536,16 +536,16 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
         wts = np.array([pieces[i][3] - pieces[i][2] for i in grp])
         off = float(np.average([pieces[i][1] for i in grp], weights=wts))
         # Coordinates along the group's own tangent (pieces' t are within tolerance of t0).
-        spans = []
+        along: list[tuple[float, float, int, int]] = []
         for i in grp:
             nrm, _, u0, u1, j, e = pieces[i]
             t = np.array([nrm[1], -nrm[0]])
             p0 = u0 * t + pieces[i][1] * nrm
             p1 = u1 * t + pieces[i][1] * nrm
-            spans.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
-        spans.sort()
+            along.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
+        along.sort()
         runs: list[list] = []
-        for u0, u1, j, e in spans:
+        for u0, u1, j, e in along:
             if runs and u0 <= runs[-1][1] + POS_TOL_UM:
                 runs[-1][1] = max(runs[-1][1], u1)
                 runs[-1][2].append((j, e, u0, u1))

@@ -246,7 +246,7 @@ def _set_key(data: dict, key: str, value: Any, source: str) -> None:
         for r in data["robots"]:
             r[parts[1]] = value
         return
-    node = data
+    node: Any = data
     for p in parts[:-1]:
         node = node.get(p) if isinstance(node, dict) else None
         if not isinstance(node, dict):
@@ -269,7 +269,8 @@ def _controller_options(values: Mapping[str, Any], source: str):
                                   field=f"controller.{k}")
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise StressbotsError(f"must be a number or a name, got {v!r}", source=source, field=f"controller.{k}")
-    return ControllerOptions(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v) for k, v in values.items()})
+    kwargs: dict[str, Any] = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v) for k, v in values.items()}
+    return ControllerOptions(**kwargs)
 
 
 def _describe(point: Mapping[str, Any]) -> str:
@@ -367,7 +368,7 @@ def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
 
     rows = []
     by_cell = {c: sorted((o for o in outcomes if o.cell == c), key=lambda o: o.index) for c in range(len(cells))}
-    baseline = {}  # the first cell of each layout: the others are compared with it, trial by trial
+    baseline: dict[Any, int] = {}  # the first cell of each layout: the others are compared with it, trial by trial
     for c, cell in enumerate(cells):
         baseline.setdefault(cell.params["layout"], c)
     for c, cell in enumerate(cells):

@@ -44,7 +44,7 @@ def success_curves(summary: Mapping[str, Any], axis: str) -> tuple[list[Any], di
                 pooled[v][0] += s
                 pooled[v][1] += n
         combos = {"all (pooled over the other conditions)": pooled}
-    return values, {name: [tuple(series.get(_key(v), [0, 0])) for v in values] for name, series in combos.items()}
+    return values, {name: [(c[0], c[1]) for c in (series.get(_key(v), [0, 0]) for v in values)] for name, series in combos.items()}
 
 
 def plot_axis(summary: Mapping[str, Any], axis: str):

@@ -329,6 +329,7 @@ def _split(pts, area_px: float, hl0: float, hw0: float, previous: np.ndarray | N
         # coverage alone cannot see where robots touching end to end meet
         if score < best_score - (settings.good_split if from_previous else 1e-9):
             best, best_score, from_previous = (poses, half), score, False
+    assert best is not None  # the first finite score always wins
     return best
 
 

@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -135,6 +136,7 @@ class _Runner:
         n = scenario.n
         self.n = n
         self.rank = np.empty(n, dtype=int)
+        assert self.analysis.order_index is not None  # a STRING design always has its order
         for k, i in enumerate(self.analysis.order_index):
             self.rank[i] = k + 1
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
@@ -153,9 +155,10 @@ class _Runner:
         self.trace_p = [self.est.copy()]
         self._missed = False
         self._stuck = False
-        self._plan = None
+        self._plan: tuple[Any, Any, float] | None = None
         self._warned: set = set()
-        self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
+        # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
+        self._motion: tuple[float, np.ndarray, np.ndarray] | None = None
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
@@ -218,7 +221,7 @@ class _Runner:
                 gap = float(np.hypot(*(c[a] - c[b]))) - rs[a] - rs[b]
                 if gap < self.tune.orbit_watch_um:
                     near.append((f"the orbit of {self.scn.names[j]}", gap))
-            for j in np.flatnonzero(self.docked):
+            for j in np.flatnonzero(self.docked).tolist():
                 gap = float(point_rectangle_distance(c[a][None, :], self.est[j][None, :], self.L[j], self.W[j])[0, 0]) - rs[a]
                 if gap < self.tune.orbit_watch_um:
                     near.append((f"docked {self.scn.names[j]}", gap))
@@ -1076,9 +1079,9 @@ class _Runner:
         q = np.asarray(target, float)
         hq = np.array([math.sin(q[2]), math.cos(q[2])])
         rq = np.array([math.cos(q[2]), -math.sin(q[2])])
-        s, e, d = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]),
-                              indexing="ij")
-        s, e, d = s.ravel(), e.ravel(), d.ravel()
+        grid = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]),
+                           indexing="ij")
+        s, e, d = (g.ravel() for g in grid)
         goals = np.stack([q[0] + s * hq[0] + e * rq[0], q[1] + s * hq[1] + e * rq[1], np.mod(q[2] + d, TWO_PI)], axis=1)
         offset = s / vN  # further along the line: arrive correspondingly later
         penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)

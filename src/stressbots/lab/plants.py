@@ -202,7 +202,7 @@ class HardwarePlant:
         self.awg = awg
         self.camera = camera
         self.calibration = calibration
-        self.options = {"gain": gain, "offset_V": offset_V, "sample_rate_hz": sample_rate_hz, "awg_max_V": awg_max_V}
+        self.options: dict[str, Any] = {"gain": gain, "offset_V": offset_V, "sample_rate_hz": sample_rate_hz, "awg_max_V": awg_max_V}
         self.name = name
         self._sleep = sleep
         self._burst = bool(burst)
