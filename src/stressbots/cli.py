@@ -807,7 +807,7 @@ def bounds(
     ),
     coverage_trials: int = typer.Option(
         0, "--coverage-trials", min=0, max=10_000,
-            help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
+        help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
@@ -867,8 +867,6 @@ def bounds(
         return
     if quiet:
         return
-    from rich.table import Table
-
     m = report.model
     out.print(
         f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
@@ -877,20 +875,7 @@ def bounds(
         highlight=False,
         soft_wrap=True,
     )
-    t = Table(caption="r_a, h_a: C_alpha,i; pair: G_1; critical: largest multiple of \\[noise] still guaranteed" if scales else
-              "r_a, h_a: the cylinder C_alpha,i; pair: the G_1 robots")
-    for col in ("robot", "role", "t_2pi s", "r_a um", "h_a deg", "A* mm2", "guaranteed"):
-        t.add_column(col, justify="left" if col in ("robot", "role", "guaranteed") else "right", no_wrap=True)
-    if scales is not None:
-        t.add_column("critical", justify="right", no_wrap=True)
-    for rb in report.robots:
-        area = "-" if rb.region is None else f"{rb.region.area_um2 / 1e6:.3g}"
-        row = [rb.label, rb.role, f"{rb.t_2pi_s:.1f}", f"{rb.cylinder.radius_um:.0f}",
-               f"{math.degrees(rb.cylinder.height_rad):.1f}", area, "yes" if rb.guaranteed else "no"]
-        if scales is not None:
-            row.append(f"{scales[rb.name]:.3g}")
-        t.add_row(*row)
-    out.print(t)
+    out.print(_bounds_table(report, scales))
     for rb in report.robots:
         out.print(f"{rb.label}: {rb.reason}", highlight=False, soft_wrap=True)
     p = report.projection
@@ -920,6 +905,28 @@ def bounds(
         out.print(f"note: {note}", highlight=False, soft_wrap=True)
     if folder is not None:
         out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}", highlight=False, soft_wrap=True)
+
+
+def _bounds_table(report, scales: dict[str, float] | None):
+    """The per-robot table of `stressbots bounds` (with a critical-noise column when ``scales`` is given)."""
+    import math
+
+    from rich.table import Table
+
+    t = Table(caption="r_a, h_a: C_alpha,i; pair: G_1; critical: largest multiple of \\[noise] still guaranteed" if scales else
+              "r_a, h_a: the cylinder C_alpha,i; pair: the G_1 robots")
+    for col in ("robot", "role", "t_2pi s", "r_a um", "h_a deg", "A* mm2", "guaranteed"):
+        t.add_column(col, justify="left" if col in ("robot", "role", "guaranteed") else "right", no_wrap=True)
+    if scales is not None:
+        t.add_column("critical", justify="right", no_wrap=True)
+    for rb in report.robots:
+        area = "-" if rb.region is None else f"{rb.region.area_um2 / 1e6:.3g}"
+        row = [rb.label, rb.role, f"{rb.t_2pi_s:.1f}", f"{rb.cylinder.radius_um:.0f}",
+               f"{math.degrees(rb.cylinder.height_rad):.1f}", area, "yes" if rb.guaranteed else "no"]
+        if scales is not None:
+            row.append(f"{scales[rb.name]:.3g}")
+        t.add_row(*row)
+    return t
 
 
 @app.command()

@@ -455,6 +455,21 @@ def _shrunk(p: Polygon) -> Polygon:
     return p.buffer(-0.5 * POS_TOL_UM, join_style="mitre")
 
 
+def _uncovered_spans(lo: np.ndarray, hi: np.ndarray, length: float) -> list[tuple[float, float]]:
+    """The stretches ``(u0, u1)`` (um along the edge) of an edge of ``length`` um that no other body covers,
+    given each body's covered interval ``[lo, hi]``; the tolerance the grown cover took at a contact is put back."""
+    covered = sorted((float(a), float(b)) for a, b in zip(lo, hi, strict=True) if b - a > 0.0)
+    spans = []
+    cur = 0.0
+    for a, b in covered + [(length, length)]:
+        if a > cur:
+            u0 = cur if cur <= 0.0 else max(0.0, cur - POS_TOL_UM)
+            u1 = a if a >= length else min(length, a + POS_TOL_UM)
+            spans.append((u0, u1))
+        cur = max(cur, b)
+    return spans
+
+
 def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     """Free sides of the union of rectangles ``corners`` ``(k, 4, 2)`` (clockwise, front-left first).
 
@@ -498,17 +513,7 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     pieces: list[tuple[np.ndarray, float, float, float, int, int]] = []
     for j in range(k):
         for e in range(4):
-            length = float(lens[j, e])
-            covered = sorted((float(a), float(b)) for a, b in zip(lo[j, e], hi[j, e], strict=True) if b - a > 0.0)
-            spans = []
-            cur = 0.0
-            for a, b in covered + [(length, length)]:
-                if a > cur:
-                    # Put back the tolerance the grown cover took at a contact.
-                    u0 = cur if cur <= 0.0 else max(0.0, cur - POS_TOL_UM)
-                    u1 = a if a >= length else min(length, a + POS_TOL_UM)
-                    spans.append((u0, u1))
-                cur = max(cur, b)
+            spans = _uncovered_spans(lo[j, e], hi[j, e], float(lens[j, e]))
             tt = t[j, e]
             nrm = np.array([-tt[1], tt[0]])  # corners run clockwise: outside is on the left
             a_t = float(np.dot(starts[j, e], tt))

@@ -291,6 +291,14 @@ class _Runner:
                 break
         return out
 
+    def _route_or_detour(self, i: int, target: np.ndarray, orbiting: Sequence[int], extra_discs, routed, path):
+        """The roadmap route itself when there is one (it was checked at a wider clearance), else a detour at
+        the controller's clearance, else ``path`` unchanged."""
+        if routed is not None:
+            return routed
+        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
+        return path if detour is None else detour
+
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready=None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
@@ -326,12 +334,7 @@ class _Runner:
                                 return True
                         if self.t > t_before:
                             continue
-                    if routed is not None:  # drive the route itself (it was checked at a wider clearance)
-                        path = routed
-                    else:
-                        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
-                        if detour is not None:
-                            path = detour
+                    path = self._route_or_detour(i, target, orbiting, extra_discs, routed, path)
                 else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
             self.replans += 1
@@ -813,6 +816,29 @@ class _Runner:
 
     # stage 1: D_{n-1} onto its station orbit ---------------------------------------------------------
 
+    def _turn_together(self, N: int, M: int, t_turn: float, fraction: float) -> None:
+        """D_{n-1} turns for ``t_turn`` s (its measured heading decides when it is done) while D_n turns
+        ``fraction`` of that wait and then runs straight.
+
+        D_n's turn is closed loop on its measured heading: a long open-loop turn with a turn rate not yet
+        identified ends tens of degrees off, and the straight run after it goes astray."""
+        n = self.n
+        turn = t_turn * self.omega_hat[M]
+        turned = 0.0
+        n_turn, n_turned = fraction * t_turn * self.omega_hat[N], 0.0
+        while True:
+            left = (turn - turned) / self.omega_hat[M]
+            if left <= 1e-3:
+                break
+            dt = left if left <= 1.6 * self.tx else self.tx
+            a = min(dt, max((n_turn - n_turned) / self.omega_hat[N], 0.0))
+            th0, thN0 = self.est[M, 2], self.est[N, 2]
+            self.drive([(n, a), (n - 1, dt - a)])
+            n_turned += float(np.mod(self.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
+            turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+            if dt == left:
+                break
+
     def transfer(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
         """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`form_pair`).
 
@@ -822,7 +848,6 @@ class _Runner:
         (:meth:`transfer_run`), which D_n reaches first, timed to D_{n-1}'s departure. A leg too long for
         any clear track is shortened (900, 600, 400 um) when D_{n-1} can orbit at its end.
         """
-        n = self.n
         q_next = self.approach_pose(N, M, c_star, D)
         failed_runs = 0
         for attempt in range(8):
@@ -863,23 +888,7 @@ class _Runner:
                 self.log("transfer", M,
                          f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} turns {arg:.0%} of the wait, then runs "
                          "straight")
-                turn = t_turn * self.omega_hat[M]
-                turned = 0.0
-                # D_n's turn is closed loop on its measured heading: a long open-loop turn with a turn rate
-                # not yet identified ends tens of degrees off, and the straight run after it goes astray
-                n_turn, n_turned = arg * t_turn * self.omega_hat[N], 0.0
-                while True:
-                    left = (turn - turned) / self.omega_hat[M]
-                    if left <= 1e-3:
-                        break
-                    dt = left if left <= 1.6 * self.tx else self.tx
-                    a = min(dt, max((n_turn - n_turned) / self.omega_hat[N], 0.0))
-                    th0, thN0 = self.est[M, 2], self.est[N, 2]
-                    self.drive([(n, a), (n - 1, dt - a)])
-                    n_turned += float(np.mod(self.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
-                    turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
-                    if dt == left:
-                        break
+                self._turn_together(N, M, t_turn, arg)
             else:
                 self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} first takes a clear track")
                 if not self.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower):
