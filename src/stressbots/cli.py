@@ -1201,7 +1201,7 @@ def study(
     lo, hi = summary["success_rate_ci95"]
     out.print(f"[bold]{summary['name']}[/bold]: {len(summary['cells'])} cells x {summary['trials_per_cell']} paired trials, "
               f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s",
-                  highlight=False, soft_wrap=True)
+              highlight=False, soft_wrap=True)
     axes = list(summary["axes"])
     t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
     for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
@@ -1240,11 +1240,11 @@ def awg(
     name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
     upload_to: str | None = typer.Option(
         None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).",
-            show_default=False
+        show_default=False
     ),
     visa_library: str | None = typer.Option(
         None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.",
-            show_default=False
+        show_default=False
     ),
     ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
     output_on: bool = typer.Option(False, "--output-on", help="Switch the generator's output on after a clean upload (off by default)."),

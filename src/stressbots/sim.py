@@ -680,24 +680,7 @@ class SimulatedPlant:
         kappa = kappa + self._drift.curvature_at(self._odo)
         probe = move(P, PROBE_UM, kappa)  # each robot alone, a hair further along its own motion
         # Touching pairs and whether each side's motion pushes into the other.
-        push: dict[int, list[int]] = {}
-        approach: dict[tuple[int, int], float] = {}
-        touching: dict[int, list[int]] = {}
-        if ii.size:
-            t = np.flatnonzero(d0 > -TOUCH_UM)
-            if t.size:
-                a, b = ii[t], jj[t]
-                da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
-                db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
-                for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist(), strict=False):
-                    touching.setdefault(x, []).append(y)
-                    touching.setdefault(y, []).append(x)
-                    approach[(x, y)] = rx / PROBE_UM
-                    approach[(y, x)] = ry / PROBE_UM
-                    if rx > PUSH_EPS_UM:
-                        push.setdefault(x, []).append(y)
-                    if ry > PUSH_EPS_UM:
-                        push.setdefault(y, []).append(x)
+        push, approach, touching = self._touch_graph(probe, d0)
         if arena is not None:
             gp = _arena_gap(probe, hl, hw, arena)
             for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
@@ -719,67 +702,19 @@ class SimulatedPlant:
         for i, j in sorted({(min(a, b), max(a, b)) for a in pushers for b in push[a] if b != ARENA}):
             if i in done or j in done or not self._head_on(i, j, straight, speed, approach):
                 continue
-            key = self._rule_key(i, j, straight)
-            hit = self._rule_cache.get((i, j))
-            if hit is not None and hit[0] == key:
-                kind, detail = hit[1]
-            else:
-                kind, detail = self._self_align(i, j)
-                self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-            outcomes[(i, j)] = (kind, detail)
-            outcomes[(j, i)] = (kind, detail)
+            outcomes[(i, j)] = outcomes[(j, i)] = self._self_align_cached(i, j, straight)
             mode[i] = mode[j] = _HELD
             done |= {i, j}
 
         # 2. Each remaining robot that pushes into something.
         for i in sorted(pushers - done):
-            cs = push[i]
             mode[i] = _HELD
-            if not straight[i]:
-                # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
-                # into its slot on an arc is docked there, and stays docked while it keeps pushing.
-                flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
-                for j in cs:
-                    outcomes[(i, j)] = (
-                        ("dock", "arrived flush against the structure") if j in flush
-                        else ("blocked", "a turning robot cannot pivot off an obstacle")
-                    )
-                if flush:
-                    self._docked[i] = True
-                    self._stuck[i] = False
-                continue
-            if ARENA in cs:
-                self._arena_hit[i] = True
-                for j in cs:
-                    outcomes[(i, j)] = ("arena", "stopped at the arena edge") if j == ARENA else ("contact", "stopped")
-                continue
-            fronts = [j for j in cs if j in static]
-            if len(cs) == 1 and fronts:
-                j = cs[0]
-                key = self._rule_key(i, j, straight)
-                hit = self._rule_cache.get((i, j))
-                if hit is not None and hit[0] == key:
-                    (kind, detail), slide = hit[1], None
-                else:
-                    kind, detail, slide = self._dock_rule(i, j, ctx, touching.get(i, []))
-                    if slide is None:  # held outcomes repeat while nothing moves; slides are recomputed
-                        self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-                outcomes[(i, j)] = (kind, detail)
-                if slide is not None:
-                    mode[i] = _SLIDE
-                    slide_v[i], slide_end[i] = slide
-                    slide_partner[i] = j
-                    excluded.add((min(i, j), max(i, j)))
-                continue
-            if len(cs) > 1 and len(fronts) == len(cs):
-                flush = [j for j in cs if self._flush_cached(i, j, straight)]
-                for j in cs:
-                    outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
-                self._docked[i] = bool(flush)
-                self._stuck[i] = not flush
-                continue
-            for j in cs:
-                outcomes[(i, j)] = ("contact", "stopped against a moving robot" if j not in static else "stopped")
+            slide = self._push_outcome(i, push[i], static, ctx, touching.get(i, []), outcomes)
+            if slide is not None:
+                j, (slide_v[i], slide_end[i]) = slide
+                mode[i] = _SLIDE
+                slide_partner[i] = j
+                excluded.add((min(i, j), max(i, j)))
 
         # A slide is along a body that stays put; if the partner moves after all, stop instead.
         for i in np.flatnonzero(mode == _SLIDE).tolist():
@@ -789,8 +724,99 @@ class SimulatedPlant:
                 slide_end[i] = math.inf
                 excluded.discard((min(i, j), max(i, j)))
                 outcomes[(i, j)] = ("contact", "stopped against a moving robot")
-        # Log changes of outcome. Outcomes are remembered while the pair stays within NEAR_UM, so two
-        # robots jostling against each other do not log every touch.
+        self._remember_contacts(outcomes, t_abs, near)
+        recheck = any(
+            mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
+        )
+        return _Motion(mode, slide_v, slide_end, excluded, recheck)
+
+    def _touch_graph(self, probe: np.ndarray, d0: np.ndarray):
+        """``(push, approach, touching)`` of the touching pairs: whom each robot's own motion pushes into,
+        the approach rate of each ordered pair (um per um driven) and whom each robot touches."""
+        P, hl, hw = self._pose, self._hl, self._hw
+        ii, jj = self._I, self._J
+        push: dict[int, list[int]] = {}
+        approach: dict[tuple[int, int], float] = {}
+        touching: dict[int, list[int]] = {}
+        if not ii.size:
+            return push, approach, touching
+        t = np.flatnonzero(d0 > -TOUCH_UM)
+        if not t.size:
+            return push, approach, touching
+        a, b = ii[t], jj[t]
+        da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
+        db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
+        for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist(), strict=False):
+            touching.setdefault(x, []).append(y)
+            touching.setdefault(y, []).append(x)
+            approach[(x, y)] = rx / PROBE_UM
+            approach[(y, x)] = ry / PROBE_UM
+            if rx > PUSH_EPS_UM:
+                push.setdefault(x, []).append(y)
+            if ry > PUSH_EPS_UM:
+                push.setdefault(y, []).append(x)
+        return push, approach, touching
+
+    def _self_align_cached(self, i: int, j: int, straight) -> tuple[str, str]:
+        """``(kind, detail)`` of self-aligning compliance between i and j, remembered while nothing moves."""
+        key = self._rule_key(i, j, straight)
+        hit = self._rule_cache.get((i, j))
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        kind, detail = self._self_align(i, j)
+        self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+        return kind, detail
+
+    def _push_outcome(self, i: int, cs: list[int], static: set[int], ctx, touching_i: list[int],
+                      outcomes: dict[tuple[int, int], tuple[str, str]]):
+        """The outcome of robot i pushing into the bodies ``cs`` (written to ``outcomes``); ``(j, (slide
+        velocity, slide end))`` when i slides along body j, else None (i is held)."""
+        straight = ctx[2]
+        if not straight[i]:
+            # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
+            # into its slot on an arc is docked there, and stays docked while it keeps pushing.
+            flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
+            for j in cs:
+                outcomes[(i, j)] = (
+                    ("dock", "arrived flush against the structure") if j in flush
+                    else ("blocked", "a turning robot cannot pivot off an obstacle")
+                )
+            if flush:
+                self._docked[i] = True
+                self._stuck[i] = False
+            return None
+        if ARENA in cs:
+            self._arena_hit[i] = True
+            for j in cs:
+                outcomes[(i, j)] = ("arena", "stopped at the arena edge") if j == ARENA else ("contact", "stopped")
+            return None
+        fronts = [j for j in cs if j in static]
+        if len(cs) == 1 and fronts:
+            j = cs[0]
+            key = self._rule_key(i, j, straight)
+            hit = self._rule_cache.get((i, j))
+            if hit is not None and hit[0] == key:
+                (kind, detail), slide = hit[1], None
+            else:
+                kind, detail, slide = self._dock_rule(i, j, ctx, touching_i)
+                if slide is None:  # held outcomes repeat while nothing moves; slides are recomputed
+                    self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+            outcomes[(i, j)] = (kind, detail)
+            return None if slide is None else (j, slide)
+        if len(cs) > 1 and len(fronts) == len(cs):
+            flush = [j for j in cs if self._flush_cached(i, j, straight)]
+            for j in cs:
+                outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
+            self._docked[i] = bool(flush)
+            self._stuck[i] = not flush
+            return None
+        for j in cs:
+            outcomes[(i, j)] = ("contact", "stopped against a moving robot" if j not in static else "stopped")
+        return None
+
+    def _remember_contacts(self, outcomes: dict[tuple[int, int], tuple[str, str]], t_abs: float, near) -> None:
+        """Log changes of outcome. Outcomes are remembered while the pair stays within NEAR_UM, so two
+        robots jostling against each other do not log every touch."""
         for pair in sorted(outcomes):
             kind, detail = outcomes[pair]
             if self._contacts.get(pair) != kind:
@@ -800,10 +826,6 @@ class SimulatedPlant:
             if pair not in memory and near(*pair):
                 memory[pair] = kind
         self._contacts = memory
-        recheck = any(
-            mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
-        )
-        return _Motion(mode, slide_v, slide_end, excluded, recheck)
 
     def _head_on(self, i: int, j: int, straight, speed, approach) -> bool:
         """Whether touching robots i and j meet head-on (the situation of self-aligning compliance).

@@ -66,9 +66,10 @@ def check_determinism(scenario, seed: int, *, plan=None, options: ControllerOpti
         if not np.array_equal(fa, fb, equal_nan=True):
             raise AssertionError(f"seed {seed}: two runs differ: camera frame {k} differs")
     if a.events != b.events:
-        first = next(k for k, (x, y) in enumerate(zip(a.events, b.events,
-                                                      strict=True)) if x != y) if len(a.events) == len(b.events) else min(len(a.events),
-                                                                                                                          len(b.events))
+        if len(a.events) == len(b.events):
+            first = next(k for k, (x, y) in enumerate(zip(a.events, b.events, strict=True)) if x != y)
+        else:
+            first = min(len(a.events), len(b.events))
         raise AssertionError(f"seed {seed}: two runs differ: event logs differ from event {first}")
     if not (np.array_equal(a.trace_t, b.trace_t) and np.array_equal(a.trace_poses, b.trace_poses)):
         raise AssertionError(f"seed {seed}: two runs differ: traces differ")

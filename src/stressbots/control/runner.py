@@ -383,7 +383,7 @@ class _Runner:
         return Obstacles(
             np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
             self.est[docked], self.L[docked] + 2.0 * box_margin, self.W[docked] + 2.0 * box_margin,
-                tuple("a docked robot" for _ in docked), self.scn.arena_um,
+            tuple("a docked robot" for _ in docked), self.scn.arena_um,
         )
 
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
