@@ -17,7 +17,7 @@ from stressbots.electrostatics import Electrodes
 
 def hysteresis(state: tuple[int, ...], volts: float, vd, vu) -> tuple[int, ...]:
     """SPEC 4 literally: down if V >= V_d, up if V <= V_u, else unchanged."""
-    return tuple(1 if volts >= d else (0 if volts <= u else s) for s, d, u in zip(state, vd, vu))
+    return tuple(1 if volts >= d else (0 if volts <= u else s) for s, d, u in zip(state, vd, vu, strict=False))
 
 
 def grid_levels(vd, vu, max_V: float, margin: float, step: float = 0.5) -> list[float]:
@@ -72,7 +72,7 @@ def string_orders(vd, vu, e: Electrodes) -> list[tuple[int, ...]]:
     m = e.margin_V
     tol = 1e-9
     for vals in (sorted(set(vd)), sorted(set(vu))):
-        if any(b - a < 2 * m - 2 * tol for a, b in zip(vals, vals[1:])):
+        if any(b - a < 2 * m - 2 * tol for a, b in zip(vals, vals[1:], strict=False)):
             return []
     if max(vu) > e.drive_low_V - 2 * m + tol or min(vd) < e.drive_high_V + 2 * m - tol:
         return []

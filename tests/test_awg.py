@@ -11,7 +11,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots.electrostatics import Electrodes
-from stressbots.lab.awg import DAC_MAX, AwgError, AwgProgram, arb_text, codes_to_volts, compile_awg, upload, volts_to_codes
+from stressbots.lab.awg import (
+    DAC_MAX,
+    AwgError,
+    AwgProgram,
+    arb_text,
+    codes_to_volts,
+    compile_awg,
+    upload,
+    volts_to_codes,
+)
 from stressbots.waveform import Drive, Hold, sample
 
 DATA = Path(__file__).parent / "data"

@@ -16,7 +16,15 @@ from hypothesis import strategies as st
 
 from stressbots import se2
 from stressbots.control import ControllerOptions, Tuning, structure_targets
-from stressbots.control.queries import best_departure, in_funnel, line_coords, line_pose, merge, pose_on_orbit, turn_fraction
+from stressbots.control.queries import (
+    best_departure,
+    in_funnel,
+    line_coords,
+    line_pose,
+    merge,
+    pose_on_orbit,
+    turn_fraction,
+)
 from stressbots.kinematics import move
 from stressbots.robots import angle_difference, orbit_radii, turning_centres
 

@@ -41,13 +41,13 @@ def lp_clearance(e: Electrodes, k_u: int, k_d: int) -> float:
     x = list(range(k_u))
     y = list(range(k_u, k_u + k_d))
     row([(R, 1.0), (x[0], -1.0)], 0.0)  # x_1 - 0 >= rho
-    for a, c in zip(x, x[1:]):
+    for a, c in zip(x, x[1:], strict=False):
         row([(R, 2.0), (c, -1.0), (a, 1.0)], 0.0)  # x_{j+1} - x_j >= 2 rho
     row([(x[-1], 1.0), (R, 1.0)], e.drive_low_V)  # drive_low - x_K >= rho
     row([(x[-1], 1.0)], e.drive_low_V - 2 * e.margin_V)  # drive-band rule
     row([(R, 1.0), (y[0], -1.0)], -e.drive_high_V)  # y_1 - drive_high >= rho
     row([(y[0], -1.0)], -(e.drive_high_V + 2 * e.margin_V))  # drive-band rule
-    for a, c in zip(y, y[1:]):
+    for a, c in zip(y, y[1:], strict=False):
         row([(R, 2.0), (c, -1.0), (a, 1.0)], 0.0)
     row([(y[-1], 1.0), (R, 1.0)], e.max_V)  # max_V - y_K >= rho
     cost = np.zeros(nv)
@@ -209,7 +209,7 @@ def test_yield_agrees_with_decoding_real_waveforms():
         vd = np.array(d.snap_down_V) + sd * rng.standard_normal(3)
         vu = np.array(d.release_V) + sd * rng.standard_normal(3)
         drives = decode(wf, vd, vu)
-        ok += all(dr.ok and dr.states.tolist() == w for dr, w in zip(drives, want))
+        ok += all(dr.ok and dr.states.tolist() == w for dr, w in zip(drives, want, strict=False))
     independent = ok / trials
     y = estimate_yield(d, sd, trials=20_000, seed=3)
     sigma = math.sqrt(max(independent * (1 - independent), 0.01) / trials)
@@ -279,7 +279,8 @@ def test_cli_help_teaches():
 
     from stressbots.cli import app
 
-    for cmd, words in [("design", ["--sd-V", "(V)", "Examples"]), ("states", ["--json", "margin_V", "Example"]), ("waveform", ["--steps", "P1:2.5", "--rate-hz"])]:
+    for cmd, words in [("design", ["--sd-V", "(V)", "Examples"]), ("states", ["--json", "margin_V", "Example"]),
+                       ("waveform", ["--steps", "P1:2.5", "--rate-hz"])]:
         r = CliRunner().invoke(app, [cmd, "--help"], env={"COLUMNS": "200", "TERM": "dumb"})
         assert r.exit_code == 0
         for w in words:

@@ -87,7 +87,7 @@ def test_drift_is_the_integral_of_the_knot_curvatures_and_bends_the_path_accordi
     lengths, kappas = drift.segments(0, 0.0, 730.0)
     assert lengths.size == math.ceil(730.0 / DEFAULT_DRIFT.knot_um) and np.all(lengths <= DEFAULT_DRIFT.knot_um + 1e-9)
     x, y, th = 0.0, 0.0, 0.0  # composed arcs, written out
-    for s, k in zip(lengths, kappas):
+    for s, k in zip(lengths, kappas, strict=False):
         t = k * s
         x += (math.cos(th) - math.cos(th + t)) / k if k else 0.0
         y += (math.sin(th + t) - math.sin(th)) / k if k else s
@@ -114,7 +114,8 @@ def test_variance_grows_as_bias_plus_walk_and_the_split_is_the_documented_one():
 
 def test_other_knot_spacings_and_splits_keep_the_one_mm_figure():
     n = 3000
-    for model in (DriftModel(knot_um=10.0, bias_share=0.0), DriftModel(knot_um=100.0, bias_share=1.0), DriftModel(knot_um=50.0, bias_share=0.3)):
+    for model in (DriftModel(knot_um=10.0, bias_share=0.0), DriftModel(knot_um=100.0, bias_share=1.0), DriftModel(knot_um=50.0,
+                                                                                                                  bias_share=0.3)):
         drift = HeadingDrift(n, SIGMA, np.random.SeedSequence(5), model)
         d = np.array([drift.heading_change(i, 0.0, 1000.0) for i in range(n)])
         lo, hi = sd_interval(SIGMA * 1000.0, n)
@@ -135,7 +136,8 @@ def test_no_drift_means_no_draws_and_straight_lines():
 def test_a_robot_that_does_not_move_does_not_drift():
     """The odometer advances only with driving: a robot stopped against the arena edge keeps its heading."""
     robots = (Robot("A", 120.0, 15.0, start=Pose.from_degrees(500.0, 2700.0, 0.0)),)
-    sc = Scenario(name="wall", robots=robots, electrodes=Electrodes(), arena_um=(1000.0, 3000.0), noise=Noise(heading_drift_rad_per_um=SIGMA))
+    sc = Scenario(name="wall", robots=robots, electrodes=Electrodes(), arena_um=(1000.0, 3000.0),
+                  noise=Noise(heading_drift_rad_per_um=SIGMA))
     plant = SimulatedPlant(sc, seed=4)
     plant.apply([Drive(75.0, 105.0, 3.0)])
     stopped = plant.true_poses()

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from stressbots.assessment import shape_error
-from stressbots.control import Plant
-from stressbots.control import assemble, nominal_plan
+from stressbots.control import Plant, assemble, nominal_plan
 from stressbots.scenario import Noise, load
 from stressbots.sim import SimulatedPlant
 

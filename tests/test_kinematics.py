@@ -141,7 +141,7 @@ def test_follow_and_poses_along():
     nodes = km.follow(start, lengths, kappas)
     assert nodes.shape == (5, 3)
     p = start
-    for s, k in zip(lengths, kappas):
+    for s, k in zip(lengths, kappas, strict=False):
         p = spec_arc(p, s, 1 / k) if k else spec_straight(p, s)
     assert_pose_close(nodes[-1], p)
     s = np.array([0.0, 50.0, 100.0, 200.0, 350.0, 390.0, 1e9])
@@ -187,7 +187,7 @@ def test_trajectory_replays_steps(n, k, step_um, seed):
     assert np.all(gaps <= step_um * (1 + 1e-9))
     # the end equals chaining advance
     p = poses
-    for row, dt in zip(turning, durations):
+    for row, dt in zip(turning, durations, strict=False):
         p = km.advance(p, row, speed, rad, dt)
     assert_pose_close(traj[-1], p, atol=1e-8)
     # coarse sampling ends at the same place

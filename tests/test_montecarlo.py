@@ -193,7 +193,7 @@ def test_real_controller_is_deterministic_across_workers(four):
 @pytest.fixture
 def fake_controller(monkeypatch):
     monkeypatch.setattr(mc, "default_assemble", lambda: fake_assemble)
-    monkeypatch.setattr(mc, "default_planner", lambda: (lambda scenario: PLAN))
+    monkeypatch.setattr(mc, "default_planner", lambda: (lambda _scenario: PLAN))
 
 
 def test_montecarlo_command_writes_summary_and_pictures(run_cli, tmp_path, fake_controller):

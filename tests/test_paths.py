@@ -166,7 +166,7 @@ def test_batch_equals_single(items):
     for i, (s, g, r) in enumerate(items):
         p = shortest_path(s, g, r)
         assert batch[i] == pytest.approx(p.length, rel=1e-12, abs=1e-12)
-        assert p == Path(s, r, tuple(zip(str(words[i]), seg[i])))
+        assert p == Path(s, r, tuple(zip(str(words[i]), seg[i], strict=False)))
     # scalar radius broadcasts; a single pair gives a 0-d result
     np.testing.assert_allclose(shortest_path_lengths(starts, goals, 150.0),
                                [shortest_path(s, g, 150.0).length for s, g, _ in items], rtol=1e-12)
@@ -311,7 +311,7 @@ def slsqp_brute_force(start, goal, r, upper, rng, starts=8):
     scale = scale_of(start, goal, r)
 
     def end_xy(x):
-        return np.array(literal_end(start, zip(word, x), r)[:2])
+        return np.array(literal_end(start, zip(word, x, strict=False), r)[:2])
 
     for k in range(3):
         turn = delta + TWO_PI * k
@@ -852,7 +852,7 @@ def test_single_query_fast_path_equals_the_vectorised_solver(pair, approach):
     start, goal, r = pair
     p = shortest_path(start, goal, r, approach_um=approach)
     words, seg = shortest_path_segments(np.array([start]), np.array([goal]), r, approach_um=approach)
-    batch = Path(start, r, tuple(zip(str(words[0]), seg[0])))
+    batch = Path(start, r, tuple(zip(str(words[0]), seg[0], strict=False)))
     assert p.word == batch.word
     assert p.length == pytest.approx(float(shortest_path_lengths(start, goal, r, approach_um=approach)), rel=1e-9, abs=1e-9)
     assert [v for _, v in p.segments] == pytest.approx([v for _, v in batch.segments], rel=1e-9, abs=1e-9)

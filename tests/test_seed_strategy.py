@@ -26,7 +26,13 @@ from stressbots.paths import arc_through, interpolation_deviation, shortest_path
 from stressbots.robots import angle_difference
 from stressbots.scenario import Noise, load, to_toml
 from stressbots.seed_fine_motion import arc_back, s2f_duty, s2f_steps, s3f_duty, s3f_radii, s3f_steps
-from stressbots.seed_strategy import assemble_seed, in_proximity, intermediate_reason, nominal_intermediate, region_path
+from stressbots.seed_strategy import (
+    assemble_seed,
+    in_proximity,
+    intermediate_reason,
+    nominal_intermediate,
+    region_path,
+)
 from stressbots.sim import SimulatedPlant
 from stressbots.strategies import STRATEGIES, assemble_with
 
@@ -82,7 +88,8 @@ def test_eq1_arc_through_the_docking_point_flown_as_s2f(x, y, th, dist, bearing,
     # each symmetric cycle of the mean duty lands on the arc up to (r'-r)(beta - 2 sin(beta/2)) along it
     beta = v * period_s / fine.radius_um
     cycles = math.ceil(duration / period_s)
-    tol = cycles * (fine.radius_um - r) * (beta - 2 * math.sin(beta / 2)) * 2 + interpolation_deviation(fine.radius_um, r, v * period_s) + 1e-6
+    tol = cycles * (fine.radius_um - r) * (beta - 2 * math.sin(beta / 2)) * 2 + interpolation_deviation(fine.radius_um, r,
+                                                                                                        v * period_s) + 1e-6
     assert np.hypot(*(end[:2] - point)) <= tol
     assert abs(float(angle_difference(end[2], fine.arrival_rad))) <= 1e-6 + tol / fine.radius_um
 
@@ -97,7 +104,7 @@ def test_s3f_radii_match_a_simulated_interleaving_for_both_robots(rhos):
     endN = _drive(start, steps, {n}, v, rN)
     endM = _drive(start, steps, {n, n - 1}, v, rM)
     expected = s3f_radii(rhos, rN, rM)
-    for end, want in zip((endN, endM), expected):
+    for end, want in zip((endN, endM), expected, strict=False):
         turn = float(np.mod(end[2] - start[2], 2 * math.pi))
         chord = float(np.hypot(*(end[:2] - start[:2])))
         measured = math.inf if turn < 1e-12 else chord / (2 * math.sin(turn / 2))

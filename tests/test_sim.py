@@ -196,7 +196,7 @@ def test_zero_noise_camera_sees_the_truth():
 def _chunks(waveform, k):
     """A waveform cut into k consecutive pieces at segment boundaries."""
     cuts = np.linspace(0, len(waveform), k + 1).astype(int)
-    return [waveform[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    return [waveform[a:b] for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
 
 
 def test_same_seed_is_bit_identical_and_copies_continue_identically(example_plan):
@@ -329,7 +329,8 @@ def test_zero_noise_open_loop_docks_every_robot_at_its_goal(n, seed, shape):
     np.testing.assert_allclose(final[:, :2], result.replay.final[:, :2], atol=1e-6)  # the planner's own replay
     kinds = {e.kind for e in plant.events}
     assert kinds <= {"self_align", "dock"}, plant.events  # nothing stuck, slid, blocked or outside
-    assert plant.time_s == pytest.approx(result.plan.duration_s + sum(s.duration_s for s in plan_waveform(sc, result.plan) if isinstance(s, Hold)))
+    holds_s = sum(s.duration_s for s in plan_waveform(sc, result.plan) if isinstance(s, Hold))
+    assert plant.time_s == pytest.approx(result.plan.duration_s + holds_s)
 
 
 LAYOUTS = sorted((EXAMPLES.parent / "tests" / "data" / "layouts").glob("*.toml"))
@@ -413,7 +414,8 @@ def plan_file(example_plan, tmp_path_factory):
 
 
 def test_cli_simulate_plan_without_noise_ends_exactly_in_the_slots(run_cli, plan_file, tmp_path):
-    res = run_cli("simulate", EXAMPLES / "four-robots.toml", "--plan", plan_file, "--seed", "5", "--noise", "none", "--out", tmp_path / "sim")
+    res = run_cli("simulate", EXAMPLES / "four-robots.toml", "--plan", plan_file, "--seed", "5", "--noise", "none", "--out",
+                  tmp_path / "sim")
     assert res.code == 0, res.err
     data = json.loads((tmp_path / "sim" / "result.json").read_text())
     assert data["success"] is True and data["seed"] == 5

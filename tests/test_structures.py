@@ -8,9 +8,9 @@ import re
 
 import numpy as np
 import pytest
+import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
-import shapely
 from shapely.geometry import Point, Polygon
 
 from stressbots.errors import PlanningError, ScenarioError
@@ -343,13 +343,16 @@ REJECTIONS = [
     ({"C": (142.0, 0.0, LEFT)}, "D3/D4 (robots 'C'/'D') do not form G_1: front edges 12.0 um apart"),
     ({"C": (130.0, 8.0, LEFT)}, "D3/D4 (robots 'C'/'D') do not form G_1: front edges offset by 8.0 um sideways"),
     ({"C": (125.0, 0.0, LEFT)}, "D3/D4 (robots 'C'/'D') do not form G_1: bodies overlap by 5.0 um along their axis"),
-    ({"C": (130.0, 0.0, 260 * DEG)}, "D3/D4 (robots 'C'/'D') do not form G_1: headings 170.0 deg apart, must be opposite (180 deg, head-on)"),
+    ({"C": (130.0, 0.0, 260 * DEG)},
+     "D3/D4 (robots 'C'/'D') do not form G_1: headings 170.0 deg apart, must be opposite (180 deg, head-on)"),
     ({"B": (0.0, -195.2, UP)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 35.2 um from the nearest free side"),
     ({"B": (250.0, -160.0, UP)}, "D2 (robot 'B'): front edge overhangs the end of the free side it rests on by 20.0 um"),
     ({"B": (0.0, -30.0 - 130.0 * math.cos(DEG) - 30.0 * math.sin(DEG), 1.0 * DEG)},
      "D2 (robot 'B'): front edge is at 1.0 deg to the free side it touches (must be parallel to it within 0.1 deg)"),
-    ({"B": (0.0, -163.0, 1.0 * DEG)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 2.5 um from the nearest free side and at 1.0 deg to it"),
-    ({"B": (0.0, -200.0, 1.0 * DEG)}, "D2 (robot 'B'): goal is not flush with the structure: front edge 39.5 um from the nearest free side and at 1.0 deg to it"),
+    ({"B": (0.0, -163.0, 1.0 * DEG)},
+     "D2 (robot 'B'): goal is not flush with the structure: front edge 2.5 um from the nearest free side and at 1.0 deg to it"),
+    ({"B": (0.0, -200.0, 1.0 * DEG)},
+     "D2 (robot 'B'): goal is not flush with the structure: front edge 39.5 um from the nearest free side and at 1.0 deg to it"),
     ({"B": (0.0, -160.0, DOWN)}, "D2 (robot 'B'): its rear edge, not its front edge, is on a free side"),
     ({"B": (0.0, -150.0, UP)}, "D2 (robot 'B'): body overlaps D4 (robot 'D') by 300 um^2"),
     ({"A": (0.0, -160.0, UP)}, "D1 (robot 'A'): body overlaps D2 (robot 'B') by 15600 um^2"),
@@ -443,7 +446,7 @@ def test_named_shape_moves_with_its_frame(phi, dx, dy):
     ref = candidate_structures(robots, StructureSpec("comb", Pose(0.0, 0.0, 0.0)))
     mov = candidate_structures(robots, StructureSpec("comb", Pose(dx, dy, phi)))
     assert len(ref) == len(mov)
-    for r, m in zip(ref, mov):
+    for r, m in zip(ref, mov, strict=False):
         want = _move({k: tuple(p) for k, p in r.goals().items()}, phi, dx, dy)
         got = m.goals()
         for k in want:

@@ -49,7 +49,7 @@ def test_grid_cells_conditions_and_paired_seeds(tmp_path):
     base = load(FOUR)
     expected = list(itertools.product(["four-robots", "four-b"], [0.5, 2.0], [0.0, 1.0, 2.0]))  # last axis fastest
     assert [(c.params["layout"], c.params["control.replan_interval_s"], c.params["noise.scale"]) for c in cells] == expected
-    for c, (_, dt, scale) in zip(cells, expected):
+    for c, (_, dt, scale) in zip(cells, expected, strict=False):
         assert c.scenario.control.replan_interval_s == dt
         assert c.scenario.noise == base.noise.scaled(scale)
         assert dict(c.controller)["options"].clearance_um == 15.0
@@ -73,8 +73,9 @@ def test_grid_cells_conditions_and_paired_seeds(tmp_path):
         if c == base:
             assert pv is None
             continue
-        pairs = list(zip(by_cell[c], by_cell[base]))
-        assert (pv["baseline_cell"], pv["gained"], pv["lost"]) == (base, sum(a and not b for a, b in pairs), sum(b and not a for a, b in pairs))
+        pairs = list(zip(by_cell[c], by_cell[base], strict=False))
+        assert (pv["baseline_cell"], pv["gained"], pv["lost"]) == (base, sum(a and not b for a, b in pairs), sum(b and not a for a,
+                                                                                                                 b in pairs))
     assert summary["trials"] == 60 and summary["axes"] == {"control.replan_interval_s": [0.5, 2.0], "noise.scale": [0.0, 1.0, 2.0]}
 
 
@@ -146,7 +147,8 @@ def test_a_strategy_the_controller_lacks_is_refused_and_default_passes():
 def test_study_command_resume_and_report(tmp_path, run_cli):
     study = tmp_path / "s.study.toml"
     study.write_text(
-        f'name = "noise"\ntrials = 6\nseed = 2\n[[layouts]]\nfile = "{FOUR}"\n[[layouts]]\ngenerate = {{ n = 2, shape = "pair", seed = 3 }}\n'
+        f'name = "noise"\ntrials = 6\nseed = 2\n[[layouts]]\nfile = "{FOUR}"\n[[layouts]]\ngenerate = {{ n = 2, shape = "pair", seed = 3 '
+        '}\n'
         '[grid]\n"noise.scale" = [0.0, 1.0, 3.0]\n'
     )
     out = tmp_path / "out"

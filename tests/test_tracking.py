@@ -27,7 +27,7 @@ def reference_render(poses, lengths, widths, cal: Calibration, shape, rng, *, su
     rr = (np.arange(rows * sub) + 0.5) / sub - 0.5
     X = (cc[None, :] - cal.origin_px[0]) * cal.um_per_px
     Y = (cal.origin_px[1] - rr[:, None]) * cal.um_per_px
-    for (x, y, th), L, W in zip(poses, lengths, widths):
+    for (x, y, th), L, W in zip(poses, lengths, widths, strict=False):
         h = np.array([math.sin(th), math.cos(th)])  # heading
         right = np.array([math.cos(th), -math.sin(th)])
         u = (X - x) * h[0] + (Y - y) * h[1]
@@ -199,7 +199,8 @@ def test_cli_track_folder_of_pngs(run_cli, tmp_path, tee):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert_user_error(run_cli("track", empty, "--scenario", scn, "--um-per-px", "3", "--origin-px", "0", "0", "--out", out), "no .png")
-    assert_user_error(run_cli("track", folder, "--scenario", scn, "--um-per-px", "-1", "--origin-px", "0", "0", "--out", out), "--um-per-px")
+    assert_user_error(run_cli("track", folder, "--scenario", scn, "--um-per-px", "-1", "--origin-px", "0", "0", "--out", out),
+                      "--um-per-px")
 
 
 def test_docstring_examples():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import doctest
 import json
 
@@ -48,7 +49,7 @@ def replay_samples(v: np.ndarray, vd, vu) -> np.ndarray:
     s = tuple(0 for _ in vd)
     starts = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
     ends = np.r_[starts[1:], v.size]
-    for a, b in zip(starts, ends):
+    for a, b in zip(starts, ends, strict=False):
         s = hysteresis(s, float(v[a]), vd, vu)
         states[a:b] = s
     return states
@@ -79,7 +80,7 @@ def test_segments_validate(make, words):
 def test_segments_are_frozen_values():
     h = Hold(10, 1)
     assert h == Hold(10.0, 1.0) and isinstance(h.volts, float)
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         h.volts = 3.0  # type: ignore[misc]
 
 
@@ -149,8 +150,9 @@ def test_general_designs_synthesise_or_refuse_for_a_reason(design, data):
     target = a.accessible_states[data.draw(st.integers(0, a.count - 1))]
     m = e.margin_V
     flips = any(
-        (s == 0 and e.drive_high_V > d - m) or (s == 1 and e.drive_low_V < u + m) or (s == 0 and e.drive_high_V >= d) or (s == 1 and e.drive_low_V <= u)
-        for s, d, u in zip(target, vd, vu)
+        (s == 0 and e.drive_high_V > d - m) or (s == 1 and e.drive_low_V < u + m)
+        or (s == 0 and e.drive_high_V >= d) or (s == 1 and e.drive_low_V <= u)
+        for s, d, u in zip(target, vd, vu, strict=False)
     )
     reachable = brute_shortest(vd, vu, e.max_V, e.margin_V, [0] * len(vd), target) is not None
     assert reachable  # every accessible state is reachable from all-up, by definition
@@ -321,7 +323,8 @@ def test_steps_from_plan(four):
     bad = plans.from_dict(plan_dict(primitives=[{"name": "P0", "turning": []}, {"name": "Q", "turning": ["C"]}]))
     with pytest.raises(WaveformError, match=r"primitives\[1\] \(Q\)\.turning: turning \['C'\] is not an accessible"):
         steps_from_plan(bad, four, source="p.json")
-    other = plans.from_dict(plan_dict(robots=["A", "B", "C", "E"], primitives=[{"name": "P0", "turning": []}, {"name": "Q", "turning": []}]))
+    other = plans.from_dict(plan_dict(robots=["A", "B", "C", "E"], primitives=[{"name": "P0", "turning": []}, {"name": "Q",
+                                                                                                               "turning": []}]))
     with pytest.raises(WaveformError, match="robots: robot 'D' of the scenario is not in the plan"):
         steps_from_plan(other, four, source="p.json")
 

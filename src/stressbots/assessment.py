@@ -15,8 +15,9 @@ Used by ``stressbots simulate`` (open loop) and by the closed-loop controller's 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 

@@ -90,8 +90,9 @@ seed.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -196,7 +197,7 @@ class ErrorModel:
     drift_walk_rad_per_sqrt_um: float = 0.0
 
     @classmethod
-    def from_noise(cls, noise, k: float = DEFAULT_K, *, jitter: float = SEGMENT_JITTER) -> "ErrorModel":
+    def from_noise(cls, noise, k: float = DEFAULT_K, *, jitter: float = SEGMENT_JITTER) -> ErrorModel:
         """``k``-sigma bounds of a :class:`~stressbots.scenario.Noise` (see the module notes)."""
         if not (math.isfinite(k) and k >= 0):
             raise ValueError(f"k must be a finite number >= 0, got {k!r}")
@@ -1028,7 +1029,8 @@ def intermediate_region(
                     f"r_alpha = {erosion_radius_um:.0f} um: no pose of the preimage of G* outside C_O keeps that "
                     f"clearance from its boundary (heading margin {math.degrees(erosion_height_rad):.1f} deg)"
                 )
-    return Region(robot, goal, xs, ys, hs, mask, pre, float(erosion_radius_um), float(erosion_height_rad), float(cone_rad), float(min_radius_um), reason)
+    return Region(robot, goal, xs, ys, hs, mask, pre, float(erosion_radius_um), float(erosion_height_rad), float(cone_rad),
+                  float(min_radius_um), reason)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1081,7 +1083,8 @@ class Cone:
         }
 
 
-def fine_motion_cone(radius_min_um: float, radius_max_um: float, length_um: float, *, n: int = 65, label: str = "", robot: str = "", duties=("", "")) -> Cone:
+def fine_motion_cone(radius_min_um: float, radius_max_um: float, length_um: float, *, n: int = 65, label: str = "", robot: str = "",
+                     duties=("", "")) -> Cone:
     """The cone of positions reachable by arcs of radius ``r_min <= r' <= r_max`` up to ``length_um``.
 
     Arcs from one pose with one tangent are nested circles touching only at the start, so up to half a
@@ -1200,7 +1203,9 @@ def empirical_coverage(
     from .waveform import synthesize
 
     if plant_factory is None:
-        from .sim import SimulatedPlant as plant_factory  # noqa: N813
+        from .sim import SimulatedPlant
+
+        plant_factory = SimulatedPlant
     model = ErrorModel.from_noise(scenario.noise, k)
     step = float(step_s if step_s is not None else scenario.control.replan_interval_s)
     children = np.random.SeedSequence(int(seed)).spawn(int(trials))
@@ -1222,12 +1227,12 @@ def empirical_coverage(
             trial_seed = int(children[t].generate_state(1, np.uint64)[0] >> np.uint64(11))
             plant = plant_factory(solo, seed=trial_seed)
             state = None
-            for seq, curve in zip(seqs, curves):
+            for seq, curve in zip(seqs, curves, strict=True):
                 p0 = np.asarray(plant.true_poses(), dtype=np.float64)[0]
                 ends_t = np.cumsum(seq.durations_s)
                 nominal = sequence_poses(p0, seq.turning, seq.durations_s, v, r, np.zeros((1, 3)), ends_t)[0]
                 bxy, bth = curve.at(ends_t)
-                for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s)):
+                for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s, strict=True)):
                     prim = analysis.primitive("P1" if turn else "P0")
                     plant.apply(synthesize(analysis, [(prim, float(dur))], initial=state))
                     state = np.array(prim.state, dtype=np.uint8)
@@ -1370,7 +1375,7 @@ class BoundsReport:
             "provenance": provenance(None),
         }
 
-    def with_coverage(self, coverage: Coverage) -> "BoundsReport":
+    def with_coverage(self, coverage: Coverage) -> BoundsReport:
         return replace(self, coverage=coverage)
 
 
@@ -1455,6 +1460,7 @@ def _prepare(scenario, structure, notes: list[str], say):
     if structure is None:
         say("resolving the target structure")
         structure = _resolve_structure(scenario, analysis, notes)
+    assert analysis.order is not None  # a STRING design always has its order
     return list(analysis.order), structure
 
 
@@ -1515,7 +1521,8 @@ def analyse_bounds(
         d_turn = deviation_envelope(turning_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
         d_str = deviation_envelope(straight_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
         tx = float(scenario.control.replan_interval_s)
-        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence, straight_sequence)]
+        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence,
+                                                                                                               straight_sequence)]
         d_tx = (max(a for a, _ in short), max(b for _, b in short))
         say(f"sampling A_{idx}* ({nm})")
         region, ok, reason = _verdict(

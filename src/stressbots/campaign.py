@@ -22,11 +22,12 @@ import signal
 import socket
 import threading
 import time
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any
 
 from .errors import StressbotsError
 
@@ -113,7 +114,8 @@ class Campaign:
         return out
 
 
-def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None = None, source: str = "--strategy") -> tuple[tuple[str, Any], ...]:
+def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None = None,
+                      source: str = "--strategy") -> tuple[tuple[str, Any], ...]:
     """The extra controller arguments of a cell, checked against what ``assemble`` accepts.
 
     A strategy other than ``"default"`` is passed as ``ControllerOptions.strategy`` when the options have
@@ -124,6 +126,7 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
     import inspect
 
     out: dict[str, Any] = {}
+    params: Mapping[str, inspect.Parameter]
     try:
         params = inspect.signature(assemble).parameters
     except (TypeError, ValueError):  # pragma: no cover - builtins
@@ -433,7 +436,7 @@ def _sigterm_as_interrupt():
         yield
         return
 
-    def handler(signum, frame):
+    def handler(_signum, _frame):
         raise KeyboardInterrupt
 
     old = signal.signal(signal.SIGTERM, handler)

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import sys
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 import typer
@@ -46,7 +46,7 @@ out = Console()
 err = Console(stderr=True)
 
 
-class StrategyChoice(str, Enum):
+class StrategyChoice(StrEnum):
     """The --strategy choices of simulate and run (stressbots.strategies.STRATEGIES)."""
 
     rendezvous = "rendezvous"
@@ -58,7 +58,7 @@ def _strategy_option():
 
     return typer.Option(StrategyChoice.rendezvous, "--strategy", help=STRATEGY_HELP)
 
-class CameraChoice(str, Enum):
+class CameraChoice(StrEnum):
     """The --camera choices of simulate and run: what the controller sees."""
 
     poses = "poses"
@@ -69,7 +69,7 @@ CAMERA_HELP = ("What the controller sees: 'poses' (the simulator's noisy pose ca
                "frames tracked by stressbots.tracking: image in the loop; needs the [lab] extra).")
 
 
-class NoiseChoice(str, Enum):
+class NoiseChoice(StrEnum):
     """The --noise choices of simulate and run."""
 
     scenario = "scenario"
@@ -130,13 +130,15 @@ def demo(
 
 @app.command()
 def run(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].", show_default=False),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots with start poses, a target ([structure] or goals), [noise].",
+                                    show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for report.html, result.json, plan.json, the waveform and pictures.",
+                                 show_default=False),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the simulated plant (same seed, same run)."),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Simulated time budget of the closed-loop run (s); default from the layout (a few crossings).",
         show_default=False
     ),
@@ -235,7 +237,7 @@ def design(
     ties: bool = typer.Option(
         False, "--ties/--no-ties", help="Let consecutive robots share V_d or V_u (not both): fits about twice as many robots."
     ),
-    sd_v: Optional[float] = typer.Option(
+    sd_v: float | None = typer.Option(
         None, "--sd-V", help="Also estimate the yield when every threshold scatters with this standard deviation (V).", show_default=False
     ),
     resolution_v: float = typer.Option(
@@ -245,7 +247,7 @@ def design(
     trials: int = typer.Option(10000, "--trials", min=1, max=10_000_000, help="Monte Carlo trials for the yield."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Random seed for the yield (same seed, same estimate)."),
     as_json: bool = typer.Option(False, "--json", help="Write JSON instead of a TOML scenario fragment."),
-    out_file: Optional[Path] = typer.Option(
+    out_file: Path | None = typer.Option(
         None, "--out", help="Write to this file (atomically) instead of stdout; .json implies --json.", show_default=False
     ),
 ) -> None:
@@ -309,14 +311,15 @@ def waveform(
         ..., "--out", help="Output file: .json (segments, small), .npy (samples, columns t_s and volts) or .csv (same).",
         show_default=False,
     ),
-    steps: Optional[str] = typer.Option(
+    steps: str | None = typer.Option(
         None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False
     ),
-    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (as `stressbots plan` writes) instead of --steps.",
+    plan: Path | None = typer.Option(None, "--plan", help="A plan.json (as `stressbots plan` writes) instead of --steps.",
                                         show_default=False),
     rate_hz: float = typer.Option(100_000.0, "--rate-hz", min=1.0, max=10_000_000.0,
                                   help="Sample rate (Hz) for .npy/.csv; at least twice the drive frequency."),
-    large: bool = typer.Option(False, "--large", help=f"Allow a sampled output of more than {LARGE_SAMPLES:,} samples (tens of MB or more)."),
+    large: bool = typer.Option(False, "--large",
+                               help=f"Allow a sampled output of more than {LARGE_SAMPLES:,} samples (tens of MB or more)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors."),
 ) -> None:
     """Synthesise the voltage waveform of a list of primitives and write it.
@@ -401,7 +404,7 @@ def _check_sampled_size(out_file: Path, step_list, sc, rate_hz: float, large: bo
         )
 
 
-def _waveform_of(scenario: Path, steps: Optional[str], plan: Optional[Path], out_file: Path, suffixes: tuple[str, ...], command: str):
+def _waveform_of(scenario: Path, steps: str | None, plan: Path | None, out_file: Path, suffixes: tuple[str, ...], command: str):
     """The scenario, its voltage analysis and the waveform of ``--steps`` or ``--plan`` (shared by ``waveform``
     and ``awg``), after checking ``--out`` (not an input, not a folder, a known suffix)."""
     from .electrostatics import analyse_scenario
@@ -428,11 +431,11 @@ def plan(
         0, "--seed", min=0, max=MAX_SEED,
         help="Seed of the route search's random waypoints (recorded in plan.json); `run`, `simulate` and `demo` plan with 0.",
     ),
-    clearance_um: Optional[float] = typer.Option(
+    clearance_um: float | None = typer.Option(
         None, "--clearance-um", min=0.0, max=1000.0,
         help="Distance kept from orbits, the structure and the arena edge (um); default the controller's setting.", show_default=False,
     ),
-    approach_um: Optional[float] = typer.Option(
+    approach_um: float | None = typer.Option(
         None, "--approach-um", min=1.0, max=5000.0,
         help="Final approach into every slot (um): a gentle clockwise arc, then a short straight push; default the controller's.",
         show_default=False,
@@ -551,14 +554,15 @@ def _noise_dict(noise) -> dict[str, float]:
 def simulate(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, arena and [noise].", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for result.json and the pictures.", show_default=False),
-    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of every random draw of the simulated plant (same seed, same run)."),
-    plan: Optional[Path] = typer.Option(
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED,
+                             help="Seed of every random draw of the simulated plant (same seed, same run)."),
+    plan: Path | None = typer.Option(
         None, "--plan", help="Execute this plan.json open loop instead of the closed-loop controller.", show_default=False
     ),
     noise: NoiseChoice = typer.Option(
         NoiseChoice.scenario, "--noise", help="Control and camera error: the scenario's [noise], none, or the literature's levels."
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Closed loop: simulated time budget (s); default from the layout (a few crossings).",
         show_default=False
     ),
@@ -645,8 +649,8 @@ def simulate(
         **{k: v for k, v in summary.items() if k != "success"},
         "events": [e.as_dict() for e in plant.events],
         "plant": {
-            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist())),
-            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist())),
+            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist(), strict=True)),
+            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist(), strict=True)),
         },
         "wall_time_s": wall,
         "provenance": provenance(plant.seed),
@@ -701,7 +705,7 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     budget = finite_budget(time_budget_s)
     scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
     folder = prepare_dir(out_dir, inputs=[scenario])
-    names = ("result.json", "trajectory.png", "structure.png", "animation.html")
+    names: tuple[str, ...] = ("result.json", "trajectory.png", "structure.png", "animation.html")
     for name in names:
         check_not_input(folder / name, [scenario])
     if not scn.has_starts:
@@ -731,7 +735,8 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     if quiet:
         return
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: {res.duration_s:.1f} s simulated, "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: "
+              f"{res.duration_s:.1f} s simulated, "
               f"{res.replans} re-plans; the command took {time.perf_counter() - t_command:.1f} s (wall time)",
               highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))
@@ -792,15 +797,17 @@ def _finite_nonneg(value: float, option: str) -> float:
 
 @app.command()
 def bounds(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.", show_default=False),
-    out_dir: Optional[Path] = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) with goals or a [structure], and a [noise] section.",
+                                    show_default=False),
+    out_dir: Path | None = typer.Option(None, "--out", help="Folder for bounds.json and bounds.png.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only the bounds.json object on stdout."),
     k: float = typer.Option(3.0, "--k", help="Standard deviations of each noise factor the bounds cover (k-sigma box)."),
     critical: bool = typer.Option(
         False, "--critical", help="Also find, per robot, the largest multiple of [noise] at which it is still guaranteed (a few s)."
     ),
     coverage_trials: int = typer.Option(
-        0, "--coverage-trials", min=0, max=10_000, help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
+        0, "--coverage-trials", min=0, max=10_000,
+        help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
@@ -847,7 +854,7 @@ def bounds(
         with Progress(TextColumn("coverage"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
                       disable=not show, transient=True) as bar:
             task = bar.add_task("coverage", total=coverage_trials * scn.n)
-            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, t: bar.update(task, completed=d))
+            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, _total: bar.update(task, completed=d))
         report = report.with_coverage(cov)
     doc = report.to_dict()
     if scales is not None:
@@ -860,8 +867,6 @@ def bounds(
         return
     if quiet:
         return
-    from rich.table import Table
-
     m = report.model
     out.print(
         f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
@@ -870,20 +875,7 @@ def bounds(
         highlight=False,
         soft_wrap=True,
     )
-    t = Table(caption="r_a, h_a: C_alpha,i; pair: G_1; critical: largest multiple of \\[noise] still guaranteed" if scales else
-              "r_a, h_a: the cylinder C_alpha,i; pair: the G_1 robots")
-    for col in ("robot", "role", "t_2pi s", "r_a um", "h_a deg", "A* mm2", "guaranteed"):
-        t.add_column(col, justify="left" if col in ("robot", "role", "guaranteed") else "right", no_wrap=True)
-    if scales is not None:
-        t.add_column("critical", justify="right", no_wrap=True)
-    for rb in report.robots:
-        area = "-" if rb.region is None else f"{rb.region.area_um2 / 1e6:.3g}"
-        row = [rb.label, rb.role, f"{rb.t_2pi_s:.1f}", f"{rb.cylinder.radius_um:.0f}",
-               f"{math.degrees(rb.cylinder.height_rad):.1f}", area, "yes" if rb.guaranteed else "no"]
-        if scales is not None:
-            row.append(f"{scales[rb.name]:.3g}")
-        t.add_row(*row)
-    out.print(t)
+    out.print(_bounds_table(report, scales))
     for rb in report.robots:
         out.print(f"{rb.label}: {rb.reason}", highlight=False, soft_wrap=True)
     p = report.projection
@@ -915,24 +907,50 @@ def bounds(
         out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}", highlight=False, soft_wrap=True)
 
 
+def _bounds_table(report, scales: dict[str, float] | None):
+    """The per-robot table of `stressbots bounds` (with a critical-noise column when ``scales`` is given)."""
+    import math
+
+    from rich.table import Table
+
+    t = Table(caption="r_a, h_a: C_alpha,i; pair: G_1; critical: largest multiple of \\[noise] still guaranteed" if scales else
+              "r_a, h_a: the cylinder C_alpha,i; pair: the G_1 robots")
+    for col in ("robot", "role", "t_2pi s", "r_a um", "h_a deg", "A* mm2", "guaranteed"):
+        t.add_column(col, justify="left" if col in ("robot", "role", "guaranteed") else "right", no_wrap=True)
+    if scales is not None:
+        t.add_column("critical", justify="right", no_wrap=True)
+    for rb in report.robots:
+        area = "-" if rb.region is None else f"{rb.region.area_um2 / 1e6:.3g}"
+        row = [rb.label, rb.role, f"{rb.t_2pi_s:.1f}", f"{rb.cylinder.radius_um:.0f}",
+               f"{math.degrees(rb.cylinder.height_rad):.1f}", area, "yes" if rb.guaranteed else "no"]
+        if scales is not None:
+            row.append(f"{scales[rb.name]:.3g}")
+        t.add_row(*row)
+    return t
+
+
 @app.command()
 def montecarlo(
     scenario: Path = typer.Argument(..., help="Scenario file (TOML): robots, start poses, target and [noise].", show_default=False),
     trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
-    sweep: Optional[str] = typer.Option(
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256,
+                                       help="Worker processes (default: every core; 1 = in this process).", show_default=False),
+    sweep: str | None = typer.Option(
         None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
     ),
-    time_budget_s: Optional[float] = typer.Option(
+    time_budget_s: float | None = typer.Option(
         None, "--time-budget-s", help="Simulated time budget per trial (s); default the controller's.", show_default=False
     ),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
-    resume: bool = typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made with other settings)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: Optional[str] = typer.Option(
+    resume: bool = typer.Option(False, "--resume",
+                                help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made "
+                                     "with other settings)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: str | None = typer.Option(
         None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
         "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
     ),
@@ -1042,7 +1060,14 @@ from contextlib import contextmanager as _contextmanager  # noqa: E402 - kept wi
 def _campaign_progress(show: bool, label: str = "trials"):
     """A progress bar with ETA for a campaign; it appears at the first report (after the store is
     checked, so a refusal prints only its error line). No refresh thread: workers may be forked."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     bar = Progress(TextColumn(label), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
                    console=err, disable=not show, auto_refresh=False, transient=False)
@@ -1088,7 +1113,8 @@ def _write_trials_csv(folder: Path) -> Path:
 def export(
     store_dir: Path = typer.Argument(..., metavar="DIR", help="A campaign's folder (or its trials.sqlite).", show_default=False),
     fmt: str = typer.Option("csv", "--format", help="csv, or parquet (needs pyarrow)."),
-    out_file: Optional[Path] = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).", show_default=False),
+    out_file: Path | None = typer.Option(None, "--out", help="File to write (default DIR/trials.csv or DIR/trials.parquet).",
+                                         show_default=False),
 ) -> None:
     """Export a campaign's trial store (finished, interrupted or still running) for pandas & co.
 
@@ -1116,12 +1142,19 @@ def export(
 
 @app.command()
 def study(
-    study_file: Path = typer.Argument(..., metavar="STUDY.toml", help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
-    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.", show_default=False),
-    workers: Optional[int] = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).", show_default=False),
-    resume: bool = typer.Option(False, "--resume", help="Continue the study in DIR/trials.sqlite: run only its missing trials (refused if the study changed)."),
-    overwrite: bool = typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: Optional[str] = typer.Option(None, "--dask", metavar="ADDRESS", help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    study_file: Path = typer.Argument(..., metavar="STUDY.toml",
+                                      help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
+    out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.",
+                                 show_default=False),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).",
+                                       show_default=False),
+    resume: bool = typer.Option(False, "--resume",
+                                help="Continue the study in DIR/trials.sqlite: run only its missing trials "
+                                     "(refused if the study changed)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
+    dask: str | None = typer.Option(None, "--dask", metavar="ADDRESS",
+                                    help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
 ) -> None:
@@ -1167,7 +1200,8 @@ def study(
 
     lo, hi = summary["success_rate_ci95"]
     out.print(f"[bold]{summary['name']}[/bold]: {len(summary['cells'])} cells x {summary['trials_per_cell']} paired trials, "
-              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s", highlight=False, soft_wrap=True)
+              f"{summary['successes']}/{summary['trials']} successes ({lo:.3f}-{hi:.3f}), {summary['run']['wall_s']:.1f} s",
+              highlight=False, soft_wrap=True)
     axes = list(summary["axes"])
     t = Table(title="cells (conditions, successes, Wilson 95 % CI, most common failure)")
     for col in ["cell", "layout", *axes, "ok", "rate", "95 % CI", "top failure"]:
@@ -1179,7 +1213,8 @@ def study(
                   f"{r['success_rate']:.2f}", f"{r['success_rate_ci95'][0]:.2f}-{r['success_rate_ci95'][1]:.2f}",
                   top if len(top) <= 40 else top[:39] + "...")
     out.print(t)
-    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")), highlight=False, soft_wrap=True)
+    out.print("wrote " + ", ".join(str(folder / f) for f in ("summary.json", "report.html", "trials.sqlite", "trials.csv")),
+              highlight=False, soft_wrap=True)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1188,23 +1223,28 @@ def study(
 
 @app.command()
 def awg(
-    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.", show_default=False),
+    scenario: Path = typer.Argument(..., help="Scenario file (TOML) giving the robots' voltages, max_V and the drive frequency.",
+                                    show_default=False),
     out_file: Path = typer.Option(
-        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) or .npy (int16 codes).",
+        ..., "--out", help="Output file: .arb (33500-series text ARB: header, then one DAC code per line), .csv (t_s,awg_V,electrode_V) "
+                           "or .npy (int16 codes).",
         show_default=False,
     ),
-    steps: Optional[str] = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
-    plan: Optional[Path] = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
+    steps: str | None = typer.Option(None, "--steps", help="Primitives and drive durations (s), e.g. 'P1:2.5,P0:1.0'.", show_default=False),
+    plan: Path | None = typer.Option(None, "--plan", help="A plan.json (from stressbots plan) instead of --steps.", show_default=False),
     gain: float = typer.Option(20.0, "--gain", help="Voltage gain of the amplifier between generator and electrodes (V/V)."),
     offset_V: float = typer.Option(0.0, "--offset-V", help="Electrode level (V) at generator output 0 V (amplifier offset)."),
-    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz", help="Generator sample rate (Hz); at least twice the drive frequency."),
+    sample_rate_hz: float = typer.Option(100_000.0, "--sample-rate-hz",
+                                         help="Generator sample rate (Hz); at least twice the drive frequency."),
     awg_max_V: float = typer.Option(10.0, "--awg-max-V", help="The generator's output limit (V): every level must stay within +-this."),
     name: str = typer.Option("stressbots", "--name", help="Name of the arbitrary waveform in the generator's memory (<= 12 characters)."),
-    upload_to: Optional[str] = typer.Option(
-        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).", show_default=False
+    upload_to: str | None = typer.Option(
+        None, "--upload", help="VISA resource of the generator, e.g. TCPIP::192.168.1.5::INSTR: upload over PyVISA ([lab] extra).",
+        show_default=False
     ),
-    visa_library: Optional[str] = typer.Option(
-        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.", show_default=False
+    visa_library: str | None = typer.Option(
+        None, "--visa-library", help="PyVISA backend, e.g. '@py' (pyvisa-py) or 'awg.yaml@sim' (pyvisa-sim); default PyVISA's.",
+        show_default=False
     ),
     ascii_data: bool = typer.Option(False, "--ascii", help="Send the DAC codes as text instead of a binary block (pyvisa-sim needs this)."),
     output_on: bool = typer.Option(False, "--output-on", help="Switch the generator's output on after a clean upload (off by default)."),
@@ -1216,8 +1256,9 @@ def awg(
     wave at the scenario's drive frequency), mapped to `u` and quantised to int16 DAC codes
     (-32767 = VOLT:LOW, +32767 = VOLT:HIGH). Before anything is written or sent it refuses electrode
     levels outside [0, max_V], generator levels outside +-awg_max_V and more points than the generator
-    holds (saying how to split the plan). --upload sends the SCPI sequence documented in the README ("Running on your hardware") to channel 1 and
-    checks SYST:ERR? after the data and after the settings; the output stays off unless --output-on.
+    holds (saying how to split the plan). --upload sends the SCPI sequence documented in the README
+    ("Running on your hardware") to channel 1 and checks SYST:ERR? after the data and after the settings;
+    the output stays off unless --output-on.
 
     Examples: `stressbots awg examples/four-robots.toml --steps P1:0.5,P0:0.5 --out wf.arb`;
     dry run against the simulated instrument: `stressbots awg examples/four-robots.toml --steps P1:0.5
@@ -1233,7 +1274,8 @@ def awg(
     ev = prog.electrode_volts()
     out.print(
         f"wrote {out_file}: {prog.points} points at {prog.sample_rate_hz:g} Hz ({prog.duration_s:g} s); generator "
-        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset {offset_V:g} V",
+        f"{prog.u_low:g}..{prog.u_high:g} V (VOLT:LOW/HIGH), electrodes {ev.min():g}..{ev.max():g} V at gain {gain:g}, offset "
+        f"{offset_V:g} V",
         highlight=False, soft_wrap=True,
     )
     if upload_to is not None:
@@ -1244,12 +1286,14 @@ def awg(
 @app.command()
 def track(
     frames: Path = typer.Argument(..., help="A folder of PNG frames (tracked in name order) or a video file.", show_default=False),
-    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.", show_default=False),
+    scenario: Path = typer.Option(..., "--scenario", help="Scenario file (TOML): the robots' names, body sizes and start poses.",
+                                  show_default=False),
     um_per_px: float = typer.Option(..., "--um-per-px", help="Camera calibration: micrometres per pixel.", show_default=False),
     origin_px: tuple[float, float] = typer.Option(
         ..., "--origin-px", help="Camera calibration: the pixel (column, row) of the arena origin (x = y = 0).", show_default=False
     ),
-    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).", show_default=False),
+    out_file: Path = typer.Option(..., "--out", help="CSV of the poses: frame,name,robot,x_um,y_um,heading_deg (nan: not found).",
+                                  show_default=False),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
     """Track the robots in camera frames: one pose per robot and frame, identities kept from frame to frame.
@@ -1301,7 +1345,7 @@ def track(
                   soft_wrap=True)
 
 
-def _upload_program(prog, resource: str, visa_library: Optional[str], *, name: str, ascii_data: bool, output_on: bool) -> None:
+def _upload_program(prog, resource: str, visa_library: str | None, *, name: str, ascii_data: bool, output_on: bool) -> None:
     """Open the VISA resource and upload (errors from PyVISA become one ``error:`` line)."""
     from .lab.awg import upload
 
@@ -1349,7 +1393,7 @@ _UsageError = _click_base("UsageError")
 _ClickException = _click_base("ClickException")
 
 
-def main(argv: Optional[list[str]] = None) -> None:
+def main(argv: list[str] | None = None) -> None:
     """Console-script entry point: run the CLI, mapping every failure to one ``error:`` line.
 
     Exit status: 0 done, 1 internal error (a bug: ``error: internal error: ...``; set

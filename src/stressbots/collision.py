@@ -86,7 +86,7 @@ def pairwise_overlaps(poses, lengths_um, widths_um, *, tol_um: float = 1e-6) -> 
     widths = np.broadcast_to(np.asarray(widths_um, dtype=np.float64), (n,))
     depth = penetration_depth(poses[i], lengths[i], widths[i], poses[j], lengths[j], widths[j])
     hit = depth > tol_um
-    return [(int(a), int(b), float(dd)) for a, b, dd in zip(i[hit], j[hit], depth[hit])]
+    return [(int(a), int(b), float(dd)) for a, b, dd in zip(i[hit], j[hit], depth[hit], strict=True)]
 
 
 def arena_gap(poses, length_um, width_um, arena_um) -> np.ndarray:
@@ -118,4 +118,4 @@ def disc_overlaps(centres, radii, *, tol_um: float = 0.0) -> list[tuple[int, int
     i, j = np.triu_indices(c.shape[0], k=1)
     overlap = r[i] + r[j] - np.hypot(*(c[i] - c[j]).T)
     hit = overlap > tol_um
-    return [(int(a), int(b), float(o)) for a, b, o in zip(i[hit], j[hit], overlap[hit])]
+    return [(int(a), int(b), float(o)) for a, b, o in zip(i[hit], j[hit], overlap[hit], strict=True)]

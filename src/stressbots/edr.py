@@ -5,6 +5,15 @@ The controller is the :mod:`stressbots.control` package now (issue 12); import f
 
 from __future__ import annotations
 
-from .control import AssemblyResult, ControllerOptions, Targets, Tuning, assemble, check_determinism, nominal_plan, structure_targets
+from .control import (
+    AssemblyResult,
+    ControllerOptions,
+    Targets,
+    Tuning,
+    assemble,
+    check_determinism,
+    nominal_plan,
+    structure_targets,
+)
 
 __all__ = ["AssemblyResult", "ControllerOptions", "Targets", "Tuning", "assemble", "check_determinism", "nominal_plan", "structure_targets"]

@@ -35,9 +35,9 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -162,7 +162,7 @@ class LevelTable:
     @property
     def changes(self) -> np.ndarray:
         """``(L,)`` bool: the level changes some arm state (not the identity)."""
-        return self.snaps.any(axis=1) | self.releases.any(axis=1)
+        return np.asarray(self.snaps.any(axis=1) | self.releases.any(axis=1))
 
 
 def _thresholds(snap_down_V, release_V) -> tuple[np.ndarray, np.ndarray]:
@@ -607,6 +607,7 @@ class ControlAnalysis:
             raise IndexError(k)
         row = self.primitive_states[k]
         if self.is_string:
+            assert self.order is not None  # a STRING design always has its order
             turning = self.order[:k]
         else:
             turning = tuple(self.names[i] for i in np.flatnonzero(row))
@@ -773,6 +774,7 @@ def _prefix_length(state: np.ndarray, order: np.ndarray) -> int | None:
 def _string_path(analysis: ControlAnalysis, j: int, k: int) -> list[float] | None:
     """SPEC 4's closed form between prefix states ``j`` and ``k`` of a STRING design (None: use search)."""
     up, down = analysis.raise_levels_V, analysis.release_levels_V
+    assert up is not None and down is not None  # a STRING design always has its levels
     n = analysis.n
     if k == j:
         return []

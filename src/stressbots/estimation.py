@@ -156,10 +156,11 @@ class Estimator:
             dp = p[:, :2] - start[:, :2]
             dm = frame[:, :2] - start[:, :2]
             dp2 = (dp * dp).sum(axis=1)
-            for i in np.flatnonzero(valid & (dp2 >= 30.0**2)):
+            for i in np.flatnonzero(valid & (dp2 >= 30.0**2)).tolist():
                 value = self.speed[i] * float(dm[i] @ dp[i]) / float(dp2[i])
                 if 0.6 * self.v_nom[i] < value < 1.4 * self.v_nom[i]:
-                    self._v_pool[i] = (self._v_w[i] * self._v_pool[i] + dp2[i] / self.v_nom[i] ** 2 * value) / (self._v_w[i] + dp2[i] / self.v_nom[i] ** 2)
+                    self._v_pool[i] = ((self._v_w[i] * self._v_pool[i] + dp2[i] / self.v_nom[i] ** 2 * value)
+                                       / (self._v_w[i] + dp2[i] / self.v_nom[i] ** 2))
                     self._v_w[i] += dp2[i] / self.v_nom[i] ** 2
                     self.speed[i] = self._v_pool[i]
         # turn rate: runs of pure turning

@@ -113,7 +113,8 @@ def random_scenario(
             keep_centre = keep_centre * scale
             goal_arr = goal_arr + np.concatenate([keep_centre - keep_centre / scale, [0.0]])
             keep_pts = keep_pts + (keep_centre - keep_centre / scale)
-            spec = StructureSpec(shape, Pose(spec.at.x + keep_centre[0] - keep_centre[0] / scale, spec.at.y + keep_centre[1] - keep_centre[1] / scale, spec.at.theta))
+            spec = StructureSpec(shape, Pose(spec.at.x + keep_centre[0] - keep_centre[0] / scale,
+                                             spec.at.y + keep_centre[1] - keep_centre[1] / scale, spec.at.theta))
             tries, placed = 0, 0
         p = np.array([rng.uniform(0, w), rng.uniform(0, h), rng.uniform(0, TWO_PI)])
         c = turning_centres(p, r[placed])[0]

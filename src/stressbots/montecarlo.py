@@ -39,9 +39,10 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -172,13 +173,13 @@ def default_planner() -> Callable:
     when it offers one, else :func:`stressbots.planning.plan_assembly`. A trial then follows exactly the
     plan ``assemble(..., plan=None)`` would have made."""
     try:
-        from .control import nominal_plan  # type: ignore[attr-defined]
+        from .control import nominal_plan
 
         return nominal_plan
     except ImportError:
         pass
     try:  # the controller's module, where control.assemble comes from
-        from .edr import nominal_plan  # type: ignore[no-redef]
+        from .edr import nominal_plan
 
         return nominal_plan
     except ImportError:
@@ -404,7 +405,8 @@ def montecarlo_summary(scenario, outcomes: dict[float, list[TrialOutcome]], seed
     summary.update(summarise(outcomes[1.0]))
     summary["ci_method"] = "Wilson score interval, 95 %"
     summary["seed"] = int(seed)
-    summary["trial_seeds"] = "trial i: int(SeedSequence(seed).spawn(trials)[i].generate_state(1, uint64)[0] >> 11), for plant and controller"
+    summary["trial_seeds"] = ("trial i: int(SeedSequence(seed).spawn(trials)[i].generate_state(1, uint64)[0] >> 11), "
+                              "for plant and controller")
     summary["noise"] = _noise_dict(scenario.noise)
     pl = getattr(plan, "plan", plan)
     summary["nominal_plan"] = {

@@ -234,7 +234,7 @@ class Path:
         return tuple((k == "R", v / speed_um_s) for k, v in self.segments)
 
     @classmethod
-    def _trusted(cls, x: float, y: float, theta: float, radius: float, segments) -> "Path":
+    def _trusted(cls, x: float, y: float, theta: float, radius: float, segments) -> Path:
         """A path from values already checked (finite floats, radius > 0, lengths >= 0): no numpy."""
         t = theta % TWO_PI
         path = object.__new__(cls)
@@ -243,12 +243,12 @@ class Path:
         object.__setattr__(path, "segments", _normalise_segments(segments))
         return path
 
-    def then(self, *segments) -> "Path":
+    def then(self, *segments) -> Path:
         """This path followed by more ``(kind, length_um)`` segments."""
         return Path(self.start, self.radius, self.segments + tuple(segments))
 
 
-def sub_path(path: "Path", s0_um: float, s1_um: float) -> "Path":
+def sub_path(path: Path, s0_um: float, s1_um: float) -> Path:
     """The part of ``path`` between arc lengths ``s0_um`` and ``s1_um`` (um), as a path of its own.
 
     Used to cut a planned route into the pieces a robot drives between two measurements or phases.
@@ -260,7 +260,7 @@ def sub_path(path: "Path", s0_um: float, s1_um: float) -> "Path":
         if b > a:
             segs.append((kind, b - a))
         acc += ell
-    return Path(tuple(path.pose_at(s0_um)), path.radius, tuple(segs))
+    return Path(Pose(*path.pose_at(s0_um)), path.radius, tuple(segs))
 
 
 class InfeasibleLengthError(ValueError):
@@ -551,7 +551,8 @@ def _float_pose(p, name) -> tuple[float, float, float]:
         x, y, t = p
         out = (float(x), float(y), float(t))
     except (TypeError, ValueError):
-        return tuple(float(v) for v in _pose_tuple(p, name))  # the array path raises the usual errors
+        x, y, t = (float(v) for v in _pose_tuple(p, name))  # the array path raises the usual errors
+        return (x, y, t)
     if not all(math.isfinite(v) for v in out):
         raise ValueError(f"{name} must be finite")
     return out
@@ -596,7 +597,7 @@ def shortest_path(start, goal, radius, *, approach_um=0.0) -> Path:
     if ell > 0.0:
         x2, y2 = x2 - ell * math.sin(t2), y2 - ell * math.cos(t2)
     word, seg = _solve_scalar(x1, y1, t1, x2, y2, t2, r)
-    segments = tuple(zip(word, seg)) + ((("S", ell),) if ell > 0.0 else ())
+    segments = tuple(zip(word, seg, strict=False)) + ((("S", ell),) if ell > 0.0 else ())
     return Path._trusted(x1, y1, t1, r, segments)
 
 
@@ -681,7 +682,7 @@ def _from_atoms(start, radius, turn, atoms) -> Path:
         segs.append(("S", max(m, 0.0)))
         cur = o
     segs.append(("R", radius * (turn - cur)))
-    return Path(tuple(start), radius, segs)
+    return Path(Pose(*start), radius, tuple(segs))
 
 
 def _fmt_intervals(iv) -> str:
@@ -865,7 +866,7 @@ def interpolated_arc(start, turn_rad, r_prime, radius, max_period_um) -> Path:
     if not lam > 0:
         raise ValueError(f"switching period must be positive (um), got {max_period_um!r}")
     if turn == 0.0:
-        return Path(tuple(start), r, ())
+        return Path(Pose(*start), r, ())
     n = max(1, math.ceil(r_prime * turn / lam), math.ceil(turn / _PI))
     beta = turn / n
     a = r * beta
@@ -874,7 +875,7 @@ def interpolated_arc(start, turn_rad, r_prime, radius, max_period_um) -> Path:
     for _ in range(n - 1):
         segs += [("S", b), ("R", a)]
     segs += [("S", b), ("R", 0.5 * a)]
-    return Path(tuple(start), r, segs)
+    return Path(Pose(*start), r, tuple(segs))
 
 
 def interpolation_deviation(r_prime, radius, period_um):
@@ -901,9 +902,9 @@ def interpolation_deviation(r_prime, radius, period_um):
 class ArcThrough(NamedTuple):
     """The single clockwise arc from a pose through a point."""
 
-    radius_um: np.ndarray  #: r' (um); inf for a point straight ahead; nan if unreachable
-    turn_rad: np.ndarray  #: clockwise turn to the point (rad), in [0, 2 pi); nan if unreachable
-    length_um: np.ndarray  #: arc length to the point (um); nan if unreachable
+    radius_um: np.ndarray | float  #: r' (um); inf for a point straight ahead; nan if unreachable
+    turn_rad: np.ndarray | float  #: clockwise turn to the point (rad), in [0, 2 pi); nan if unreachable
+    length_um: np.ndarray | float  #: arc length to the point (um); nan if unreachable
 
 
 def arc_through(pose, point) -> ArcThrough:

@@ -158,7 +158,7 @@ def closed_loop(scenario, plan_result, *, seed: int, time_budget_s: float | None
     assemble = strategy_function(strategy)
 
     plant = SimulatedPlant(scenario, seed=seed, record=True)
-    observed = plant
+    observed: Any = plant  # the simulator, or an image lab around it (frames, describe)
     if camera == "images":
         observed = _image_lab(scenario, plant, seed)
     kwargs: dict[str, Any] = {"seed": seed, "plan": plan_result}

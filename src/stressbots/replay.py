@@ -84,15 +84,12 @@ def replay(
     """
     names = list(scenario.names)
     n = len(names)
-    problems: list[str] = []
     if sorted(plan.robots) != sorted(names):
-        return ReplayReport(False, ("plan robots differ from the scenario's",), np.full((n, 3), np.nan), np.zeros(n, bool), np.full(n, np.nan))
+        return ReplayReport(False, ("plan robots differ from the scenario's",), np.full((n, 3), np.nan), np.zeros(n, bool),
+                            np.full(n, np.nan))
     order = [plan.robots.index(nm) for nm in names]  # plan column of each scenario robot
     turning_all = plan.turning_matrix()[:, order]
-    if accessible_turning is not None:
-        for p in plan.primitives:
-            if frozenset(p.turning) not in accessible_turning:
-                problems.append(f"primitive {p.name} (turning {sorted(p.turning)}) is not an accessible control state")
+    problems: list[str] = _inaccessible_primitives(plan, accessible_turning)
     if goals is None:
         goals = np.array([plan.goals[nm] if nm in plan.goals else (np.nan,) * 3 for nm in names], dtype=np.float64)
     goals = np.asarray(goals, dtype=np.float64)
@@ -121,95 +118,35 @@ def replay(
     for k, step in enumerate(plan.steps):
         dur = step.duration_s
         turning = turning_all[k]
-        for i in np.flatnonzero(docked & turning):
+        for i in np.flatnonzero(docked & turning).tolist():
             note(("turn-docked", i), f"step {k} ({step.primitive}): docked robot {names[i]} receives a turning primitive")
         if dur <= 0:
             continue
         moving = ~docked
         # Docking events: straight-moving robots whose slot lies ahead on their line within this step.
-        t_dock = np.full(n, np.inf)
-        for i in np.flatnonzero(moving & ~turning & np.isfinite(goals[:, 0])):
-            g = goals[i]
-            dth = (g[2] - pose[i, 2] + math.pi) % TWO_PI - math.pi
-            if abs(dth) > heading_tol_rad:
-                continue
-            h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
-            d = g[:2] - pose[i, :2]
-            along = float(d @ h)
-            lateral = abs(float(d[0] * h[1] - d[1] * h[0]))
-            if lateral <= tol_um and -tol_um <= along <= speed[i] * dur + tol_um:
-                # within tolerance of the step's end counts as arriving at its end: never sample past it
-                t_dock[i] = min(max(along, 0.0) / speed[i], dur)
+        t_dock = _docking_times(pose, goals, moving & ~turning, speed, dur, tol_um, heading_tol_rad)
         ksteps = max(2, int(math.ceil(vmax * dur / max_step_um)) + 1)
         t = np.linspace(0.0, dur, ksteps)
         t = np.unique(np.concatenate([t, t_dock[np.isfinite(t_dock)]]))
         traj = _motion(pose, turning & moving, speed, radius, t)  # (K, n, 3)
         traj[:, docked, :] = pose[docked]
-        # Accept a docking event only against the structure: touching a docked body, or meeting the
-        # partner that docks at the same moment (G_1).
-        accepted = np.zeros(n, dtype=bool)
-        cand = np.flatnonzero(np.isfinite(t_dock))
-        for i in cand:
-            gi = goals[i]
-            touching = False
-            for j in range(n):
-                if j == i:
-                    continue
-                if docked[j] or (np.isfinite(t_dock[j]) and abs(t_dock[j] - t_dock[i]) * speed[i] <= tol_um):
-                    pj = pose[j] if docked[j] else goals[j]
-                    depth = penetration_depth(gi, length[i], width[i], pj, length[j], width[j])[0]
-                    if depth >= -tol_um:
-                        touching = True
-                        break
-            if touching:
-                accepted[i] = True
-        for i in np.flatnonzero(accepted):
-            after = t >= t_dock[i]
-            h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
-            stop = pose[i, :2] + speed[i] * t_dock[i] * h
-            traj[after, i, 0:2] = stop
-            traj[after, i, 2] = pose[i, 2]
-        # Collisions between every pair of bodies at every sample.
-        if len(pairs_i):
-            K = traj.shape[0]
-            a = traj[:, pairs_i, :].reshape(-1, 3)
-            b = traj[:, pairs_j, :].reshape(-1, 3)
-            depth = penetration_depth(
-                a, np.tile(length[pairs_i], K), np.tile(width[pairs_i], K), b, np.tile(length[pairs_j], K), np.tile(width[pairs_j], K)
-            ).reshape(K, -1)
-            bad = depth > tol_um
-            for p in np.flatnonzero(bad.any(axis=0)):
-                kk = int(np.argmax(bad[:, p]))
-                i, j = int(pairs_i[p]), int(pairs_j[p])
-                note(
-                    ("overlap", i, j),
-                    f"bodies of {names[i]} and {names[j]} overlap by {depth[:, p].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k}, {step.primitive})",
-                )
+        accepted = _accepted_docks(t_dock, goals, pose, docked, length, width, speed, tol_um)
+        _stop_at_docks(traj, t, pose, speed, t_dock, accepted)
+        where = f"step {k}, {step.primitive}"
+        for key, text in _overlaps(traj, t + t_now, pairs_i, pairs_j, length, width, tol_um, names, where):
+            note(key, text)
         if arena is not None:
-            K = traj.shape[0]
-            out = outside_arena(traj.reshape(-1, 3), np.tile(length, K), np.tile(width, K), arena, tol_um=tol_um).reshape(K, n)
-            for i in np.flatnonzero((out > 0).any(axis=0)):
-                kk = int(np.argmax(out[:, i] > 0))
-                note(("arena", int(i)), f"{names[i]} leaves the arena by {out[:, i].max():.1f} um at t = {t_now + t[kk]:.2f} s (step {k})")
+            for key, text in _arena_exits(traj, t + t_now, length, width, arena, tol_um, names, f"step {k}"):
+                note(key, text)
         pose = traj[-1].copy()
-        for i in np.flatnonzero(accepted):
+        for i in np.flatnonzero(accepted).tolist():
             docked[i] = True
             dock_time[i] = t_now + t_dock[i]
         if trace_every_um is not None:
-            stride = max(1, int(round(trace_every_um / max(vmax * (t[1] - t[0]) if len(t) > 1 else 1.0, 1e-9))))
-            trace_t.extend((t_now + t[stride::stride]).tolist())
-            trace_p.extend(traj[stride::stride])
-            if (len(t) - 1) % stride:
-                trace_t.append(t_now + t[-1])
-                trace_p.append(traj[-1])
+            _extend_trace(trace_t, trace_p, traj, t, t_now, trace_every_um, vmax)
         t_now += dur
 
-    for i in np.flatnonzero(~docked):
-        if np.isfinite(goals[i, 0]):
-            dist = float(np.hypot(*(pose[i, :2] - goals[i, :2])))
-            problems.append(f"{names[i]} is not docked at its slot at the end (ends {dist:.1f} um from it)")
-        else:
-            problems.append(f"{names[i]} has no slot")
+    problems.extend(_undocked(pose, goals, docked, names))
     return ReplayReport(
         ok=not problems,
         problems=tuple(problems),
@@ -219,3 +156,118 @@ def replay(
         trace_t=np.asarray(trace_t),
         trace_poses=np.asarray(trace_p),
     )
+
+
+def _inaccessible_primitives(plan: Plan, accessible_turning: set[frozenset[str]] | None) -> list[str]:
+    """One problem per plan primitive whose turning set is not an accessible control state."""
+    if accessible_turning is None:
+        return []
+    return [f"primitive {p.name} (turning {sorted(p.turning)}) is not an accessible control state"
+            for p in plan.primitives if frozenset(p.turning) not in accessible_turning]
+
+
+def _docking_times(pose: np.ndarray, goals: np.ndarray, straight: np.ndarray, speed: np.ndarray, dur: float, tol_um: float,
+                   heading_tol_rad: float) -> np.ndarray:
+    """``(n,)`` time (s into the step) at which each straight-moving robot reaches its slot, inf if it does not
+    this step (its slot not ahead on its line, or not within ``dur``)."""
+    n = len(pose)
+    t_dock = np.full(n, np.inf)
+    for i in np.flatnonzero(straight & np.isfinite(goals[:, 0])).tolist():
+        g = goals[i]
+        dth = (g[2] - pose[i, 2] + math.pi) % TWO_PI - math.pi
+        if abs(dth) > heading_tol_rad:
+            continue
+        h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
+        d = g[:2] - pose[i, :2]
+        along = float(d @ h)
+        lateral = abs(float(d[0] * h[1] - d[1] * h[0]))
+        if lateral <= tol_um and -tol_um <= along <= speed[i] * dur + tol_um:
+            # within tolerance of the step's end counts as arriving at its end: never sample past it
+            t_dock[i] = min(max(along, 0.0) / speed[i], dur)
+    return t_dock
+
+
+def _accepted_docks(t_dock: np.ndarray, goals: np.ndarray, pose: np.ndarray, docked: np.ndarray, length: np.ndarray,
+                    width: np.ndarray, speed: np.ndarray, tol_um: float) -> np.ndarray:
+    """``(n,)`` bool: docking events accepted, i.e. only against the structure: touching a docked body, or
+    meeting the partner that docks at the same moment (G_1)."""
+    n = len(t_dock)
+    accepted = np.zeros(n, dtype=bool)
+    for i in np.flatnonzero(np.isfinite(t_dock)).tolist():
+        gi = goals[i]
+        for j in range(n):
+            if j == i:
+                continue
+            if docked[j] or (np.isfinite(t_dock[j]) and abs(t_dock[j] - t_dock[i]) * speed[i] <= tol_um):
+                pj = pose[j] if docked[j] else goals[j]
+                if penetration_depth(gi, length[i], width[i], pj, length[j], width[j])[0] >= -tol_um:
+                    accepted[i] = True
+                    break
+    return accepted
+
+
+def _stop_at_docks(traj: np.ndarray, t: np.ndarray, pose: np.ndarray, speed: np.ndarray, t_dock: np.ndarray,
+                   accepted: np.ndarray) -> None:
+    """Hold each robot whose docking was accepted at its docking pose from its docking time on (in place)."""
+    for i in np.flatnonzero(accepted).tolist():
+        after = t >= t_dock[i]
+        h = np.array([math.sin(pose[i, 2]), math.cos(pose[i, 2])])
+        stop = pose[i, :2] + speed[i] * t_dock[i] * h
+        traj[after, i, 0:2] = stop
+        traj[after, i, 2] = pose[i, 2]
+
+
+def _overlaps(traj: np.ndarray, t_abs: np.ndarray, pairs_i: np.ndarray, pairs_j: np.ndarray, length: np.ndarray,
+              width: np.ndarray, tol_um: float, names: list[str], where: str) -> list[tuple[tuple, str]]:
+    """``(key, problem)`` for every pair of bodies that interpenetrate at some sample ``t_abs`` (s)."""
+    if not len(pairs_i):
+        return []
+    K = traj.shape[0]
+    a = traj[:, pairs_i, :].reshape(-1, 3)
+    b = traj[:, pairs_j, :].reshape(-1, 3)
+    depth = penetration_depth(
+        a, np.tile(length[pairs_i], K), np.tile(width[pairs_i], K), b, np.tile(length[pairs_j], K), np.tile(width[pairs_j], K)
+    ).reshape(K, -1)
+    bad = depth > tol_um
+    found = []
+    for pk in np.flatnonzero(bad.any(axis=0)).tolist():
+        kk = int(np.argmax(bad[:, pk]))
+        i, j = int(pairs_i[pk]), int(pairs_j[pk])
+        found.append((("overlap", i, j),
+                      f"bodies of {names[i]} and {names[j]} overlap by {depth[:, pk].max():.1f} um at t = {t_abs[kk]:.2f} s ({where})"))
+    return found
+
+
+def _arena_exits(traj: np.ndarray, t_abs: np.ndarray, length: np.ndarray, width: np.ndarray, arena, tol_um: float,
+                 names: list[str], where: str) -> list[tuple[tuple, str]]:
+    """``(key, problem)`` for every robot whose body leaves the arena at some sample ``t_abs`` (s)."""
+    K, n = traj.shape[0], traj.shape[1]
+    out = outside_arena(traj.reshape(-1, 3), np.tile(length, K), np.tile(width, K), arena, tol_um=tol_um).reshape(K, n)
+    found = []
+    for i in np.flatnonzero((out > 0).any(axis=0)).tolist():
+        kk = int(np.argmax(out[:, i] > 0))
+        found.append((("arena", int(i)), f"{names[i]} leaves the arena by {out[:, i].max():.1f} um at t = {t_abs[kk]:.2f} s ({where})"))
+    return found
+
+
+def _extend_trace(trace_t: list[float], trace_p: list[np.ndarray], traj: np.ndarray, t: np.ndarray, t_now: float,
+                  trace_every_um: float, vmax: float) -> None:
+    """Append the step's samples about every ``trace_every_um`` um of the fastest robot, and its end (in place)."""
+    stride = max(1, int(round(trace_every_um / max(vmax * (t[1] - t[0]) if len(t) > 1 else 1.0, 1e-9))))
+    trace_t.extend((t_now + t[stride::stride]).tolist())
+    trace_p.extend(traj[stride::stride])
+    if (len(t) - 1) % stride:
+        trace_t.append(t_now + t[-1])
+        trace_p.append(traj[-1])
+
+
+def _undocked(pose: np.ndarray, goals: np.ndarray, docked: np.ndarray, names: list[str]) -> list[str]:
+    """One problem per robot not docked at the end."""
+    problems = []
+    for i in np.flatnonzero(~docked).tolist():
+        if np.isfinite(goals[i, 0]):
+            dist = float(np.hypot(*(pose[i, :2] - goals[i, :2])))
+            problems.append(f"{names[i]} is not docked at its slot at the end (ends {dist:.1f} um from it)")
+        else:
+            problems.append(f"{names[i]} has no slot")
+    return problems

@@ -31,7 +31,7 @@ class Pose(NamedTuple):
         return np.array([self.x, self.y, self.theta], dtype=np.float64)
 
     @classmethod
-    def from_degrees(cls, x: float, y: float, heading_deg: float) -> "Pose":
+    def from_degrees(cls, x: float, y: float, heading_deg: float) -> Pose:
         """Build a pose from the file format's ``[x_um, y_um, heading_deg]``."""
         return cls(float(x), float(y), math.radians(float(heading_deg)))
 

@@ -7,9 +7,9 @@ see :mod:`stressbots.seed_strategy` for the strategy as a whole.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Sequence
 
 import numpy as np
 import shapely
@@ -24,7 +24,8 @@ from .robots import TWO_PI, angle_difference, orbit_radii, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s2f_steps
 from .waveform import synthesize
 
-__all__ = ["SeedLoop", "SeedSettings", "SeedStop", "dock_single", "intermediate_reason", "in_proximity", "nominal_intermediate", "region_path"]
+__all__ = ["SeedLoop", "SeedSettings", "SeedStop", "dock_single", "intermediate_reason", "in_proximity", "nominal_intermediate",
+           "region_path"]
 
 @dataclass(frozen=True)
 class SeedSettings:
@@ -198,6 +199,7 @@ class SeedLoop:
         n = scenario.n
         self.n = n
         self.rank = np.empty(n, dtype=int)
+        assert self.analysis.order_index is not None  # a STRING design always has its order
         for k, i in enumerate(self.analysis.order_index):
             self.rank[i] = k + 1
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
@@ -285,7 +287,7 @@ class SeedLoop:
             hits = bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii) + c).any(axis=0)
             if hits.any():
                 return labels[int(np.argmax(hits))]
-        for j in np.flatnonzero(self.docked):
+        for j in np.flatnonzero(self.docked).tolist():
             if (penetration_depth(samples, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -c).any():
                 return f"docked {self.name(j)}"
         if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
@@ -373,7 +375,9 @@ def gross_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, targets: 
         blocked = loop.hit(path.sample(10.0), i, orbiting)
         period = TWO_PI / float(loop.omega_hat[i])
         if blocked is not None and len(targets) > 1 and waited == 0.0:
-            path = loop.path_into_region(i, targets[1]) if len(targets) == 2 else paths.shortest_path(p, targets[1], float(loop.r_hat[i]))  # skip ahead if clear
+            # skip ahead if clear
+            path = (loop.path_into_region(i, targets[1]) if len(targets) == 2
+                    else paths.shortest_path(p, targets[1], float(loop.r_hat[i])))
             if loop.hit(path.sample(10.0), i, orbiting) is None:
                 targets.pop(0)
                 blocked = None
@@ -390,7 +394,8 @@ def gross_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, targets: 
         duration = math.fsum(d for _, d in steps)
         stalls = stalls + 1 if loop.stalled(i, before, duration) else 0
         if stalls >= 3:
-            raise SeedStop(f"{loop.label(i)} stopped during gross motion at ({loop.est[i, 0]:.0f}, {loop.est[i, 1]:.0f}) um (failure region H)")
+            raise SeedStop(f"{loop.label(i)} stopped during gross motion at ({loop.est[i, 0]:.0f}, {loop.est[i, 1]:.0f}) um (failure "
+                           "region H)")
         if whole:
             if len(targets) == 1:
                 return bool(inside())
@@ -426,7 +431,8 @@ def fine_motion(loop: SeedLoop, i: int, turn_k: int, straight_k: int, goal) -> b
             if near:  # at the structure already: push and let compliance act
                 check_docked(loop, i, straight_k, goal)
                 return True
-            why = "no arc of radius >= r" if fine is None else f"arrival {math.degrees(abs(float(angle_difference(fine.arrival_rad, goal[2])))):.0f} deg off"
+            why = ("no arc of radius >= r" if fine is None
+                   else f"arrival {math.degrees(abs(float(angle_difference(fine.arrival_rad, goal[2])))):.0f} deg off")
             loop.log("preimage", i, f"left the fine-motion preimage ({why}): back to gross motion")
             return False
         loop.replans += 1
@@ -446,14 +452,16 @@ def dock_single(loop: SeedLoop, k: int, goal, co, waypoints) -> None:
     orbiting = [loop.by_rank[j] for j in range(1, k)]
     a_pose, rho = _intermediate_for(loop, i, goal, co, orbiting)
     rad, hgt = loop.region(i)
-    loop.log("a_i", i, f"a_i = ({a_pose[0]:.0f}, {a_pose[1]:.0f}, {math.degrees(a_pose[2]) % 360:.0f} deg), S_2f rho_a {rho:.2f}; A_i: {rad:.0f} um / {math.degrees(hgt):.0f} deg ({loop.cylinder_note(i)})")
+    loop.log("a_i", i, f"a_i = ({a_pose[0]:.0f}, {a_pose[1]:.0f}, {math.degrees(a_pose[2]) % 360:.0f} deg), S_2f rho_a {rho:.2f}; A_i: "
+                       f"{rad:.0f} um / {math.degrees(hgt):.0f} deg ({loop.cylinder_note(i)})")
     cone = math.radians(cfg.sticking_cone_deg)
     route = [np.asarray(w, float) for w in waypoints if not bool(in_proximity(co, np.asarray(w)[:2]))]
 
     def inside() -> bool:
-        return intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone) is None
+        return intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt,
+                                   cone_rad=cone) is None
 
-    for attempt in range(cfg.fine_attempts):
+    for _attempt in range(cfg.fine_attempts):
         if not gross_motion(loop, i, k, k - 1, route + [a_pose], inside, orbiting):
             why = intermediate_reason(loop.est[i], a_pose, goal, float(loop.r_hat[i]), co, region_um=rad, region_rad=hgt, cone_rad=cone)
             loop.log("retry", i, f"ended outside A_i ({why}): re-plans to a_i")

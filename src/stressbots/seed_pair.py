@@ -33,7 +33,7 @@ import numpy as np
 from . import paths
 from .collision import penetration_depth
 from .kinematics import move
-from .robots import TWO_PI, angle_difference, front_midpoints, turning_centres
+from .robots import TWO_PI, Pose, angle_difference, front_midpoints, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s3f_duty, s3f_radii, s3f_steps
 from .seed_loop import SeedLoop, SeedStop, in_proximity
 
@@ -95,7 +95,8 @@ def pair_nominal(loop: SeedLoop, structure, gN, gM, lower) -> PairNominal | None
             continue
         for k in range(int(good[0]), min(int(good[0]) + 24, T.size), 4):
             if _sweeps_clear(loop, N, M, gN, gM, rN, rM, float(T[k]), lower):
-                return PairNominal(aN[k], aM[k], tuple(float(x) for x in rhos), float(T[k]))
+                r1, r2, r3 = (float(x) for x in rhos)
+                return PairNominal(aN[k], aM[k], (r1, r2, r3), float(T[k]))
     return None
 
 
@@ -181,8 +182,8 @@ def _orbit_free(loop: SeedLoop, i: int, centre, lower, centres=(), radii=()) -> 
     c = loop.cfg.clearance_um
     cs = [*turning_centres(loop.est[lower], loop.r_hat[lower])] if lower else []
     rs = list(loop.rstar[lower]) if lower else []
-    cs, rs = np.array(cs + list(centres)).reshape(-1, 2), np.array(rs + list(radii))
-    clear = (np.hypot(*(cs - centre).T) >= rs + loop.rstar[i] + c).all() if cs.size else True
+    cs_all, rs_all = np.array(cs + list(centres)).reshape(-1, 2), np.array(rs + list(radii))
+    clear = (np.hypot(*(cs_all - centre).T) >= rs_all + loop.rstar[i] + c).all() if cs_all.size else True
     return bool(clear) and _inside_arena(loop, centre, float(loop.rstar[i]) + c)
 
 
@@ -292,7 +293,7 @@ def orbit_then_go(loop: SeedLoop, N: int, target, durations, lower, disc) -> tup
                 if abs(total(w) - v * d) > 0.1 * v:  # more than 0.1 s off: a discontinuity, not a root
                     continue
                 rest = paths.shortest_path(move(start, w, 1.0 / r), target, r)
-                path = paths.Path(tuple(start), r, (("R", w),) + rest.segments)
+                path = paths.Path(Pose(*start), r, (("R", w),) + rest.segments)
                 if loop.hit(path.sample(10.0), N, lower, discs=disc) is None:
                     return w / v, path
     return None
@@ -312,7 +313,7 @@ def timed_path(loop: SeedLoop, N: int, target, durations, lower, disc) -> paths.
                 rest = paths.path_of_length(move(start, wait_um, 1.0 / r), target, r, v * duration - wait_um)
             except ValueError:
                 continue
-            cand = paths.Path(tuple(start), r, (("R", wait_um),) + rest.segments)
+            cand = paths.Path(Pose(*start), r, (("R", wait_um),) + rest.segments)
             if loop.hit(cand.sample(10.0), N, lower, discs=disc) is None:
                 return cand
     return None
@@ -340,7 +341,8 @@ def stage1(loop: SeedLoop, dep: Departure, lower) -> None:
             if plan is None:
                 committed = timed_path(loop, N, dep.a_n_prime, durations, lower, disc)
                 if committed is None:
-                    raise SeedStop(f"G_1 stage 1: {loop.label(N)} has no clear path to A_n' timed to {loop.label(M)}'s departure (within {MAX_PERIODS} orbit periods)")
+                    raise SeedStop(f"G_1 stage 1: {loop.label(N)} has no clear path to A_n' timed to {loop.label(M)}'s departure (within "
+                                   f"{MAX_PERIODS} orbit periods)")
                 loop.log("timed", N, f"follows a lengthened path of {committed.length:.0f} um (open loop until its last {2 * loop.tx:g} s)")
                 _follow(loop, N, committed, n, n - 1)
                 departed = True
@@ -401,10 +403,14 @@ def stage2(loop: SeedLoop, nominal: PairNominal) -> bool:
         if in_N and in_M:
             return True
         if in_M:
-            loop.log("replan", M, f"{loop.label(M)} entered A_(n-1) before {loop.label(N)} entered A_n (its path was shorter than nominal): re-plans sigma_1")
+            loop.log("replan", M,
+                     f"{loop.label(M)} entered A_(n-1) before {loop.label(N)} entered A_n (its path was shorter than nominal): re-plans "
+                     "sigma_1")
             return False
         if in_N or passed:
-            loop.log("replan", N, f"{loop.label(N)} reached A_n before {loop.label(M)} entered A_(n-1) (its path was longer than nominal): re-plans sigma_1")
+            loop.log("replan", N,
+                     f"{loop.label(N)} reached A_n before {loop.label(M)} entered A_(n-1) (its path was longer than nominal): re-plans "
+                     "sigma_1")
             return False
     raise SeedStop(f"G_1 stage 2: {loop.label(M)} did not reach A_(n-1) in {loop.cfg.max_cycles} re-plans")
 
@@ -429,7 +435,7 @@ def partial_stage2(loop: SeedLoop, nominal: PairNominal, duration_s: float) -> N
             break
 
 
-def check_pair(loop: SeedLoop, gN, gM) -> None:
+def check_pair(loop: SeedLoop, _gN, _gM) -> None:
     """Push both straight until they stop: G_1 formed (both docked) or the strategy ends in H."""
     n = loop.n
     N, M = loop.by_rank[n], loop.by_rank[n - 1]
@@ -442,9 +448,12 @@ def check_pair(loop: SeedLoop, gN, gM) -> None:
             off = abs(float(angle_difference(loop.est[N, 2], loop.est[M, 2] + math.pi)))
             if gap <= PAIR_TOL_UM and off <= math.radians(PAIR_TOL_DEG):
                 loop.docked[[N, M]] = True
-                loop.log("G_1", None, f"{loop.label(N)} and {loop.label(M)} formed G_1 (front edges {gap:.1f} um apart, {math.degrees(off):.1f} deg from head-on)")
+                loop.log("G_1", None,
+                         f"{loop.label(N)} and {loop.label(M)} formed G_1 (front edges {gap:.1f} um apart, {math.degrees(off):.1f} deg "
+                         "from head-on)")
                 return
-            raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} stopped with front edges {gap:.0f} um apart, {math.degrees(off):.0f} deg from head-on (failure region H)")
+            raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} stopped with front edges {gap:.0f} um apart, "
+                           f"{math.degrees(off):.0f} deg from head-on (failure region H)")
     raise SeedStop(f"G_1 did not form: {loop.label(N)} and {loop.label(M)} kept moving after their S_3f arcs (they missed each other)")
 
 
@@ -461,10 +470,10 @@ def fine_pair(loop: SeedLoop, gN, gM) -> bool:
             why = "no arc of radius >= r through a docking point"
         elif max(abs(float(angle_difference(fN.arrival_rad, gN[2]))), abs(float(angle_difference(fM.arrival_rad, gM[2])))) > cone:
             why = "an arc arrives outside the self-alignment limit"
-        rhos = None if why else s3f_duty(float(loop.r_hat[N]), fN.radius_um, float(loop.r_hat[M]), fM.radius_um)
+        rhos = None if why or fN is None or fM is None else s3f_duty(float(loop.r_hat[N]), fN.radius_um, float(loop.r_hat[M]), fM.radius_um)
         if why is None and rhos is None:
             why = f"outside the S_3f cones ({loop.label(N)} would have to turn more than {loop.label(M)})"
-        if why is not None:
+        if why is not None or fN is None or fM is None:
             loop.log("preimage", None, f"the pair left the S_3f preimage: {why}")
             return False
         loop.replans += 1
@@ -485,23 +494,32 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
     gN, gM = nominal_goals[N], nominal_goals[M]
     nominal = pair_nominal(loop, structure, gN, gM, lower)
     if nominal is None:
-        raise SeedStop(f"G_1: no S_3f arcs into the slots of {loop.label(N)} and {loop.label(M)} start outside C_O and clear of the other robots (A_n* empty)")
-    loop.log("a_n", None, f"S_3f{tuple(round(r, 2) for r in nominal.rhos)}, {nominal.duration_s:.1f} s; a_n = ({nominal.a_n[0]:.0f}, {nominal.a_n[1]:.0f}), a_(n-1) = ({nominal.a_m[0]:.0f}, {nominal.a_m[1]:.0f}); {loop.cylinder_note(N)}")
+        raise SeedStop(f"G_1: no S_3f arcs into the slots of {loop.label(N)} and {loop.label(M)} start outside C_O and clear of the other "
+                       "robots (A_n* empty)")
+    loop.log("a_n", None,
+             f"S_3f{tuple(round(r, 2) for r in nominal.rhos)}, {nominal.duration_s:.1f} s; a_n = ({nominal.a_n[0]:.0f}, "
+             f"{nominal.a_n[1]:.0f}), a_(n-1) = ({nominal.a_m[0]:.0f}, {nominal.a_m[1]:.0f}); {loop.cylinder_note(N)}")
     replans = partials = 0
     while True:
         dep = departure(loop, nominal, lower)
         if dep is None:
             if partials >= cfg.partial_stages:
-                raise SeedStop(f"G_1 did not form: no clear straight stage-2 run for {loop.label(N)} after {partials} partial stages (the seed's two-stage scheme; SPEC 5's known limit)")
+                raise SeedStop(f"G_1 did not form: no clear straight stage-2 run for {loop.label(N)} after {partials} partial stages (the "
+                               "seed's two-stage scheme; SPEC 5's known limit)")
             dep = partial_departure(loop, nominal, lower)
             if dep is None:
-                raise SeedStop(f"G_1: no departure of {loop.label(M)} from its orbit gives {loop.label(N)} a clear straight stage-2 run (the seed's two-stage scheme; SPEC 5's known limit)")
+                raise SeedStop(f"G_1: no departure of {loop.label(M)} from its orbit gives {loop.label(N)} a clear straight stage-2 run "
+                               "(the seed's two-stage scheme; SPEC 5's known limit)")
             partials += 1
-            loop.log("sigma_1", N, f"no clear straight run to A_n: partial stage 2 ({dep.t2_s:.1f} s of {loop.label(M)}'s path) from a run at ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f})")
+            loop.log("sigma_1", N,
+                     f"no clear straight run to A_n: partial stage 2 ({dep.t2_s:.1f} s of {loop.label(M)}'s path) from a run at "
+                     f"({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f})")
             stage1_partial(loop, dep)
             partial_stage2(loop, nominal, dep.t2_s)
             continue
-        loop.log("sigma_1", N, f"stage 1 to A_n' ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f}); stage 2 {dep.t2_s:.1f} s from heading {math.degrees(dep.heading):.0f} deg")
+        loop.log("sigma_1", N,
+                 f"stage 1 to A_n' ({dep.a_n_prime[0]:.0f}, {dep.a_n_prime[1]:.0f}); stage 2 {dep.t2_s:.1f} s from heading "
+                 f"{math.degrees(dep.heading):.0f} deg")
         stage1(loop, dep, lower)
         if stage2(loop, nominal):
             loop.log("A_n", None, "both in A_n x A_(n-1): fine motion (S_3f)")
@@ -509,4 +527,5 @@ def form_pair(loop: SeedLoop, structure, nominal_goals: np.ndarray) -> None:
                 return
         replans += 1
         if replans > cfg.pair_replans:
-            raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine motion")
+            raise SeedStop(f"G_1 did not form: {cfg.pair_replans} re-plans of sigma_1 without both robots in A_n x A_(n-1) and a fine "
+                           "motion")

@@ -48,7 +48,16 @@ import numpy as np
 from .assessment import shape_error
 from .control import AssemblyResult, ControllerOptions, nominal_plan
 from .robots import TWO_PI, angle_difference
-from .seed_loop import SeedLoop, SeedSettings, SeedStop, dock_single, in_proximity, intermediate_reason, nominal_intermediate, region_path
+from .seed_loop import (
+    SeedLoop,
+    SeedSettings,
+    SeedStop,
+    dock_single,
+    in_proximity,
+    intermediate_reason,
+    nominal_intermediate,
+    region_path,
+)
 from .seed_pair import form_pair
 
 __all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity", "nominal_intermediate", "region_path"]
@@ -57,7 +66,7 @@ __all__ = ["SeedSettings", "assemble_seed", "intermediate_reason", "in_proximity
 # -- the whole assembly ----------------------------------------------------------------------------
 
 
-def _rigid_goals(goals: np.ndarray, nominal: np.ndarray, N: int, M: int, measured: np.ndarray):
+def _rigid_goals(nominal: np.ndarray, N: int, M: int, measured: np.ndarray):
     """``(phi, c_nom, c_meas)``: the rigid motion that takes the pair's nominal slots onto the measured pair."""
     nom_axis = nominal[M, :2] - nominal[N, :2]
     meas_axis = measured[M, :2] - measured[N, :2]
@@ -72,12 +81,13 @@ def _run(loop: SeedLoop, plan) -> np.ndarray:
     nominal = plan.plan.goal_array()
     N, M = loop.by_rank[n], loop.by_rank[n - 1]
     form_pair(loop, structure, nominal)
-    phi, c_nom, c_meas = _rigid_goals(nominal, nominal, N, M, loop.est)
+    phi, c_nom, c_meas = _rigid_goals(nominal, N, M, loop.est)
     moved = structure.moved(phi, c_meas - c_nom, c_nom)
     goals = moved.goal_poses(loop.scn.names)
     goals[N], goals[M] = loop.est[N], loop.est[M]
     if abs(math.degrees(phi)) > 0.5 or np.hypot(*(c_meas - c_nom)) > 5.0:
-        loop.log("retarget", None, f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
+        loop.log("retarget", None,
+                 f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
     for k in range(n - 2, 0, -1):
         i = loop.by_rank[k]
         route = next((p for p in plan.phases if p.kind == "route" and p.mover == i), None)
@@ -92,7 +102,8 @@ def _moved_pose(pose, phi: float, c_nom, c_meas) -> np.ndarray:
     return np.array([c_meas[0] + d[0] * c + d[1] * s, c_meas[1] - d[0] * s + d[1] * c, float(np.mod(pose[2] + phi, TWO_PI))])
 
 
-def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options: ControllerOptions | None = None, settings: SeedSettings | None = None) -> AssemblyResult:
+def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None,
+                  options: ControllerOptions | None = None, settings: SeedSettings | None = None) -> AssemblyResult:
     """Assemble ``scenario``'s structure through ``plant`` with the seed's two-step EDR strategy.
 
     Same interface and result as :func:`stressbots.control.assemble` (``options`` gives t_x, the time

@@ -100,8 +100,9 @@ from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -433,7 +434,7 @@ class SimulatedPlant:
             p = np.concatenate([p, self._pose[None]])
         return t, p
 
-    def copy(self) -> "SimulatedPlant":
+    def copy(self) -> SimulatedPlant:
         """An independent copy that continues bit-identically (random streams included)."""
         new = object.__new__(type(self))
         new.__dict__ = {k: (v if k == "scenario" else copy.deepcopy(v)) for k, v in self.__dict__.items()}
@@ -507,11 +508,11 @@ class SimulatedPlant:
     def _quiet(self, bound: np.ndarray, duration_s: float) -> bool:
         """Whether no body can come within :data:`NEAR_UM` of another or of the arena edge in
         ``duration_s`` (bounding circles grown by each body's largest travel)."""
-        P, I, J = self._pose, self._I, self._J
+        P, ii, jj = self._pose, self._I, self._J
         travel = bound * duration_s
-        if I.size:
-            centre = np.hypot(P[I, 0] - P[J, 0], P[I, 1] - P[J, 1])
-            if (centre - self._hd[I] - self._hd[J] - travel[I] - travel[J] <= NEAR_UM).any():
+        if ii.size:
+            centre = np.hypot(P[ii, 0] - P[jj, 0], P[ii, 1] - P[jj, 1])
+            if (centre - self._hd[ii] - self._hd[jj] - travel[ii] - travel[jj] <= NEAR_UM).any():
                 return False
         if self.scenario.arena_um is not None:
             if (_arena_gap(P, self._hl, self._hw, self.scenario.arena_um) - travel <= NEAR_UM).any():
@@ -545,7 +546,7 @@ class SimulatedPlant:
         curvature plus the drift's, which is piecewise constant between odometer knots: exact arcs,
         composed (all robots at once, pieces padded to a common count)."""
         tmax = float(taus.max())
-        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed)]
+        pieces = [self._drift.segments(int(i), self._odo[i], sp * tmax) for i, sp in zip(idx, speed, strict=False)]
         k = max(len(p[0]) for p in pieces)
         lengths = np.zeros((len(pieces), k))
         kd = np.zeros((len(pieces), k))
@@ -586,20 +587,20 @@ class SimulatedPlant:
         if horizon <= 0.0 or not moving.any():
             return None
         U = np.where(moving, np.where(motion.mode == _SLIDE, np.hypot(*motion.slide_v.T), ctx[3]), 0.0)
-        I, J = self._I, self._J
-        keep = moving[I] | moving[J]
+        ii, jj = self._I, self._J
+        keep = moving[ii] | moving[jj]
         if keep.any():
-            I, J = I[keep], J[keep]
-            reach = (U[I] + U[J]) * horizon + 1.0
-            centre = np.hypot(p0[I, 0] - p0[J, 0], p0[I, 1] - p0[J, 1])
-            near = centre - self._hd[I] - self._hd[J] < reach
-            I, J = I[near], J[near]
-            if motion.excluded and I.size:
-                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(I, J)], dtype=bool)
-                I, J = I[ok], J[ok]
+            ii, jj = ii[keep], jj[keep]
+            reach = (U[ii] + U[jj]) * horizon + 1.0
+            centre = np.hypot(p0[ii, 0] - p0[jj, 0], p0[ii, 1] - p0[jj, 1])
+            near = centre - self._hd[ii] - self._hd[jj] < reach
+            ii, jj = ii[near], jj[near]
+            if motion.excluded and ii.size:
+                ok = np.array([(int(a), int(b)) not in motion.excluded for a, b in zip(ii, jj, strict=True)], dtype=bool)
+                ii, jj = ii[ok], jj[ok]
         else:
-            I, J = I[:0], J[:0]
-        ci, cj = I, J
+            ii, jj = ii[:0], jj[:0]
+        ci, cj = ii, jj
         if self.scenario.arena_um is not None:
             m = np.flatnonzero(moving)
             g0a = _arena_gap(p0[m], self._hl[m], self._hw[m], self.scenario.arena_um)
@@ -651,7 +652,7 @@ class SimulatedPlant:
             else:
                 lo = mid[-1]
         Gh = self._gaps(self._poses_at(p0, motion, ctx, np.array([hi])), ci, cj)[0]
-        pairs = [(int(x), int(y)) for x, y, g, t in zip(ci, cj, Gh, thr) if g < t]
+        pairs = [(int(x), int(y)) for x, y, g, t in zip(ci, cj, Gh, thr, strict=False) if g < t]
         return lo, pairs
 
     # -- contact rules -------------------------------------------------------------------------------
@@ -669,9 +670,9 @@ class SimulatedPlant:
         slide_v = np.zeros((n, 2))
         slide_end = np.full(n, math.inf)
         excluded: set = set()
-        I, J = self._I, self._J
+        ii, jj = self._I, self._J
         arena = self.scenario.arena_um
-        d0 = _depth(P[I], P[J], hl[I], hw[I], hl[J], hw[J]) if I.size else np.zeros(0)
+        d0 = _depth(P[ii], P[jj], hl[ii], hw[ii], hl[jj], hw[jj]) if ii.size else np.zeros(0)
         g0 = _arena_gap(P, hl, hw, arena) if arena is not None else np.full(n, np.inf)
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self._contacts = {}
@@ -679,30 +680,13 @@ class SimulatedPlant:
         kappa = kappa + self._drift.curvature_at(self._odo)
         probe = move(P, PROBE_UM, kappa)  # each robot alone, a hair further along its own motion
         # Touching pairs and whether each side's motion pushes into the other.
-        push: dict[int, list[int]] = {}
-        approach: dict[tuple[int, int], float] = {}
-        touching: dict[int, list[int]] = {}
-        if I.size:
-            t = np.flatnonzero(d0 > -TOUCH_UM)
-            if t.size:
-                a, b = I[t], J[t]
-                da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
-                db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
-                for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist()):
-                    touching.setdefault(x, []).append(y)
-                    touching.setdefault(y, []).append(x)
-                    approach[(x, y)] = rx / PROBE_UM
-                    approach[(y, x)] = ry / PROBE_UM
-                    if rx > PUSH_EPS_UM:
-                        push.setdefault(x, []).append(y)
-                    if ry > PUSH_EPS_UM:
-                        push.setdefault(y, []).append(x)
+        push, approach, touching = self._touch_graph(probe, d0)
         if arena is not None:
             gp = _arena_gap(probe, hl, hw, arena)
             for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
                 push.setdefault(i, []).append(ARENA)
         close = np.flatnonzero(d0 > -NEAR_UM)
-        near_pairs = {(int(a), int(b)) for a, b in zip(I[close], J[close])}
+        near_pairs = {(int(a), int(b)) for a, b in zip(ii[close], jj[close], strict=True)}
         arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
 
         def near(a: int, b: int) -> bool:
@@ -718,67 +702,19 @@ class SimulatedPlant:
         for i, j in sorted({(min(a, b), max(a, b)) for a in pushers for b in push[a] if b != ARENA}):
             if i in done or j in done or not self._head_on(i, j, straight, speed, approach):
                 continue
-            key = self._rule_key(i, j, straight)
-            hit = self._rule_cache.get((i, j))
-            if hit is not None and hit[0] == key:
-                kind, detail = hit[1]
-            else:
-                kind, detail = self._self_align(i, j)
-                self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-            outcomes[(i, j)] = (kind, detail)
-            outcomes[(j, i)] = (kind, detail)
+            outcomes[(i, j)] = outcomes[(j, i)] = self._self_align_cached(i, j, straight)
             mode[i] = mode[j] = _HELD
             done |= {i, j}
 
         # 2. Each remaining robot that pushes into something.
         for i in sorted(pushers - done):
-            cs = push[i]
             mode[i] = _HELD
-            if not straight[i]:
-                # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
-                # into its slot on an arc is docked there, and stays docked while it keeps pushing.
-                flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
-                for j in cs:
-                    outcomes[(i, j)] = (
-                        ("dock", "arrived flush against the structure") if j in flush
-                        else ("blocked", "a turning robot cannot pivot off an obstacle")
-                    )
-                if flush:
-                    self._docked[i] = True
-                    self._stuck[i] = False
-                continue
-            if ARENA in cs:
-                self._arena_hit[i] = True
-                for j in cs:
-                    outcomes[(i, j)] = ("arena", "stopped at the arena edge") if j == ARENA else ("contact", "stopped")
-                continue
-            fronts = [j for j in cs if j in static]
-            if len(cs) == 1 and fronts:
-                j = cs[0]
-                key = self._rule_key(i, j, straight)
-                hit = self._rule_cache.get((i, j))
-                if hit is not None and hit[0] == key:
-                    (kind, detail), slide = hit[1], None
-                else:
-                    kind, detail, slide = self._dock_rule(i, j, ctx, touching.get(i, []))
-                    if slide is None:  # held outcomes repeat while nothing moves; slides are recomputed
-                        self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
-                outcomes[(i, j)] = (kind, detail)
-                if slide is not None:
-                    mode[i] = _SLIDE
-                    slide_v[i], slide_end[i] = slide
-                    slide_partner[i] = j
-                    excluded.add((min(i, j), max(i, j)))
-                continue
-            if len(cs) > 1 and len(fronts) == len(cs):
-                flush = [j for j in cs if self._flush_cached(i, j, straight)]
-                for j in cs:
-                    outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
-                self._docked[i] = bool(flush)
-                self._stuck[i] = not flush
-                continue
-            for j in cs:
-                outcomes[(i, j)] = ("contact", "stopped against a moving robot" if j not in static else "stopped")
+            slide = self._push_outcome(i, push[i], static, ctx, touching.get(i, []), outcomes)
+            if slide is not None:
+                j, (slide_v[i], slide_end[i]) = slide
+                mode[i] = _SLIDE
+                slide_partner[i] = j
+                excluded.add((min(i, j), max(i, j)))
 
         # A slide is along a body that stays put; if the partner moves after all, stop instead.
         for i in np.flatnonzero(mode == _SLIDE).tolist():
@@ -788,21 +724,108 @@ class SimulatedPlant:
                 slide_end[i] = math.inf
                 excluded.discard((min(i, j), max(i, j)))
                 outcomes[(i, j)] = ("contact", "stopped against a moving robot")
-        # Log changes of outcome. Outcomes are remembered while the pair stays within NEAR_UM, so two
-        # robots jostling against each other do not log every touch.
-        for key in sorted(outcomes):
-            kind, detail = outcomes[key]
-            if self._contacts.get(key) != kind:
-                self._log(t_abs, key[0], kind, key[1], detail)
-        memory = {k: v[0] for k, v in outcomes.items()}
-        for key, kind in self._contacts.items():
-            if key not in memory and near(*key):
-                memory[key] = kind
-        self._contacts = memory
+        self._remember_contacts(outcomes, t_abs, near)
         recheck = any(
             mode[i] == _HELD and j >= 0 and mode[j] != _HELD for (i, j) in outcomes
         )
         return _Motion(mode, slide_v, slide_end, excluded, recheck)
+
+    def _touch_graph(self, probe: np.ndarray, d0: np.ndarray):
+        """``(push, approach, touching)`` of the touching pairs: whom each robot's own motion pushes into,
+        the approach rate of each ordered pair (um per um driven) and whom each robot touches."""
+        P, hl, hw = self._pose, self._hl, self._hw
+        ii, jj = self._I, self._J
+        push: dict[int, list[int]] = {}
+        approach: dict[tuple[int, int], float] = {}
+        touching: dict[int, list[int]] = {}
+        if not ii.size:
+            return push, approach, touching
+        t = np.flatnonzero(d0 > -TOUCH_UM)
+        if not t.size:
+            return push, approach, touching
+        a, b = ii[t], jj[t]
+        da = _depth(probe[a], P[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
+        db = _depth(P[a], probe[b], hl[a], hw[a], hl[b], hw[b]) - d0[t]
+        for x, y, rx, ry in zip(a.tolist(), b.tolist(), da.tolist(), db.tolist(), strict=False):
+            touching.setdefault(x, []).append(y)
+            touching.setdefault(y, []).append(x)
+            approach[(x, y)] = rx / PROBE_UM
+            approach[(y, x)] = ry / PROBE_UM
+            if rx > PUSH_EPS_UM:
+                push.setdefault(x, []).append(y)
+            if ry > PUSH_EPS_UM:
+                push.setdefault(y, []).append(x)
+        return push, approach, touching
+
+    def _self_align_cached(self, i: int, j: int, straight) -> tuple[str, str]:
+        """``(kind, detail)`` of self-aligning compliance between i and j, remembered while nothing moves."""
+        key = self._rule_key(i, j, straight)
+        hit = self._rule_cache.get((i, j))
+        if hit is not None and hit[0] == key:
+            return hit[1]
+        kind, detail = self._self_align(i, j)
+        self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+        return kind, detail
+
+    def _push_outcome(self, i: int, cs: list[int], static: set[int], ctx, touching_i: list[int],
+                      outcomes: dict[tuple[int, int], tuple[str, str]]):
+        """The outcome of robot i pushing into the bodies ``cs`` (written to ``outcomes``); ``(j, (slide
+        velocity, slide end))`` when i slides along body j, else None (i is held)."""
+        straight = ctx[2]
+        if not straight[i]:
+            # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
+            # into its slot on an arc is docked there, and stays docked while it keeps pushing.
+            flush = [j for j in cs if j != ARENA and j in static and self._flush_cached(i, j, straight)]
+            for j in cs:
+                outcomes[(i, j)] = (
+                    ("dock", "arrived flush against the structure") if j in flush
+                    else ("blocked", "a turning robot cannot pivot off an obstacle")
+                )
+            if flush:
+                self._docked[i] = True
+                self._stuck[i] = False
+            return None
+        if ARENA in cs:
+            self._arena_hit[i] = True
+            for j in cs:
+                outcomes[(i, j)] = ("arena", "stopped at the arena edge") if j == ARENA else ("contact", "stopped")
+            return None
+        fronts = [j for j in cs if j in static]
+        if len(cs) == 1 and fronts:
+            j = cs[0]
+            key = self._rule_key(i, j, straight)
+            hit = self._rule_cache.get((i, j))
+            if hit is not None and hit[0] == key:
+                (kind, detail), slide = hit[1], None
+            else:
+                kind, detail, slide = self._dock_rule(i, j, ctx, touching_i)
+                if slide is None:  # held outcomes repeat while nothing moves; slides are recomputed
+                    self._rule_cache[(i, j)] = (self._rule_key(i, j, straight), (kind, detail))
+            outcomes[(i, j)] = (kind, detail)
+            return None if slide is None else (j, slide)
+        if len(cs) > 1 and len(fronts) == len(cs):
+            flush = [j for j in cs if self._flush_cached(i, j, straight)]
+            for j in cs:
+                outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
+            self._docked[i] = bool(flush)
+            self._stuck[i] = not flush
+            return None
+        for j in cs:
+            outcomes[(i, j)] = ("contact", "stopped against a moving robot" if j not in static else "stopped")
+        return None
+
+    def _remember_contacts(self, outcomes: dict[tuple[int, int], tuple[str, str]], t_abs: float, near) -> None:
+        """Log changes of outcome. Outcomes are remembered while the pair stays within NEAR_UM, so two
+        robots jostling against each other do not log every touch."""
+        for pair in sorted(outcomes):
+            kind, detail = outcomes[pair]
+            if self._contacts.get(pair) != kind:
+                self._log(t_abs, pair[0], kind, pair[1], detail)
+        memory = {k: v[0] for k, v in outcomes.items()}
+        for pair, kind in self._contacts.items():
+            if pair not in memory and near(*pair):
+                memory[pair] = kind
+        self._contacts = memory
 
     def _head_on(self, i: int, j: int, straight, speed, approach) -> bool:
         """Whether touching robots i and j meet head-on (the situation of self-aligning compliance).
@@ -848,7 +871,7 @@ class SimulatedPlant:
             own = np.array([True, False])
         return pts, own
 
-    def _front_face(self, i: int, j: int, pts, own):
+    def _front_face(self, i: int, j: int, pts):
         """For robot i pressing its front on body j: ``(contact point, outward normal of j's face, alpha)``,
         or ``None`` when the contact is not on i's front edge."""
         P = self._pose
@@ -882,7 +905,7 @@ class SimulatedPlant:
 
     def _flush(self, i: int, j: int) -> bool:
         pts, own = self._contact_points(i, j)
-        ff = self._front_face(i, j, pts, own)
+        ff = self._front_face(i, j, pts)
         return ff is not None and abs(ff[2]) <= FLUSH_TOL_RAD
 
     def _dock_rule(self, i: int, j: int, ctx, touching: Iterable[int]):
@@ -893,7 +916,7 @@ class SimulatedPlant:
         P = self._pose
         speed = ctx[0]
         pts, own = self._contact_points(i, j)
-        ff = self._front_face(i, j, pts, own)
+        ff = self._front_face(i, j, pts)
         name_j = self._names[j]
         if ff is None:
             u, v = _local(pts, P[i])
@@ -927,7 +950,8 @@ class SimulatedPlant:
             dist = float(np.max((on_face - c) @ t)) + SLIDE_OVERSHOOT_UM
             if dist > 0.0 and not self._slide_blocked(i, vel, [k for k in touching if k != j]):
                 self._stuck[i] = False
-                return "slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {name_j} (H)", (vel, dist / float(np.linalg.norm(vel)))
+                return ("slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {name_j} (H)",
+                        (vel, dist / float(np.linalg.norm(vel))))
             self._stuck[i] = True
             return "stuck", f"incidence {deg:.1f} deg outside the sticking cone and cannot slide (H)", None
         self._stuck[i] = True
@@ -1085,7 +1109,7 @@ def _first_difference(a: dict[str, Any], b: dict[str, Any], names: Sequence[str]
         x, y = a[key], b[key]
         if key == "events":
             if x != y:
-                k = next((m for m, (p, q) in enumerate(zip(x, y)) if p != q), min(len(x), len(y)))
+                k = next((m for m, (p, q) in enumerate(zip(x, y, strict=False)) if p != q), min(len(x), len(y)))
                 px = x[k] if k < len(x) else "nothing"
                 py = y[k] if k < len(y) else "nothing"
                 return f"event {k} differs: {px} vs {py}"
@@ -1135,7 +1159,8 @@ def check_determinism(
     for k, wf in enumerate(wfs):
         if k == half:
             twin = a.copy()
-        sa, sb = [], []
+        sa: list[Any] = []
+        sb: list[Any] = []
         for plant, out in ((a, sa), (b, sb)):
             plant.apply(wf)
             out.append(_state(plant, plant.observe() if observe else None))

@@ -36,9 +36,10 @@ import io
 import json
 import math
 import sqlite3
-from datetime import datetime, timezone
+from collections.abc import Iterable, Mapping, Sequence
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 from .errors import StressbotsError
 
@@ -84,7 +85,7 @@ _BUSY_TIMEOUT_MS = 30_000  # a reader (pandas, sqlite3 shell) may hold the file 
 
 
 def _utc_now() -> str:
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
 
 
 def _db_value(v: Any) -> Any:
@@ -170,7 +171,7 @@ class TrialStore:
     Use :meth:`open`; close with :meth:`close` or a ``with`` block.
     """
 
-    def __init__(self, path: Path, con: sqlite3.Connection, settings: dict):
+    def __init__(self, path: Path, con: sqlite3.Connection, settings: Mapping[str, Any]):
         self.path = path
         self._con = con
         self.settings = settings
@@ -179,7 +180,7 @@ class TrialStore:
 
     @classmethod
     def open(cls, path: Path | str, settings: Mapping[str, Any], *, resume: bool = False, overwrite: bool = False,
-             info: Mapping[str, Any] | None = None, cells: Iterable[tuple[str, Mapping[str, Any]]] = ()) -> "TrialStore":
+             info: Mapping[str, Any] | None = None, cells: Iterable[tuple[str, Mapping[str, Any]]] = ()) -> TrialStore:
         """Create a store, or reopen one for ``--resume`` after checking it was made with ``settings``.
 
         ``path`` may be ``":memory:"`` (a campaign that keeps nothing). An existing store is refused
@@ -238,7 +239,7 @@ class TrialStore:
             return "unknown number of"
 
     @classmethod
-    def _reopen(cls, p: Path, settings: dict) -> "TrialStore":
+    def _reopen(cls, p: Path, settings: Mapping[str, Any]) -> TrialStore:
         con = _open_readonly(p)
         try:
             row = con.execute("SELECT value FROM campaign WHERE key = 'settings'").fetchone()
@@ -285,7 +286,7 @@ class TrialStore:
     def close(self) -> None:
         self._con.close()
 
-    def __enter__(self) -> "TrialStore":
+    def __enter__(self) -> TrialStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -294,11 +295,12 @@ class TrialStore:
 
 def _rows(con: sqlite3.Connection) -> list[dict[str, Any]]:
     cur = con.execute(f"SELECT {', '.join(_NAMES)} FROM trials ORDER BY trial")
-    return [dict(zip(_NAMES, r)) for r in cur]
+    return [dict(zip(_NAMES, r, strict=True)) for r in cur]
 
 
 def _cells(con: sqlite3.Connection) -> list[dict[str, Any]]:
-    return [{"cell": c, "label": lab, "params": json.loads(p)} for c, lab, p in con.execute("SELECT cell, label, params FROM cells ORDER BY cell")]
+    return [{"cell": c, "label": lab, "params": json.loads(p)} for c, lab,
+            p in con.execute("SELECT cell, label, params FROM cells ORDER BY cell")]
 
 
 def read_rows(path: Path | str) -> list[dict[str, Any]]:
@@ -332,7 +334,7 @@ def csv_text(rows: Iterable[Mapping[str, Any]], cells: Iterable[Mapping[str, Any
     return buf.getvalue()
 
 
-def write_parquet(rows: list[Mapping[str, Any]], cells: Iterable[Mapping[str, Any]], path: Path | str) -> Path:
+def write_parquet(rows: Sequence[Mapping[str, Any]], cells: Iterable[Mapping[str, Any]], path: Path | str) -> Path:
     """Write the trials as a Parquet file (needs pyarrow, imported here only). Atomic, like every output."""
     try:
         import pyarrow as pa

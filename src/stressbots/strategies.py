@@ -15,7 +15,7 @@ processes (Monte Carlo pools, Dask) as it is.
 from __future__ import annotations
 
 import importlib
-from typing import Callable
+from collections.abc import Callable
 
 from .control import assemble
 from .errors import StressbotsError

@@ -375,7 +375,7 @@ class Structure:
         r_star = self.slot(name).orbit_radius_um if orbit_radius_um is None else float(orbit_radius_um)
         return self.docking_object(name).buffer(2.0 * r_star)
 
-    def moved(self, rotation_rad: float = 0.0, translation_um=(0.0, 0.0), about_um=(0.0, 0.0)) -> "Structure":
+    def moved(self, rotation_rad: float = 0.0, translation_um=(0.0, 0.0), about_um=(0.0, 0.0)) -> Structure:
         """The same structure after a rigid motion: rotate clockwise by ``rotation_rad`` about
         ``about_um`` (heading convention: theta grows clockwise), then translate. Re-validated."""
         poses = _rigid(self.goal_poses(self.docking_order), rotation_rad, translation_um, about_um)
@@ -455,6 +455,21 @@ def _shrunk(p: Polygon) -> Polygon:
     return p.buffer(-0.5 * POS_TOL_UM, join_style="mitre")
 
 
+def _uncovered_spans(lo: np.ndarray, hi: np.ndarray, length: float) -> list[tuple[float, float]]:
+    """The stretches ``(u0, u1)`` (um along the edge) of an edge of ``length`` um that no other body covers,
+    given each body's covered interval ``[lo, hi]``; the tolerance the grown cover took at a contact is put back."""
+    covered = sorted((float(a), float(b)) for a, b in zip(lo, hi, strict=True) if b - a > 0.0)
+    spans = []
+    cur = 0.0
+    for a, b in covered + [(length, length)]:
+        if a > cur:
+            u0 = cur if cur <= 0.0 else max(0.0, cur - POS_TOL_UM)
+            u1 = a if a >= length else min(length, a + POS_TOL_UM)
+            spans.append((u0, u1))
+        cur = max(cur, b)
+    return spans
+
+
 def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     """Free sides of the union of rectangles ``corners`` ``(k, 4, 2)`` (clockwise, front-left first).
 
@@ -498,17 +513,7 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     pieces: list[tuple[np.ndarray, float, float, float, int, int]] = []
     for j in range(k):
         for e in range(4):
-            length = float(lens[j, e])
-            covered = sorted((float(a), float(b)) for a, b in zip(lo[j, e], hi[j, e]) if b - a > 0.0)
-            spans = []
-            cur = 0.0
-            for a, b in covered + [(length, length)]:
-                if a > cur:
-                    # Put back the tolerance the grown cover took at a contact.
-                    u0 = cur if cur <= 0.0 else max(0.0, cur - POS_TOL_UM)
-                    u1 = a if a >= length else min(length, a + POS_TOL_UM)
-                    spans.append((u0, u1))
-                cur = max(cur, b)
+            spans = _uncovered_spans(lo[j, e], hi[j, e], float(lens[j, e]))
             tt = t[j, e]
             nrm = np.array([-tt[1], tt[0]])  # corners run clockwise: outside is on the left
             a_t = float(np.dot(starts[j, e], tt))
@@ -520,14 +525,14 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     # Group pieces on one line with one outward normal, then merge touching runs along it.
     cos_tol = math.cos(2.0 * ANG_TOL_RAD)
     groups: list[list[int]] = []
-    for idx, (nrm, off, *_rest) in enumerate(pieces):
+    for piece, (nrm, off, *_rest) in enumerate(pieces):
         for grp in groups:
             n0, off0 = pieces[grp[0]][0], pieces[grp[0]][1]
             if float(np.dot(nrm, n0)) >= cos_tol and abs(off - off0) <= POS_TOL_UM:
-                grp.append(idx)
+                grp.append(piece)
                 break
         else:
-            groups.append([idx])
+            groups.append([piece])
 
     sides: list[tuple[tuple[int, int, float], Side]] = []
     for grp in groups:
@@ -536,16 +541,16 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
         wts = np.array([pieces[i][3] - pieces[i][2] for i in grp])
         off = float(np.average([pieces[i][1] for i in grp], weights=wts))
         # Coordinates along the group's own tangent (pieces' t are within tolerance of t0).
-        spans = []
+        along: list[tuple[float, float, int, int]] = []
         for i in grp:
             nrm, _, u0, u1, j, e = pieces[i]
             t = np.array([nrm[1], -nrm[0]])
             p0 = u0 * t + pieces[i][1] * nrm
             p1 = u1 * t + pieces[i][1] * nrm
-            spans.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
-        spans.sort()
+            along.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
+        along.sort()
         runs: list[list] = []
-        for u0, u1, j, e in spans:
+        for u0, u1, j, e in along:
             if runs and u0 <= runs[-1][1] + POS_TOL_UM:
                 runs[-1][1] = max(runs[-1][1], u1)
                 runs[-1][2].append((j, e, u0, u1))
@@ -1058,7 +1063,7 @@ def named_structure(
 
 def candidate_structures(
     robots_in_voltage_order: Sequence[Robot],
-    spec: "StructureSpec",
+    spec: StructureSpec,
     *,
     approach_margin_um: float = APPROACH_MARGIN_UM,
 ) -> list[Structure]:
@@ -1112,7 +1117,7 @@ def candidate_structures(
 
 def target_structures(
     robots_in_voltage_order: Sequence[Robot],
-    spec: "StructureSpec | None" = None,
+    spec: StructureSpec | None = None,
     *,
     approach_margin_um: float = APPROACH_MARGIN_UM,
 ) -> list[Structure]:

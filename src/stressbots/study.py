@@ -42,13 +42,15 @@ import json
 import math
 import re
 import tomllib
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 from .errors import StressbotsError
 
-__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary", "paired_comparison", "run_study"]
+__all__ = ["Layout", "StudySpec", "load_study", "parse_study", "build_cells", "plan_cells", "study_settings", "study_summary",
+           "paired_comparison", "run_study"]
 
 _ROBOT_KEY = re.compile(r"^robots\[(\d+)\]\.(\w+)$")
 _TOP_KEYS = {"name", "trials", "seed", "time_budget_s", "layouts", "grid", "fixed"}
@@ -79,7 +81,7 @@ class StudySpec:
     def points(self) -> list[dict[str, Any]]:
         """Every grid point (a dict key -> value), the last axis varying fastest."""
         keys = [k for k, _ in self.axes]
-        return [dict(zip(keys, combo)) for combo in itertools.product(*(v for _, v in self.axes))]
+        return [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(v for _, v in self.axes))]
 
     @property
     def cells(self) -> int:
@@ -180,7 +182,8 @@ def _layouts(raw: Any, base: Path, source: str) -> tuple[Layout, ...]:
         seeds = gen.get("seeds", [gen.get("seed", 0)])
         for s in seeds:
             try:
-                scn = random_scenario(int(gen["n"]), int(s), shape=str(gen.get("shape", "tee")), heterogeneous=bool(gen.get("heterogeneous", True)),
+                scn = random_scenario(int(gen["n"]), int(s), shape=str(gen.get("shape", "tee")),
+                                      heterogeneous=bool(gen.get("heterogeneous", True)),
                                       noise=LITERATURE_NOISE)
             except StressbotsError as exc:
                 raise StressbotsError(f"cannot generate this layout: {exc.problem}", source=source, field=where) from None
@@ -243,7 +246,7 @@ def _set_key(data: dict, key: str, value: Any, source: str) -> None:
         for r in data["robots"]:
             r[parts[1]] = value
         return
-    node = data
+    node: Any = data
     for p in parts[:-1]:
         node = node.get(p) if isinstance(node, dict) else None
         if not isinstance(node, dict):
@@ -262,10 +265,12 @@ def _controller_options(values: Mapping[str, Any], source: str):
     names = {f.name: f for f in dataclasses.fields(ControllerOptions)}
     for k, v in values.items():
         if k not in names:
-            raise StressbotsError(f"ControllerOptions has no field {k!r}; it has {', '.join(names)}", source=source, field=f"controller.{k}")
+            raise StressbotsError(f"ControllerOptions has no field {k!r}; it has {', '.join(names)}", source=source,
+                                  field=f"controller.{k}")
         if isinstance(v, bool) or not isinstance(v, (int, float, str)):
             raise StressbotsError(f"must be a number or a name, got {v!r}", source=source, field=f"controller.{k}")
-    return ControllerOptions(**{k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v) for k, v in values.items()})
+    kwargs: dict[str, Any] = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v) for k, v in values.items()}
+    return ControllerOptions(**kwargs)
 
 
 def _describe(point: Mapping[str, Any]) -> str:
@@ -307,7 +312,7 @@ def plan_cells(cells, planner: Callable, progress: Callable[[int, int], None] | 
     distinct = list(dict.fromkeys(keys))
     plans: dict[str, tuple[Any, str | None]] = {}
     out = []
-    for cell, key in zip(cells, keys):
+    for cell, key in zip(cells, keys, strict=True):
         if key not in plans:
             try:
                 plans[key] = (planner(cell.scenario), None)
@@ -350,11 +355,11 @@ def paired_comparison(this: Sequence[bool], baseline: Sequence[bool]) -> dict[st
 
     if len(this) != len(baseline):
         raise ValueError("paired cells need the same trials")
-    gained = sum(1 for a, b in zip(this, baseline) if a and not b)
-    lost = sum(1 for a, b in zip(this, baseline) if b and not a)
+    gained = sum(1 for a, b in zip(this, baseline, strict=True) if a and not b)
+    lost = sum(1 for a, b in zip(this, baseline, strict=True) if b and not a)
     n = gained + lost
     p = 1.0 if n == 0 else min(1.0, 2.0 * float(binom.cdf(min(gained, lost), n, 0.5)))
-    return {"gained": gained, "lost": lost, "both": sum(1 for a, b in zip(this, baseline) if a and b), "mcnemar_p": p}
+    return {"gained": gained, "lost": lost, "both": sum(1 for a, b in zip(this, baseline, strict=True) if a and b), "mcnemar_p": p}
 
 
 def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
@@ -363,7 +368,7 @@ def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
 
     rows = []
     by_cell = {c: sorted((o for o in outcomes if o.cell == c), key=lambda o: o.index) for c in range(len(cells))}
-    baseline = {}  # the first cell of each layout: the others are compared with it, trial by trial
+    baseline: dict[Any, int] = {}  # the first cell of each layout: the others are compared with it, trial by trial
     for c, cell in enumerate(cells):
         baseline.setdefault(cell.params["layout"], c)
     for c, cell in enumerate(cells):
@@ -372,7 +377,8 @@ def study_summary(spec: StudySpec, cells, outcomes) -> dict[str, Any]:
         base = by_cell[baseline[cell.params["layout"]]]
         paired = None
         if baseline[cell.params["layout"]] != c and [o.index for o in base] == [o.index for o in mine]:
-            paired = {"baseline_cell": baseline[cell.params["layout"]], **paired_comparison([o.success for o in mine], [o.success for o in base])}
+            paired = {"baseline_cell": baseline[cell.params["layout"]], **paired_comparison([o.success for o in mine],
+                                                                                            [o.success for o in base])}
         rows.append({"cell": c, "label": cell.label, "layout": cell.params["layout"],
                      "params": {k: v for k, v in cell.params.items() if k != "layout"}, "trials": st["trials"],
                      "successes": st["successes"], "success_rate": st["success_rate"], "success_rate_ci95": st["success_rate_ci95"],

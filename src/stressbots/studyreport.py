@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import json
 from collections import defaultdict
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from .montecarlo import wilson_interval
 
@@ -43,7 +44,7 @@ def success_curves(summary: Mapping[str, Any], axis: str) -> tuple[list[Any], di
                 pooled[v][0] += s
                 pooled[v][1] += n
         combos = {"all (pooled over the other conditions)": pooled}
-    return values, {name: [tuple(series.get(_key(v), [0, 0])) for v in values] for name, series in combos.items()}
+    return values, {name: [(c[0], c[1]) for c in (series.get(_key(v), [0, 0]) for v in values)] for name, series in combos.items()}
 
 
 def plot_axis(summary: Mapping[str, Any], axis: str):
@@ -108,11 +109,12 @@ def failure_chart(summary: Mapping[str, Any], top: int = 6):
     y = list(range(len(rows)))[::-1]
     left = [0.0] * len(rows)
     for kind in kinds + ["other"]:
-        w = [(r["failures"].get(kind, 0) if kind != "other" else sum(n for k, n in r["failures"].items() if k not in kinds)) / max(r["trials"], 1)
+        w = [(r["failures"].get(kind, 0) if kind != "other"
+              else sum(n for k, n in r["failures"].items() if k not in kinds)) / max(r["trials"], 1)
              for r in rows]
         if any(w):
             ax.barh(y, w, left=left, label=kind[:70])
-            left = [a + b for a, b in zip(left, w)]
+            left = [a + b for a, b in zip(left, w, strict=True)]
     ax.set_yticks(y, [r["label"] for r in rows], fontsize=7)
     ax.set_xlim(0, 1)
     ax.set_xlabel("fraction of the cell's trials")
@@ -132,7 +134,8 @@ def build_study_report(summary: Mapping[str, Any]) -> str:
     varying = [k for k, v in summary["axes"].items() if len(v) > 1]
     curves = "".join(f"<h3>{_e(k)}</h3>{img(plot_axis(summary, k), f'success rate vs {k}')}" for k in varying)
     overview = img(_layout_chart(summary), "success rate per cell")
-    fails = img(failure_chart(summary), "failure reasons per cell") if any(r["failures"] for r in summary["cells"]) else "<p>No failures.</p>"
+    fails = img(failure_chart(summary),
+                "failure reasons per cell") if any(r["failures"] for r in summary["cells"]) else "<p>No failures.</p>"
     table_rows = []
     for r in summary["cells"]:
         lo, hi = r["success_rate_ci95"]

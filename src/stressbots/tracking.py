@@ -329,6 +329,7 @@ def _split(pts, area_px: float, hl0: float, hw0: float, previous: np.ndarray | N
         # coverage alone cannot see where robots touching end to end meet
         if score < best_score - (settings.good_split if from_previous else 1e-9):
             best, best_score, from_previous = (poses, half), score, False
+    assert best is not None  # the first finite score always wins
     return best
 
 
@@ -466,7 +467,7 @@ def detect(frame, calibration: Calibration, lengths_um, widths_um, *, previous=N
     prev = None if previous is None else np.asarray(previous, np.float64).reshape(-1, 3)
     poses, sizes, bg, fg = _axes(img, calibration, L, W, prev, st)
     out = []
-    for p, (length, width) in zip(poses, sizes):
+    for p, (length, width) in zip(poses, sizes, strict=False):
         q, score = _orient(img, calibration, p, float(np.median(L)) / 2, float(np.median(W)) / 2, fg - bg, st.arm)
         out.append(Detection(q, float(length), float(width), score))
     return out
@@ -535,7 +536,7 @@ def _locate(img, L, W, calibration, ref, weight: float, st: TrackerSettings) -> 
     rows, cols = linear_sum_assignment(_identity_cost(ref, P, clear, sizes, L, W, st, weight))
     # refine with each robot's own size, then front/back from its arm
     refined, _ = _refine(img, calibration, bg, fg, P[cols], L[rows] / 2, W[rows] / 2, st)
-    for i, p in zip(rows, refined):
+    for i, p in zip(rows, refined, strict=True):
         q, score = _orient(img, calibration, p, L[i] / 2, W[i] / 2, fg - bg, st.arm)
         if score < st.ambiguous_arm_frac and ref is not None and np.all(np.isfinite(ref[i])):
             if _angle_diff(q[2], ref[i, 2]) > np.pi / 2:
@@ -547,4 +548,4 @@ def _locate(img, L, W, calibration, ref, weight: float, st: TrackerSettings) -> 
 def describe(poses: np.ndarray, names) -> list[dict[str, Any]]:
     """Rows for a poses table (file units: degrees)."""
     return [{"robot": nm, "x_um": float(p[0]), "y_um": float(p[1]), "heading_deg": float(np.degrees(p[2]))}
-            for nm, p in zip(names, poses)]
+            for nm, p in zip(names, poses, strict=False)]

@@ -32,9 +32,10 @@ from __future__ import annotations
 
 import io
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Sequence, Union
+from typing import Any
 
 import numpy as np
 
@@ -117,7 +118,7 @@ class Drive:
         object.__setattr__(self, "duration_s", d)
 
 
-Segment = Union[Hold, Drive]
+Segment = Hold | Drive
 
 
 def duration(waveform: Sequence[Segment]) -> float:

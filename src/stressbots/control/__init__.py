@@ -52,4 +52,5 @@ from .runner import assemble  # noqa: E402
 from .targets import Targets, nominal_plan, structure_targets  # noqa: E402
 from .tuning import ControllerOptions, Tuning  # noqa: E402
 
-__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "Tuning", "assemble", "check_determinism", "nominal_plan", "structure_targets"]
+__all__ += ["AssemblyResult", "ControllerOptions", "Targets", "Tuning", "assemble", "check_determinism", "nominal_plan",
+            "structure_targets"]

@@ -59,14 +59,17 @@ def check_determinism(scenario, seed: int, *, plan=None, options: ControllerOpti
     (ra, a), (rb, b) = runs
     if len(ra.waveforms) != len(rb.waveforms):
         raise AssertionError(f"seed {seed}: two runs differ: {len(ra.waveforms)} vs {len(rb.waveforms)} waveforms applied")
-    for k, (wa, wb) in enumerate(zip(ra.waveforms, rb.waveforms)):
+    for k, (wa, wb) in enumerate(zip(ra.waveforms, rb.waveforms, strict=True)):
         if wa != wb:
             raise AssertionError(f"seed {seed}: two runs differ: waveform {k} differs")
-    for k, (fa, fb) in enumerate(zip(ra.frames, rb.frames)):
+    for k, (fa, fb) in enumerate(zip(ra.frames, rb.frames, strict=False)):
         if not np.array_equal(fa, fb, equal_nan=True):
             raise AssertionError(f"seed {seed}: two runs differ: camera frame {k} differs")
     if a.events != b.events:
-        first = next(k for k, (x, y) in enumerate(zip(a.events, b.events)) if x != y) if len(a.events) == len(b.events) else min(len(a.events), len(b.events))
+        if len(a.events) == len(b.events):
+            first = next(k for k, (x, y) in enumerate(zip(a.events, b.events, strict=True)) if x != y)
+        else:
+            first = min(len(a.events), len(b.events))
         raise AssertionError(f"seed {seed}: two runs differ: event logs differ from event {first}")
     if not (np.array_equal(a.trace_t, b.trace_t) and np.array_equal(a.trace_poses, b.trace_poses)):
         raise AssertionError(f"seed {seed}: two runs differ: traces differ")

@@ -49,21 +49,37 @@ placement error is reported beside it.
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
 from .. import paths as pathlib
 from .. import se2
 from ..assessment import shape_error
-from ..collision import arena_gap, bodies_hit_discs, outside_arena, penetration_depth, point_rectangle_distance
+from ..collision import (
+    arena_gap,
+    bodies_hit_discs,
+    outside_arena,
+    penetration_depth,
+    point_rectangle_distance,
+)
 from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
 from ..estimation import Estimator
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
 from ..waveform import synthesize
-from .queries import best_departure, in_funnel, line_coords, line_pose, merge, pose_on_orbit, trim_steps, turn_fraction
+from .queries import (
+    best_departure,
+    in_funnel,
+    line_coords,
+    line_pose,
+    merge,
+    pose_on_orbit,
+    trim_steps,
+    turn_fraction,
+)
 from .result import AssemblyResult
 from .targets import Targets, nominal_plan, structure_targets
 from .tuning import ControllerOptions
@@ -120,6 +136,7 @@ class _Runner:
         n = scenario.n
         self.n = n
         self.rank = np.empty(n, dtype=int)
+        assert self.analysis.order_index is not None  # a STRING design always has its order
         for k, i in enumerate(self.analysis.order_index):
             self.rank[i] = k + 1
         self.by_rank = {int(self.rank[i]): i for i in range(n)}
@@ -138,14 +155,16 @@ class _Runner:
         self.trace_p = [self.est.copy()]
         self._missed = False
         self._stuck = False
-        self._plan = None
+        self._plan: tuple[Any, Any, float] | None = None
         self._warned: set = set()
-        self._motion = None  # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
+        # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
+        self._motion: tuple[float, np.ndarray, np.ndarray] | None = None
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
     def log(self, kind: str, robot: int | None = None, detail: str = "") -> None:
-        self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.scn.names[robot], "detail": detail})
+        self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.scn.names[robot],
+                            "detail": detail})
 
     @property
     def est(self) -> np.ndarray:
@@ -202,7 +221,7 @@ class _Runner:
                 gap = float(np.hypot(*(c[a] - c[b]))) - rs[a] - rs[b]
                 if gap < self.tune.orbit_watch_um:
                     near.append((f"the orbit of {self.scn.names[j]}", gap))
-            for j in np.flatnonzero(self.docked):
+            for j in np.flatnonzero(self.docked).tolist():
                 gap = float(point_rectangle_distance(c[a][None, :], self.est[j][None, :], self.L[j], self.W[j])[0, 0]) - rs[a]
                 if gap < self.tune.orbit_watch_um:
                     near.append((f"docked {self.scn.names[j]}", gap))
@@ -219,7 +238,8 @@ class _Runner:
 
     # -- geometry -------------------------------------------------------------------------------------
 
-    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None, target=None) -> bool:
+    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
+                      target=None) -> bool:
         """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge.
 
         With ``target`` (a gross-motion goal pose), docked bodies are kept ``Tuning.gross_docked_clearance_um``
@@ -247,7 +267,8 @@ class _Runner:
             for j in docked:
                 # only samples within reach of body j (bounding circles) need the exact rectangle test
                 near = np.hypot(*(samples[:, :2] - self.est[j, :2]).T) < hd + 0.5 * math.hypot(self.L[j], self.W[j]) + need
-                if near.any() and (penetration_depth(samples[near], self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -need[near]).any():
+                if near.any() and (penetration_depth(samples[near], self.L[i], self.W[i], self.est[j], self.L[j],
+                                                     self.W[j]) > -need[near]).any():
                     return True
         if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
             return True
@@ -270,7 +291,16 @@ class _Runner:
                 break
         return out
 
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(), max_cycles: int = 400, ready=None, via: bool = True, clearance: float | None = None) -> bool:
+    def _route_or_detour(self, i: int, target: np.ndarray, orbiting: Sequence[int], extra_discs, routed, path):
+        """The roadmap route itself when there is one (it was checked at a wider clearance), else a detour at
+        the controller's clearance, else ``path`` unchanged."""
+        if routed is not None:
+            return routed
+        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
+        return path if detour is None else detour
+
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
+              max_cycles: int = 400, ready=None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
         ``ready()`` True ends the gross motion early (the robot is already in the region from which the
@@ -298,17 +328,13 @@ class _Runner:
                     t_before = self.t
                     if len(points) > 1:
                         for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False, clearance=clearance)
+                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
+                                       clearance=clearance)
                             if ready is not None and ready():
                                 return True
                         if self.t > t_before:
                             continue
-                    if routed is not None:  # drive the route itself (it was checked at a wider clearance)
-                        path = routed
-                    else:
-                        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
-                        if detour is not None:
-                            path = detour
+                    path = self._route_or_detour(i, target, orbiting, extra_discs, routed, path)
                 else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
             self.replans += 1
@@ -320,7 +346,8 @@ class _Runner:
             if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
                 cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
                 biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
+                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
+                                                                       clearance=clearance, target=target):
                     steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
                     steps.insert(1, (straight_k, cut_um / v))
                     steps = trim_steps(steps, self.tx)
@@ -340,7 +367,8 @@ class _Runner:
 
     def arrived(self, pose: np.ndarray, target: np.ndarray) -> bool:
         """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
-        return bool(np.hypot(*(pose[:2] - target[:2])) <= self.tune.arrive_um and abs(angle_difference(pose[2], target[2])) <= math.radians(self.tune.arrive_deg))
+        return bool(np.hypot(*(pose[:2] - target[:2])) <= self.tune.arrive_um
+                    and abs(angle_difference(pose[2], target[2])) <= math.radians(self.tune.arrive_deg))
 
     def _obstacles(self, i: int, orbiting, extra_discs, box_margin: float = 0.0):
         from ..planning import Obstacles
@@ -354,7 +382,8 @@ class _Runner:
         docked = np.flatnonzero(self.docked)
         return Obstacles(
             np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
-            self.est[docked], self.L[docked] + 2.0 * box_margin, self.W[docked] + 2.0 * box_margin, tuple("a docked robot" for _ in docked), self.scn.arena_um,
+            self.est[docked], self.L[docked] + 2.0 * box_margin, self.W[docked] + 2.0 * box_margin,
+            tuple("a docked robot" for _ in docked), self.scn.arena_um,
         )
 
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
@@ -370,7 +399,8 @@ class _Runner:
         for margin in margins:
             obst = self._obstacles(i, orbiting, extra_discs, margin)
             try:
-                _, routed, points = route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i], self.W[i], obst, opts, rng, "")
+                _, routed, points = route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i],
+                                          self.W[i], obst, opts, rng, "")
                 break
             except NoRoute:
                 continue
@@ -455,7 +485,7 @@ class _Runner:
                 ready = None
             else:
                 a_pose = self.line_pose(goal, back, 20.0, -math.radians(6.0))
-                ready = lambda: self.in_funnel(i, back)  # noqa: E731
+                ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
             targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
             for tgt in targets:
                 self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
@@ -468,7 +498,7 @@ class _Runner:
             if back is not None and not self.in_funnel(i, back):
                 self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
-            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k, orbiting)
+            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k)
             if ok:
                 return
             if self._missed:
@@ -477,7 +507,8 @@ class _Runner:
                 continue
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
             self.back_off(i, k)
-        raise _Abort(f"{self.scn.names[i]} did not dock in {self.tune.dock_attempts} attempts (last: {self.events[-1]['detail'] if self.events else ''})")
+        raise _Abort(f"{self.scn.names[i]} did not dock in {self.tune.dock_attempts} attempts (last: "
+                     f"{self.events[-1]['detail'] if self.events else ''})")
 
     line_pose = staticmethod(line_pose)
 
@@ -582,7 +613,7 @@ class _Runner:
         rot = np.array([d[0] * cph + d[1] * sph, -d[0] * sph + d[1] * cph])
         return np.array([c_meas[0] + rot[0], c_meas[1] + rot[1], float(np.mod(pose[2] + phi, TWO_PI))])
 
-    def fine_dock(self, i: int, k: int, orbiting) -> bool:
+    def fine_dock(self, i: int, k: int) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""
         for _ in range(60):
             v, r = self.v_hat[i], self.r_hat[i]
@@ -699,7 +730,9 @@ class _Runner:
                 tried.append((phi, dx, dy))
                 self.set_pair_frame(phi, dx, dy)
                 self.replans += 1
-                self.log("replan", N, f"G_1 re-planned from the measured poses ({last}): the structure turned {math.degrees(phi):.0f} deg and shifted {math.hypot(dx, dy):.0f} um")
+                self.log("replan", N,
+                         f"G_1 re-planned from the measured poses ({last}): the structure turned {math.degrees(phi):.0f} deg and shifted "
+                         f"{math.hypot(dx, dy):.0f} um")
             try:
                 c_star = self.station(N, M, D)
                 self.transfer(N, M, c_star, D, lower)
@@ -707,7 +740,8 @@ class _Runner:
                     if self.rendezvous(N, M, D, lower):
                         return
                     self.log("retry", N, f"rendezvous attempt {attempt + 1} missed; {self.scn.names[N]} re-plans its approach")
-                raise _Replan(f"G_1 of {self.scn.names[N]} and {self.scn.names[M]} did not form in {self.tune.rendezvous_attempts} rendezvous attempts")
+                raise _Replan(f"G_1 of {self.scn.names[N]} and {self.scn.names[M]} did not form in {self.tune.rendezvous_attempts} "
+                              "rendezvous attempts")
             except _Replan as exc:
                 last = exc.reason
         raise _Abort(f"G_1 not formed after {len(tried)} pair frame(s); last: {last}")
@@ -766,7 +800,8 @@ class _Runner:
             return False
         for a in range(n):
             later = [b for b in range(n) if rank[b] < rank[a]]
-            if later and bodies_hit_discs(g[a][None, :], self.L[a], self.W[a], orbit_c[later], rs[later] + self.tune.frame_slot_clearance_um).any():
+            if later and bodies_hit_discs(g[a][None, :], self.L[a], self.W[a], orbit_c[later],
+                                          rs[later] + self.tune.frame_slot_clearance_um).any():
                 return False
         c_star = self.station(N, M, D)
         if not self.orbits_free(M, c_star[None, :], [], lower, self.tune.frame_slot_clearance_um)[0]:
@@ -781,6 +816,29 @@ class _Runner:
 
     # stage 1: D_{n-1} onto its station orbit ---------------------------------------------------------
 
+    def _turn_together(self, N: int, M: int, t_turn: float, fraction: float) -> None:
+        """D_{n-1} turns for ``t_turn`` s (its measured heading decides when it is done) while D_n turns
+        ``fraction`` of that wait and then runs straight.
+
+        D_n's turn is closed loop on its measured heading: a long open-loop turn with a turn rate not yet
+        identified ends tens of degrees off, and the straight run after it goes astray."""
+        n = self.n
+        turn = t_turn * self.omega_hat[M]
+        turned = 0.0
+        n_turn, n_turned = fraction * t_turn * self.omega_hat[N], 0.0
+        while True:
+            left = (turn - turned) / self.omega_hat[M]
+            if left <= 1e-3:
+                break
+            dt = left if left <= 1.6 * self.tx else self.tx
+            a = min(dt, max((n_turn - n_turned) / self.omega_hat[N], 0.0))
+            th0, thN0 = self.est[M, 2], self.est[N, 2]
+            self.drive([(n, a), (n - 1, dt - a)])
+            n_turned += float(np.mod(self.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
+            turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+            if dt == left:
+                break
+
     def transfer(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
         """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`form_pair`).
 
@@ -790,7 +848,6 @@ class _Runner:
         (:meth:`transfer_run`), which D_n reaches first, timed to D_{n-1}'s departure. A leg too long for
         any clear track is shortened (900, 600, 400 um) when D_{n-1} can orbit at its end.
         """
-        n = self.n
         q_next = self.approach_pose(N, M, c_star, D)
         failed_runs = 0
         for attempt in range(8):
@@ -828,39 +885,25 @@ class _Runner:
             kind, arg, leg, c_next = plan
             self.replans += 1
             if kind == "turn":
-                self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} turns {arg:.0%} of the wait, then runs straight")
-                turn = t_turn * self.omega_hat[M]
-                turned = 0.0
-                # D_n's turn is closed loop on its measured heading: a long open-loop turn with a turn rate
-                # not yet identified ends tens of degrees off, and the straight run after it goes astray
-                n_turn, n_turned = arg * t_turn * self.omega_hat[N], 0.0
-                while True:
-                    left = (turn - turned) / self.omega_hat[M]
-                    if left <= 1e-3:
-                        break
-                    dt = left if left <= 1.6 * self.tx else self.tx
-                    a = min(dt, max((n_turn - n_turned) / self.omega_hat[N], 0.0))
-                    th0, thN0 = self.est[M, 2], self.est[N, 2]
-                    self.drive([(n, a), (n - 1, dt - a)])
-                    n_turned += float(np.mod(self.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
-                    turned += float(np.mod(self.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
-                    if dt == left:
-                        break
+                self.log("transfer", M,
+                         f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} turns {arg:.0%} of the wait, then runs "
+                         "straight")
+                self._turn_together(N, M, t_turn, arg)
             else:
                 self.log("transfer", M, f"{self.scn.names[M]} moves its orbit {leg:.0f} um; {self.scn.names[N]} first takes a clear track")
-                if not self.arrive_timed(N, M, lambda: arg, th_dep, lower):
+                if not self.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower):
                     # D_{n-1} still orbits where it was: choose again from where D_n is now
                     self.log("retry", N, f"{self.scn.names[N]} could not reach its track in time; the leg is planned again")
                     failed_runs += 1
                     if failed_runs >= 4:
                         raise _Replan(f"{self.scn.names[N]} cannot reach a clear track in time for {self.scn.names[M]}'s move")
                     continue
-                self.wait_straight(N, M, th_dep)
+                self.wait_straight(M, th_dep)
             self.straight_leg(N, M, c_next, lower)
         miss = float(np.hypot(*(c_star - self.centre(M))))
         self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
 
-    def wait_straight(self, N: int, M: int, th_dep: float) -> None:
+    def wait_straight(self, M: int, th_dep: float) -> None:
         """D_n straight (P_{n-1}) while D_{n-1} orbits on to heading ``th_dep``."""
         n = self.n
         for _ in range(40):
@@ -930,17 +973,20 @@ class _Runner:
         cM = self.centre(M)
         # buffer: clear of D_{n-1}'s current orbit; end: clear of its new one
         nb = int(np.searchsorted(s, buf)) + 1
-        ok &= ~bodies_hit_discs(samples[:, :nb].reshape(-1, 3), self.L[N], self.W[N], cM[None, :], np.array([self.rstar[M] + c])).reshape(len(starts), nb).any(axis=1)
+        ok &= ~bodies_hit_discs(samples[:, :nb].reshape(-1, 3), self.L[N], self.W[N], cM[None, :],
+                                np.array([self.rstar[M] + c])).reshape(len(starts), nb).any(axis=1)
         ok &= ~bodies_hit_discs(samples[:, -1], self.L[N], self.W[N], np.asarray(c_next)[None, :], np.array([self.rstar[M] + 40.0]))[:, 0]
         # room for D_n to orbit (wait, or turn away) where its track ends
         end_c = turning_centres(samples[:, -1], self.r_hat[N])
-        ok &= self.orbits_free(N, end_c, [(np.asarray(c_next), self.rstar[M] + self.tune.g1_clearance_um - self.tune.wall_clearance_um)], lower, self.tune.wall_clearance_um)
+        ok &= self.orbits_free(N, end_c, [(np.asarray(c_next), self.rstar[M] + self.tune.g1_clearance_um - self.tune.wall_clearance_um)],
+                               lower, self.tune.wall_clearance_um)
         idx = np.flatnonzero(ok)
         if len(idx) == 0:
             return None
         # cheapest first (to reach, plus a pull toward the next target); then the synchronous check
         ends = samples[idx, -1]
-        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], (len(idx), 3)), starts[idx], self.r_hat[N]) + 0.5 * np.hypot(*(ends[:, :2] - np.asarray(q_next)[:2]).T)
+        cost = pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], (len(idx), 3)), starts[idx],
+                                             self.r_hat[N]) + 0.5 * np.hypot(*(ends[:, :2] - np.asarray(q_next)[:2]).T)
         idx = idx[np.argsort(cost)]
         mdep = pose_on_orbit(cM, self.r_hat[M], th_dep)
         tm = np.arange(0.0, leg / vM + 1.0, 0.4)
@@ -1042,8 +1088,9 @@ class _Runner:
         q = np.asarray(target, float)
         hq = np.array([math.sin(q[2]), math.cos(q[2])])
         rq = np.array([math.cos(q[2]), -math.sin(q[2])])
-        s, e, d = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]), indexing="ij")
-        s, e, d = s.ravel(), e.ravel(), d.ravel()
+        grid = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]),
+                           indexing="ij")
+        s, e, d = (g.ravel() for g in grid)
         goals = np.stack([q[0] + s * hq[0] + e * rq[0], q[1] + s * hq[1] + e * rq[1], np.mod(q[2] + d, TWO_PI)], axis=1)
         offset = s / vN  # further along the line: arrive correspondingly later
         penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)
@@ -1075,7 +1122,8 @@ class _Runner:
                 if A[j] > 0:
                     segs = (("S", float(A[j])),) + segs
                 path = pathlib.Path(self.est[N], rN, segs)
-                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=self.tune.wall_clearance_um):
+                if not self.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc),
+                                          clearance=self.tune.wall_clearance_um):
                     return path, goals[kk], float(offset[kk]), float(want), None
         # Waiting on the orbit only shifts arrival times in steps (it eats into the path's first turn, then
         # costs a whole loop). One or two interpolated loops of radius R in [r, 1.6 r] (P_n / P_{n-1}
@@ -1095,7 +1143,8 @@ class _Runner:
                     R = float(radii[jr])
                     loop = move(self.est[N], np.linspace(0.0, TWO_PI * R, 72), 1.0 / R)
                     tail = pathlib.shortest_path(self.est[N], goals[kk], rN, approach_um=60.0)
-                    if self.obstacles_hit(np.vstack([loop, tail.sample(10.0)]), N, lower, extra_discs=self._tight(disc), clearance=self.tune.wall_clearance_um):
+                    if self.obstacles_hit(np.vstack([loop, tail.sample(10.0)]), N, lower, extra_discs=self._tight(disc),
+                                          clearance=self.tune.wall_clearance_um):
                         continue
                     return tail, goals[kk], float(offset[kk]), float(want), (R, m)
         return None
@@ -1140,7 +1189,7 @@ class _Runner:
         th_dep = float(self.goals[M, 2])
         if not self.arrive_timed(N, M, lambda: self.approach_pose(N, M, self.centre(M), D), th_dep, lower):
             raise _Replan(f"{self.scn.names[N]} found no timed path to its approach line")
-        return self.depart_and_meet(N, M, lower)
+        return self.depart_and_meet(N, M)
 
     def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float | None = None) -> bool:
         """D_n drives to ``target_fn()`` (a pose on a line it then runs straight along), arriving ``early``
@@ -1190,7 +1239,7 @@ class _Runner:
             if path is None:
                 # no timed way from here: go where D_n can wait on its orbit near the target, then retry
                 holds += 1
-                if holds > 3 or not self.to_holding(N, M, q, lower, disc):
+                if holds > 3 or not self.to_holding(N, q, lower, disc):
                     return False
                 continue
             self.replans += 1
@@ -1208,8 +1257,9 @@ class _Runner:
         ok = np.ones(len(c), dtype=bool)
         if self.scn.arena_um is not None:
             w, h = self.scn.arena_um
-            ok &= (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance) & (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
-        others = [*zip(turning_centres(self.est[lower], self.r_hat[lower]), self.rstar[lower])] if lower else []
+            ok &= (c[:, 0] >= rs + clearance) & (c[:, 0] <= w - rs - clearance)
+            ok &= (c[:, 1] >= rs + clearance) & (c[:, 1] <= h - rs - clearance)
+        others = [*zip(turning_centres(self.est[lower], self.r_hat[lower]), self.rstar[lower], strict=True)] if lower else []
         for cc, rr in [*others, *discs]:
             ok &= np.hypot(*(c - cc).T) >= rs + float(rr) + clearance
         for j in np.flatnonzero(self.docked):
@@ -1232,28 +1282,32 @@ class _Runner:
         c = np.stack([cx.ravel(), cy.ravel()], axis=1)
         return c[self.orbits_free(i, c, discs, lower, clearance)]
 
-    def to_holding(self, N: int, M: int, q, lower, disc) -> bool:
+    def to_holding(self, N: int, q, lower, disc) -> bool:
         """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
         n = self.n
         # the same clearances as the timed paths' checks, so that waiting there passes them
-        free = self.free_orbits(N, [(c, r + self.tune.g1_clearance_um - self.tune.wall_clearance_um - 5.0) for c, r in disc], lower, clearance=self.tune.wall_clearance_um + 5.0)
+        free = self.free_orbits(N, [(c, r + self.tune.g1_clearance_um - self.tune.wall_clearance_um - 5.0) for c, r in disc], lower,
+                                clearance=self.tune.wall_clearance_um + 5.0)
         if len(free) == 0:
             return False
         rN = self.r_hat[N]
         heads = np.radians(np.arange(0.0, 360.0, 30.0))
-        poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)], axis=1) for t in heads])
+        poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)],
+                                         axis=1) for t in heads])
         # near the target, with a clear way on to it (the way there may be routed around obstacles)
         cost = 0.3 * pathlib.shortest_path_lengths(np.broadcast_to(self.est[N], poses.shape), poses, rN) + pathlib.shortest_path_lengths(
             poses, np.broadcast_to(np.asarray(q, float), poses.shape), rN, approach_um=60.0
         )
         order = np.argsort(cost)[:12]
-        onward = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=self.tune.wall_clearance_um)]
+        onward = [j for j in order if not self.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N,
+                                                             lower, extra_discs=self._tight(disc), clearance=self.tune.wall_clearance_um)]
         hold = poses[onward[0] if onward else order[0]]
-        self.log("hold", N, f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
+        self.log("hold", N,
+                 f"{self.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
         self.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=self.tune.g1_clearance_um)
         return not self._stuck
 
-    def depart_and_meet(self, N: int, M: int, lower) -> bool:
+    def depart_and_meet(self, N: int, M: int) -> bool:
         """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
         n = self.n
         for _ in range(40):
@@ -1314,7 +1368,8 @@ class _Runner:
         self.goals[N] = self.est[N]
         self.goals[M] = self.est[M]
         if abs(math.degrees(phi)) > 0.5 or np.hypot(*(c_meas - c_nom)) > 5.0:
-            self.log("retarget", None, f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
+            self.log("retarget", None,
+                     f"G_1 formed {np.hypot(*(c_meas - c_nom)):.1f} um / {math.degrees(phi):.1f} deg from nominal; later slots follow it")
 
     # -- the whole assembly ---------------------------------------------------------------------------
 
@@ -1331,7 +1386,8 @@ class _Runner:
         return None
 
 
-def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None, options: ControllerOptions | None = None) -> AssemblyResult:
+def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget_s: float | None = None,
+             options: ControllerOptions | None = None) -> AssemblyResult:
     """Assemble ``scenario``'s structure through ``plant`` in closed loop (seed Appendix 3).
 
     Parameters

@@ -54,6 +54,7 @@ def structure_targets(scenario) -> Targets:
         raise PlanningError("closed-loop assembly needs a STRING design: " + "; ".join(analysis.reasons))
     n = scenario.n
     rank = np.empty(n, dtype=int)
+    assert analysis.order_index is not None  # a STRING design always has its order
     for k, i in enumerate(analysis.order_index):
         rank[i] = k + 1
     robots = [scenario.robots[i] for i in analysis.order_index]

@@ -72,7 +72,8 @@ class Camera:
         body_c = np.zeros(self.shape, np.float32)
         arm_c = np.zeros(self.shape, np.float32)
         upx = cal.um_per_px
-        for p, L, W in zip(np.asarray(poses, np.float64), np.asarray(lengths_um, np.float64), np.asarray(widths_um, np.float64)):
+        for p, L, W in zip(np.asarray(poses, np.float64), np.asarray(lengths_um, np.float64), np.asarray(widths_um, np.float64),
+                           strict=True):
             if not np.all(np.isfinite(p)):
                 continue
             hl, hw = L / 2, W / 2
@@ -104,7 +105,7 @@ class Camera:
         drop = rng.random(len(poses)) < m.dropout
         poses[drop] = np.nan
         body_c, arm_c = self.coverage(poses, lengths_um, widths_um)
-        img = np.float32(m.background) + np.float32(m.arm - m.background) * arm_c
+        img: np.ndarray = np.float32(m.background) + np.float32(m.arm - m.background) * arm_c
         np.maximum(img, np.float32(m.background) + np.float32(m.body - m.background) * body_c, out=img)
         sigma_px = m.blur_um / self.calibration.um_per_px
         if sigma_px > 0.05:

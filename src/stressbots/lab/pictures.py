@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -22,7 +22,7 @@ def plot_tracked_frames(scenario, frames: Sequence, *, max_panels: int = 4, pad_
     k = max(len(chosen), 1)
     fig, axes = plt.subplots(1, k, figsize=(3.6 * k, 3.9), squeeze=False)
     colours = robot_colours(scenario.n)
-    for ax, fr in zip(axes[0], chosen):
+    for ax, fr in zip(axes[0], chosen, strict=False):
         cal = fr.calibration
         rows, cols = fr.frame.shape
         (x0, x1), (y1, y0) = cal.to_um(np.array([-0.5, cols - 0.5]), np.array([-0.5, rows - 0.5]))

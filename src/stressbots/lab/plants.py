@@ -12,8 +12,9 @@ closed-loop controller (:func:`stressbots.control.assemble`) runs on them unchan
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -201,7 +202,7 @@ class HardwarePlant:
         self.awg = awg
         self.camera = camera
         self.calibration = calibration
-        self.options = {"gain": gain, "offset_V": offset_V, "sample_rate_hz": sample_rate_hz, "awg_max_V": awg_max_V}
+        self.options: dict[str, Any] = {"gain": gain, "offset_V": offset_V, "sample_rate_hz": sample_rate_hz, "awg_max_V": awg_max_V}
         self.name = name
         self._sleep = sleep
         self._burst = bool(burst)
