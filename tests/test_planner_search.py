@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stressbots.electrostatics import analyse_scenario
 from stressbots.errors import PlanningError
 from stressbots.generate import random_scenario
 from stressbots.kinematics import move
@@ -22,7 +23,6 @@ from stressbots.planning import Obstacles, PlannerOptions, _Planner, plan_assemb
 from stressbots.replay import replay
 from stressbots.scenario import load
 from stressbots.structures import target_structures
-from stressbots.electrostatics import analyse_scenario
 
 from .conftest import EXAMPLES
 
@@ -72,14 +72,14 @@ def test_stretch_leg_keeps_the_other_legs_shortest_and_is_exact():
     p = _PLANNER
     r = 200.0
     nodes = (np.array([0.0, 0.0, 0.0]), np.array([600.0, 900.0, 1.2]), np.array([1500.0, 400.0, 3.0]))
-    shortest = sum(paths.shortest_path(a, b, r).length for a, b in zip(nodes[:-1], nodes[1:]))
+    shortest = sum(paths.shortest_path(a, b, r).length for a, b in zip(nodes[:-1], nodes[1:], strict=False))
     want = shortest + 300.0  # only the second leg can take 300 um more (gaps in the feasible lengths)
     path = p._stretch_leg(nodes, r, want, _EMPTY, 260.0, 60.0)
     assert path is not None
     assert math.isclose(path.length, want, abs_tol=1e-6)
     assert np.allclose(_integrate(nodes[0], path.segments, r)[:2], nodes[-1][:2], atol=1e-6)
     # the route still passes its waypoint: one of the two legs is untouched
-    legs = [paths.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:])]
+    legs = [paths.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:], strict=False)]
     assert path.segments[: len(legs[0].segments)] == legs[0].segments or path.segments[-len(legs[1].segments):] == legs[1].segments
 
 

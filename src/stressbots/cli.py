@@ -485,15 +485,10 @@ def _planner_options(seed: int, clearance_um: float | None, approach_um: float |
         return None
     from dataclasses import replace
 
+    from .control.targets import PLAN_CLEARANCE_UM
     from .planning import PlannerOptions
 
-    base = PlannerOptions(seed=seed)
-    try:
-        from .edr import PLAN_CLEARANCE_UM
-
-        base = replace(base, clearance_um=PLAN_CLEARANCE_UM)
-    except ImportError:  # pragma: no cover - depends on the controller
-        pass
+    base = PlannerOptions(seed=seed, clearance_um=PLAN_CLEARANCE_UM)
     if clearance_um is not None:
         base = replace(base, clearance_um=clearance_um)
     if approach_um is not None:

@@ -32,15 +32,22 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
 
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra as csgraph_dijkstra
 
 from . import paths as pathlib
-from .collision import point_rectangle_distance, bodies_hit_discs, disc_overlaps, outside_arena, pairwise_overlaps, penetration_depth
+from .collision import (
+    bodies_hit_discs,
+    disc_overlaps,
+    outside_arena,
+    pairwise_overlaps,
+    penetration_depth,
+    point_rectangle_distance,
+)
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
 from .kinematics import advance, move
@@ -185,7 +192,7 @@ class Obstacles:
     box_labels: tuple[str, ...]
     arena: tuple[float, float] | None
 
-    def with_disc(self, centre, radius, label) -> "Obstacles":
+    def with_disc(self, centre, radius, label) -> Obstacles:
         return Obstacles(
             np.vstack([self.disc_centres, np.reshape(centre, (1, 2))]),
             np.append(self.disc_radii, radius),
@@ -295,10 +302,10 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     e, nseg = seg_lengths.shape
     kinds = np.array([[w[j] == "R" for j in range(nseg)] for w in words.tolist()], dtype=bool)
     curv = np.where(kinds, 1.0 / radius, 0.0)
-    joints = [starts]
+    joint_list = [starts]
     for j in range(nseg - 1):
-        joints.append(move(joints[-1], seg_lengths[:, j], curv[:, j]))
-    joints = np.stack(joints, axis=1)  # (E, S, 3) pose at the start of each segment
+        joint_list.append(move(joint_list[-1], seg_lengths[:, j], curv[:, j]))
+    joints = np.stack(joint_list, axis=1)  # (E, S, 3) pose at the start of each segment
     total = seg_lengths.sum(axis=1)
     counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
     owner = np.repeat(np.arange(e), counts)
@@ -313,7 +320,7 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     return poses, owner
 
 
-def _edges_clear(obst: "Obstacles", starts, goals, radius, length, width, opts: "PlannerOptions", recheck=None) -> np.ndarray:
+def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
     """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool.
 
     Two stages: coarse samples with the clearance inflated by the most any body point moves between two
@@ -343,12 +350,13 @@ def _edges_clear(obst: "Obstacles", starts, goals, radius, length, width, opts: 
     return clear
 
 
-def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: Obstacles, length: float, width: float, opts: PlannerOptions) -> np.ndarray:
+def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: Obstacles,
+                  length: float, width: float, opts: PlannerOptions) -> np.ndarray:
     """Collision-free waypoint poses: tangent to the orbit discs and uniformly random."""
     x0, y0, x1, y1 = region
     nodes = []
     # Poses tangent to rings around each disc, both travel directions: how a route skirts an orbit.
-    for c, r in zip(obst.disc_centres, obst.disc_radii):
+    for c, r in zip(obst.disc_centres, obst.disc_radii, strict=False):
         ring = r + opts.clearance_um + 0.5 * math.hypot(length, width) + 5.0
         ang = np.linspace(0.0, TWO_PI, 12, endpoint=False) + rng.uniform(0, TWO_PI / 12)
         px = c[0] + ring * np.sin(ang)
@@ -359,6 +367,17 @@ def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, flo
     nodes.append(rand)
     allnodes = np.vstack(nodes)
     return allnodes[~obst.hits(allnodes, length, width, opts.clearance_um)]
+
+
+def _roadmap_region(sources: np.ndarray, target: np.ndarray, obst: Obstacles, radius: float, length: float):
+    """``(x0, y0, x1, y1)`` (um) where roadmap waypoints are drawn: the arena, or without walls the box
+    around the sources, the target and the orbit centres, padded by two turning diameters and a body."""
+    if obst.arena is not None:
+        return (0.0, 0.0, obst.arena[0], obst.arena[1])
+    parts = [sources[:, :2], target[None, :2]] + ([obst.disc_centres] if len(obst.disc_radii) else [])
+    pts = np.vstack(parts)
+    pad = 4.0 * radius + length
+    return (pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad)
 
 
 def route(
@@ -388,7 +407,8 @@ def route(
         raise NoRoute(f"{who}: the start of its straight approach is blocked by {blocked_by}")
     free = ~obst.hits(sources, length, width, opts.clearance_um)
     if not free.any():
-        raise NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {obst.first_hit(sources[:1], length, width, opts.clearance_um)}")
+        first = obst.first_hit(sources[:1], length, width, opts.clearance_um)
+        raise NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {first}")
     sources, source_costs = sources[free], np.asarray(source_costs)[free]
     index_of = np.flatnonzero(free)
     # 1. direct shortest paths, cheapest first
@@ -406,12 +426,7 @@ def route(
             return int(index_of[s]), p, (np.asarray(target, float),)
         reasons.append(hit)
     # 2. roadmaps of growing size: k-nearest edges, all checked in one batch, then Dijkstra
-    pts = np.vstack([sources[:, :2], target[None, :2], obst.disc_centres]) if len(obst.disc_radii) else np.vstack([sources[:, :2], target[None, :2]])
-    if obst.arena is not None:
-        region = (0.0, 0.0, obst.arena[0], obst.arena[1])
-    else:
-        pad = 4.0 * radius + length
-        region = (pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad)
+    region = _roadmap_region(sources, target, obst, radius, length)
     ns = len(sources)
     for count in opts.roadmap_nodes:
         way = _sample_nodes(rng, count, region, obst, length, width, opts)
@@ -452,9 +467,9 @@ def route(
                 seq.append(int(pred[seq[-1]]))
             seq = seq[::-1]
             segs: list = []
-            for a, b in zip(seq[:-1], seq[1:]):
+            for a, b in zip(seq[:-1], seq[1:], strict=False):
                 segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
-            path = pathlib.Path(tuple(nodes[seq[0]]), radius, tuple(segs))
+            path = pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
             veto = extra_check(int(index_of[seq[0]]), path) if extra_check is not None else None
             if veto is None:
                 return int(index_of[seq[0]]), path, tuple(nodes[q].copy() for q in seq[1:])
@@ -496,7 +511,8 @@ class _Timeline:
     def phase(self, kind: str, mover: int, turn_k: int, straight_k: int, t0: float, target, **extra) -> None:
         """Record the phase that just ran (from ``t0`` to now)."""
         self.phases.append(
-            Phase(kind, int(mover), int(turn_k), int(straight_k), float(t0), float(self.t - t0), tuple(float(v) for v in target), **extra)
+            Phase(kind, int(mover), int(turn_k), int(straight_k), float(t0), float(self.t - t0),
+                  (float(target[0]), float(target[1]), float(target[2])), **extra)
         )
 
     def apply(self, k: int, duration: float, *, counts_for: Sequence[int] = ()) -> None:
@@ -531,7 +547,7 @@ def _label(scn, i: int, rank: int) -> str:
     return f"D{rank} ({scn.names[i]!r})"
 
 
-def _prechecks(scn, struct: Structure, rank: np.ndarray, opts: PlannerOptions) -> str | None:
+def _prechecks(scn, struct: Structure, rank: np.ndarray) -> str | None:
     """Reasons a structure cannot be planned from these starts at all (None if none found)."""
     n = scn.n
     starts = scn.starts
@@ -544,12 +560,12 @@ def _prechecks(scn, struct: Structure, rank: np.ndarray, opts: PlannerOptions) -
         return f"start bodies of {lab[i]} and {lab[j]} overlap by {d:.1f} um"
     if scn.arena_um is not None:
         out = outside_arena(starts, L, W, scn.arena_um)
-        for i in np.flatnonzero(out > 0):
+        for i in np.flatnonzero(out > 0).tolist():
             return f"{lab[i]} starts {out[i]:.1f} um outside the arena"
         out = outside_arena(goals, L, W, scn.arena_um)
-        for i in np.flatnonzero(out > 0):
+        for i in np.flatnonzero(out > 0).tolist():
             return f"the slot of {lab[i]} is {out[i]:.1f} um outside the arena"
-    orbiting = np.flatnonzero(rank <= n - 1)  # D_1..D_{n-1} orbit at their starts
+    orbiting = np.flatnonzero(rank <= n - 1).tolist()  # D_1..D_{n-1} orbit at their starts
     for a, b, o in disc_overlaps(centres[orbiting], rstar[orbiting]):
         i, j = orbiting[a], orbiting[b]
         return f"orbits of {lab[i]} and {lab[j]} overlap at the start by {o:.1f} um (orbit radius r* = {rstar[i]:.0f} um)"
@@ -561,7 +577,7 @@ def _prechecks(scn, struct: Structure, rank: np.ndarray, opts: PlannerOptions) -
             if over > 0:
                 return f"the orbit of {lab[i]} leaves the arena by {over:.1f} um"
     # Robots D_j (j <= n-2) orbit until their own step: every slot filled before must stay clear.
-    for i in np.flatnonzero(rank <= n - 2):
+    for i in np.flatnonzero(rank <= n - 2).tolist():
         later = np.flatnonzero(rank > rank[i])
         hit = bodies_hit_discs(goals[later], L[later], W[later], centres[i][None, :], [rstar[i]])
         for k in np.flatnonzero(hit[:, 0]):
@@ -615,6 +631,7 @@ class _Planner:
         self.opts = opts
         self.n = scn.n
         order = analysis.order_index  # scenario indices of D_1..D_n
+        assert order is not None and analysis.order is not None  # a STRING design (checked by plan_assembly)
         self.by_rank = {k + 1: int(i) for k, i in enumerate(order)}
         self.rank = np.empty(self.n, dtype=int)
         for k, i in self.by_rank.items():
@@ -669,7 +686,7 @@ class _Planner:
             options.append((0.0, a_max))
         for phi_deg, length in options:
             if phi_deg == 0.0:
-                path = pathlib.Path(tuple(_pre_approach(goal, length)), r, (("S", length),))
+                path = pathlib.Path(Pose(*_pre_approach(goal, length)), r, (("S", length),))
                 if obst.first_hit(path.sample(self.opts.sample_um)[:1], L, W, self.opts.clearance_um) is not None:
                     hit = "a docked neighbour at its start"
                     continue
@@ -834,7 +851,7 @@ class _Planner:
         scheduled and the one that forms G_1 soonest is kept.
         """
         order = np.argsort(pathlib.shortest_path_lengths(sourcesM, np.broadcast_to(preM, sourcesM.shape), rM), kind="stable")
-        found = []
+        found: list = []
         for s in order:
             if len(found) >= self.opts.pair_candidates:
                 break
@@ -860,6 +877,20 @@ class _Planner:
             return [final] * len(durs)
         return [np.asarray(park[0], float)] * (len(durs) - 1) + [final]
 
+    def _orbits_clear(self, centres: np.ndarray, M: int, obst_low: Obstacles) -> np.ndarray:
+        """``(K,)`` bool: whether D_{n-1} (index ``M``) orbiting about each of ``centres`` keeps the
+        clearance from the lower robots' orbit discs and from the arena edge."""
+        clearance = self.opts.clearance_um
+        rr = self.rstar[M] + clearance
+        ok = np.ones(len(centres), dtype=bool)
+        if len(obst_low.disc_radii):
+            gap = np.hypot(centres[:, None, 0] - obst_low.disc_centres[None, :, 0], centres[:, None, 1] - obst_low.disc_centres[None, :, 1])
+            ok &= (gap - obst_low.disc_radii[None, :] - self.rstar[M] >= clearance).all(axis=1)
+        if self.scn.arena_um is not None:
+            w, h = self.scn.arena_um
+            ok &= (centres[:, 0] >= rr) & (centres[:, 0] <= w - rr) & (centres[:, 1] >= rr) & (centres[:, 1] <= h - rr)
+        return ok
+
     def _cut_options(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, park, obst_low: Obstacles, aM: float):
         """Ways to cut D_{n-1}'s route (duration ``T`` s) into pieces for the G_1 schedule.
 
@@ -878,13 +909,7 @@ class _Planner:
         pos = np.arange(0.0, total, 10.0)
         centres = turning_centres(fullM.pose_at(pos), rM)
         rr = self.rstar[M] + opts.clearance_um
-        ok = np.ones(pos.size, dtype=bool)
-        if len(obst_low.disc_radii):
-            gap = np.hypot(centres[:, None, 0] - obst_low.disc_centres[None, :, 0], centres[:, None, 1] - obst_low.disc_centres[None, :, 1])
-            ok &= (gap - obst_low.disc_radii[None, :] - self.rstar[M] >= opts.clearance_um).all(axis=1)
-        if self.scn.arena_um is not None:
-            w, h = self.scn.arena_um
-            ok &= (centres[:, 0] >= rr) & (centres[:, 0] <= w - rr) & (centres[:, 1] >= rr) & (centres[:, 1] <= h - rr)
+        ok = self._orbits_clear(centres, M, obst_low)
         gN = self.goals[N]
         seen = set()
         # On the final corridor D_n loops back to its right and reaches about r + L/2 past the end of
@@ -924,7 +949,7 @@ class _Planner:
             if k_last < pos.size and not good[k_last]:
                 continue
             bounds = [0.0] + sorted(c for c in cuts if c > 1e-9) + [total]
-            durs = tuple((b - a) / vM for a, b in zip(bounds[:-1], bounds[1:]))
+            durs = tuple((b - a) / vM for a, b in zip(bounds[:-1], bounds[1:], strict=False))
             if len(durs) > opts.max_pieces:
                 continue
             key = tuple(round(x, 6) for x in durs)
@@ -932,7 +957,8 @@ class _Planner:
                 seen.add(key)
                 yield durs
 
-    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, durs: Sequence[float], park, lower: list[int]) -> str | None:
+    def _schedule_pair(self, N: int, M: int, fullM: pathlib.Path, wait0: float, durs: Sequence[float], park,
+                       lower: list[int]) -> str | None:
         """Plan D_n around D_{n-1}'s route cut into pieces of durations ``durs`` (s); None on success.
 
         During piece j D_{n-1} drives its piece (P_{n-1}/P_{n-2}) while D_n runs straight from
@@ -956,7 +982,7 @@ class _Planner:
             hN = np.array([math.sin(here[2]), math.cos(here[2]), 0.0])
             park = (np.asarray(park[0]) + straight_first * hN, park[1] - straight_first)
         starts = self._run_starts(N, durs, park)
-        runs = [pathlib.Path(tuple(s0), rN, (("S", vN * t),)) for s0, t in zip(starts, durs)]
+        runs = [pathlib.Path(Pose(*s0), rN, (("S", vN * t),)) for s0, t in zip(starts, durs, strict=False)]
         whoN, whoM = self.lab(N), self.lab(M)
         obst_low = self.obstacles(lower, [])
         bounds_t = np.concatenate([[0.0], np.cumsum(durs)])
@@ -980,10 +1006,11 @@ class _Planner:
                 return f"{whoN}'s straight run meets {whoM} (piece {j + 1} of {pieces})"
         # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods; D_{n-1} orbits meanwhile.
         obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {whoM}")
+        first: pathlib.Path | str
         if straight_first > 0.0:
-            first = pathlib.Path(tuple(here), rN, (("S", straight_first),))
-            hit = obst0.first_hit(first.sample(opts.sample_um), LN, WN, opts.clearance_um)
-            first = first if hit is None else f"blocked by {hit}"
+            run = pathlib.Path(Pose(*here), rN, (("S", straight_first),))
+            hit = obst0.first_hit(run.sample(opts.sample_um), LN, WN, opts.clearance_um)
+            first = run if hit is None else f"blocked by {hit}"
         else:
             first = self._timed_path(self.tl.poses[N], starts[0], vN, rN, LN, WN, wait0, TM, obst0)
         if isinstance(first, str):
@@ -1010,7 +1037,8 @@ class _Planner:
         """
         start = np.asarray(start, float)
         goal = np.asarray(goal, float)
-        key = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), round(wait0, 6), tuple(np.round(obst.disc_centres, 3).ravel()), use_route)
+        key = (tuple(np.round(start, 4)), tuple(np.round(goal, 4)), round(wait0, 6),
+               tuple(np.round(obst.disc_centres, 3).ravel()), use_route)
         if key not in self._timed_cache:
             self._timed_cache[key] = self._timed_path_uncached(start, goal, v, r, L, W, wait0, period, obst, use_route)
         return self._timed_cache[key]
@@ -1069,7 +1097,7 @@ class _Planner:
         taus = (np.arange(1, m) / m) * own
         ring = advance(np.repeat(np.asarray(start, float)[None, :], len(taus), axis=0), np.ones(len(taus), bool), v, r, taus)
         base = pathlib.shortest_path_lengths(ring, np.broadcast_to(goal, ring.shape), r)
-        cands = []
+        cands: list = []
         for j, tau in enumerate(taus):
             kmin = max(0, math.ceil((tau + base[j] / v - wait0) / period - 1e-9))
             cands.extend((wait0 + k * period, j) for k in range(kmin, kmin + 3))
@@ -1079,7 +1107,7 @@ class _Planner:
                 p = pathlib.path_of_length(ring[j], goal, r, want)
             except pathlib.InfeasibleLengthError:
                 continue
-            full = pathlib.Path(tuple(float(x) for x in start), r, (("R", v * taus[j]),) + p.segments)
+            full = pathlib.Path(Pose(*(float(x) for x in start)), r, (("R", v * taus[j]),) + p.segments)
             if _path_hit(obst, full, L, W, self.opts) is None:
                 return full
         return None
@@ -1091,7 +1119,7 @@ class _Planner:
         obstacles the route went around; here every other leg stays a shortest path and the one leg
         that gets the extra length is chosen, longest first (most room to bend).
         """
-        legs = [pathlib.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:])]
+        legs = [pathlib.shortest_path(a, b, r) for a, b in zip(nodes[:-1], nodes[1:], strict=False)]
         extra = want - sum(p.length for p in legs)
         if extra < -1e-9:
             return None
@@ -1102,7 +1130,7 @@ class _Planner:
                 continue
             if _path_hit(obst, leg, L, W, self.opts) is None:
                 segs = tuple(sg for q, p in enumerate(legs) for sg in (leg.segments if q == j else p.segments))
-                return pathlib.Path(tuple(float(x) for x in nodes[0]), r, segs)
+                return pathlib.Path(Pose(*(float(x) for x in nodes[0])), r, segs)
         return None
 
     def _stretch(self, path: pathlib.Path, want: float, obst, L, W) -> pathlib.Path | None:
@@ -1121,6 +1149,7 @@ class _Planner:
         return None
 
     def _run_pair_schedule(self) -> None:
+        assert self._pair_schedule is not None  # set by form_pair's successful search
         N, M, fullM, wait0, durs, runs, a_paths = self._pair_schedule
         n = self.n
         vM, vN = self.v[M], self.v[N]
@@ -1129,7 +1158,8 @@ class _Planner:
         # A_0: D_n drives to the start of its first run (P_n / P_{n-1}); D_{n-1} orbits to its departure phase.
         t0 = self.tl.t
         self.tl.apply_path(N, a_paths[0], n, n - 1)
-        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[0].segments, path_start=tuple(float(v) for v in a_paths[0].start))
+        self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[0].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]),
+                      path=a_paths[0].segments, path_start=tuple(float(v) for v in a_paths[0].start))
         for j in range(pieces):
             # B_j: D_{n-1} drives its piece (P_{n-1} / P_{n-2}); D_n drives straight.
             piece = pathlib.sub_path(fullM, bounds[j], bounds[j + 1])
@@ -1145,7 +1175,9 @@ class _Planner:
             if j + 1 < pieces:
                 t0 = self.tl.t
                 self.tl.apply_path(N, a_paths[j + 1], n, n - 1)
-                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[j + 1].segments, path_start=tuple(float(v) for v in a_paths[j + 1].start))
+                self.tl.phase("pair-A", N, n, n - 1, t0, a_paths[j + 1].end, partner=M,
+                              partner_end=tuple(float(v) for v in self.tl.poses[M]), path=a_paths[j + 1].segments,
+                              path_start=tuple(float(v) for v in a_paths[j + 1].start))
         self.route_lengths[M] = fullM.length
         self.route_lengths[N] = sum(p.length for p in a_paths) + vN * sum(durs)
         if pieces > 1:
@@ -1163,7 +1195,8 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
     return tuple(PlanPrimitive(p.name, tuple(p.turning)) for p in analysis.primitives)
 
 
-def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say, extended: bool = False) -> "PlanResult | str":
+def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say,
+                    extended: bool = False) -> PlanResult | str:
     """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
     t0 = time.perf_counter()
     planner = _Planner(scn, analysis, st, opts, extended=extended)
@@ -1193,7 +1226,7 @@ def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, ca
     summary = {
         "structure": st.shape,
         "variant": st.variant,
-        "order": list(analysis.order),
+        "order": list(analysis.order or ()),
         "duration_s": duration,
         "steps": len(steps),
         "route_length_um": {scn.names[i]: float(planner.route_lengths[i]) for i in range(scn.n)},
@@ -1217,7 +1250,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     scn = scenario
     if scn.n < 2:
         raise PlanningError("a structure needs at least 2 robots (G_1 is a pair)", source=scn.source)
-    scn.starts  # raises a ScenarioError naming a robot without a start
+    _ = scn.starts  # raises a ScenarioError naming a robot without a start
     analysis = analyse_scenario(scn)
     if not analysis.is_string:
         raise PlanningError(
@@ -1225,16 +1258,17 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
             source=scn.source,
         )
     order = analysis.order_index
+    assert order is not None  # STRING, checked above
     robots_in_order = [scn.robots[i] for i in order]
     structures = target_structures(robots_in_order, scn.structure)
     rank = np.empty(scn.n, dtype=int)
     for k, i in enumerate(order):
         rank[i] = k + 1
     # Cheapest candidates first (by the lower bound); skip those the starts rule out.
-    scored = []
+    scored: list = []
     first_reason = None
     for st in structures:
-        why = _prechecks(scn, st, rank, opts)
+        why = _prechecks(scn, st, rank)
         if why is not None:
             first_reason = first_reason or why
             continue
@@ -1253,7 +1287,8 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     raise PlanningError(reason + advice(reason), source=scn.source)
 
 
-def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *, extended: bool) -> "PlanResult | None":
+def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *,
+                  extended: bool) -> PlanResult | None:
     """The shortest plan over up to ``variants_compared`` plannable variants (cheapest bound first).
 
     ``extended`` turns on the wider G_1 search (one-leg stretch, orbit first); plan_assembly uses it
@@ -1285,9 +1320,11 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
 
 _ADVICE = (
     (re.compile(r"the orbit of (D\d+ \('[^']*'\))"), "move the start of {0} (its orbit disc is in the way) or enlarge the arena"),
-    (re.compile(r"too long for (D\d+ \('[^']*'\))'s free corridor"), "start the G_1 robots closer to their slots, or clear the line behind {0}'s slot"),
+    (re.compile(r"too long for (D\d+ \('[^']*'\))'s free corridor"),
+     "start the G_1 robots closer to their slots, or clear the line behind {0}'s slot"),
     (re.compile(r"the arena edge"), "enlarge the arena or move the structure (or the starts) away from its edge"),
-    (re.compile(r"the docked body of (D\d+ \('[^']*'\))|approach into its slot is blocked"), "change the structure (a slot whose approach is clear of the robots docked before it)"),
+    (re.compile(r"the docked body of (D\d+ \('[^']*'\))|approach into its slot is blocked"),
+     "change the structure (a slot whose approach is clear of the robots docked before it)"),
     (re.compile(r"meets (D\d+ \('[^']*'\))"), "move the start of {0} away from its partner's straight runs"),
 )
 
