@@ -18,10 +18,15 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.replay` - independent replay verification of plans
 - :mod:`stressbots.generate` - random feasible scenarios for tests and benchmarks
 - :mod:`stressbots.sim` - the simulated plant: control error, contact, compliance, camera
+- :mod:`stressbots.drift` - heading drift as a per-robot process of the distance driven
 - :mod:`stressbots.assessment` - placement and shape errors after a best rigid alignment
 - :mod:`stressbots.control` - the Plant protocol and the closed-loop EDR controller (seed Appendix 3; :mod:`stressbots.edr` re-exports it)
+- :mod:`stressbots.strategies` - the selectable closed-loop strategies (``rendezvous``, ``seed``)
+- :mod:`stressbots.seed_strategy` - the paper's two-step EDR strategy as written (with ``seed_loop``, ``seed_pair``, ``seed_fine_motion``)
+- :mod:`stressbots.se2` - rigid transforms of the plane
 - :mod:`stressbots.bounds` - error bounds, forward projections, regions A_i*
 - :mod:`stressbots.montecarlo` - Monte Carlo studies of closed-loop assembly
+- :mod:`stressbots.trial` - one closed-loop trial of a campaign and its seed
 - :mod:`stressbots.store` - the trial store of a campaign (DIR/trials.sqlite)
 - :mod:`stressbots.campaign` - cells x paired trials, run in-process, on a process pool or on Dask
 - :mod:`stressbots.study` - study files: a grid of conditions over layouts
@@ -29,6 +34,7 @@ Modules, by concept (see ``docs/design.md``):
 - :mod:`stressbots.tracking` - robot poses from camera frames (SPEC 9.2)
 - :mod:`stressbots.lab` - lab hardware: waveform generator, synthetic camera, image-in-the-loop plants
 - :mod:`stressbots.viz` - pictures
+- :mod:`stressbots.console` - terminal rendering (rich) of the command line
 - :mod:`stressbots.demo` - the main job on the built-in scenario
 - :mod:`stressbots.cli` - the command line
 """
