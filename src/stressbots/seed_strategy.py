@@ -45,9 +45,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .assessment import shape_error
 from .control import AssemblyResult, ControllerOptions, nominal_plan
-from .robots import TWO_PI, angle_difference
+from .control.result import judge_run
+from .robots import TWO_PI
 from .seed_loop import (
     SeedLoop,
     SeedSettings,
@@ -134,29 +134,6 @@ def assemble_seed(scenario, plant, *, seed: int | None = None, plan=None, time_b
         failure = stop.reason
     if failure is not None:
         loop.log("failure", None, failure)
-    true = plant.true_poses() if hasattr(plant, "true_poses") else None
-    final = np.asarray(true if true is not None else loop.est, dtype=np.float64)
-    shape = shape_error(final, nominal, scenario.lengths_um, scenario.widths_um)
-    success = failure is None and bool(loop.docked.all()) and shape.rms_um <= opts.shape_tol_um
-    if failure is None and not success:
-        failure = f"shape error {shape.rms_um:.1f} um RMS exceeds {opts.shape_tol_um:g} um"
-    return AssemblyResult(
-        success=success,
-        seed=seed,
-        names=scenario.names,
-        final_true=None if true is None else np.asarray(true, dtype=np.float64),
-        final_observed=loop.est.copy(),
-        goals=np.asarray(goals, dtype=np.float64).copy(),
-        nominal_goals=nominal.copy(),
-        docked=loop.docked.copy(),
-        shape_error_rms_um=float(shape.rms_um),
-        shape_rotation_deg=float(shape.rotation_deg),
-        placement_error_um=np.hypot(*(final[:, :2] - nominal[:, :2]).T),
-        heading_error_deg=np.degrees(np.abs(angle_difference(final[:, 2], nominal[:, 2]))),
-        duration_s=loop.t,
-        replans=loop.replans,
-        events=tuple(loop.events),
-        failure=failure,
-        trace_t=np.asarray(loop.trace_t),
-        trace_poses=np.asarray(loop.trace_p),
-    )
+    return judge_run(scenario, plant, seed=seed, failure=failure, estimates=loop.est, goals=goals, nominal_goals=nominal,
+                     docked=loop.docked, shape_tol_um=opts.shape_tol_um, duration_s=loop.t, replans=loop.replans,
+                     events=loop.events, trace_t=loop.trace_t, trace_poses=loop.trace_p)

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["AssemblyResult"]
+__all__ = ["AssemblyResult", "judge_run"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,3 +73,44 @@ class AssemblyResult:
 
 def _deg(p) -> list[float]:
     return [float(p[0]), float(p[1]), float(math.degrees(p[2]) % 360.0)]
+
+
+def judge_run(scenario, plant, *, seed: int | None, failure: str | None, estimates: np.ndarray, goals: np.ndarray,
+              nominal_goals: np.ndarray, docked: np.ndarray, shape_tol_um: float, duration_s: float, replans: int,
+              events, trace_t, trace_poses) -> AssemblyResult:
+    """The :class:`AssemblyResult` of a finished run of either strategy (:mod:`stressbots.strategies`).
+
+    Success needs no failure reason, every robot docked and the RMS shape error after the best rigid
+    alignment (um) within ``shape_tol_um``. A plant that offers ``true_poses()`` (the simulator) is
+    asked for them only now, for the result; otherwise the controller's ``estimates`` stand in. Placement
+    and heading errors are measured from the nominal slots (absolute placement, reported beside the shape).
+    """
+    from ..assessment import shape_error
+    from ..robots import angle_difference
+
+    true = plant.true_poses() if hasattr(plant, "true_poses") else None
+    final = np.asarray(true if true is not None else estimates, dtype=np.float64)
+    shape = shape_error(final, nominal_goals, scenario.lengths_um, scenario.widths_um)
+    success = failure is None and bool(np.all(docked)) and shape.rms_um <= shape_tol_um
+    if failure is None and not success:
+        failure = f"shape error {shape.rms_um:.1f} um RMS exceeds {shape_tol_um:g} um"
+    return AssemblyResult(
+        success=success,
+        seed=seed,
+        names=scenario.names,
+        final_true=None if true is None else np.asarray(true, dtype=np.float64),
+        final_observed=np.asarray(estimates, dtype=np.float64).copy(),
+        goals=np.asarray(goals, dtype=np.float64).copy(),
+        nominal_goals=np.asarray(nominal_goals, dtype=np.float64).copy(),
+        docked=np.asarray(docked).copy(),
+        shape_error_rms_um=float(shape.rms_um),
+        shape_rotation_deg=float(shape.rotation_deg),
+        placement_error_um=np.hypot(*(final[:, :2] - nominal_goals[:, :2]).T),
+        heading_error_deg=np.degrees(np.abs(angle_difference(final[:, 2], nominal_goals[:, 2]))),
+        duration_s=duration_s,
+        replans=replans,
+        events=tuple(events),
+        failure=failure,
+        trace_t=np.asarray(trace_t),
+        trace_poses=np.asarray(trace_poses),
+    )

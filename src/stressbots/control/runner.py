@@ -56,7 +56,6 @@ import numpy as np
 
 from .. import paths as pathlib
 from .. import se2
-from ..assessment import shape_error
 from ..collision import (
     arena_gap,
     bodies_hit_discs,
@@ -80,7 +79,7 @@ from .queries import (
     trim_steps,
     turn_fraction,
 )
-from .result import AssemblyResult
+from .result import AssemblyResult, judge_run
 from .targets import Targets, nominal_plan, structure_targets
 from .tuning import ControllerOptions
 
@@ -1426,31 +1425,6 @@ def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget
     if no_plan is not None:
         run.log("no-plan", None, f"the planner found no nominal plan ({no_plan}); the controller plans from the measured poses alone")
     failure = run.run()
-    true = plant.true_poses() if hasattr(plant, "true_poses") else None
-    final = np.asarray(true if true is not None else run.est, dtype=np.float64)
-    shape = shape_error(final, run.nominal_goals, scenario.lengths_um, scenario.widths_um)
-    placement = np.hypot(*(final[:, :2] - run.nominal_goals[:, :2]).T)
-    heading = np.degrees(np.abs(angle_difference(final[:, 2], run.nominal_goals[:, 2])))
-    success = failure is None and bool(run.docked.all()) and shape.rms_um <= opts.shape_tol_um
-    if failure is None and not success:
-        failure = f"shape error {shape.rms_um:.1f} um RMS exceeds {opts.shape_tol_um:g} um"
-    return AssemblyResult(
-        success=success,
-        seed=seed,
-        names=scenario.names,
-        final_true=None if true is None else np.asarray(true, dtype=np.float64),
-        final_observed=run.est.copy(),
-        goals=run.goals.copy(),
-        nominal_goals=run.nominal_goals.copy(),
-        docked=run.docked.copy(),
-        shape_error_rms_um=float(shape.rms_um),
-        shape_rotation_deg=float(shape.rotation_deg),
-        placement_error_um=placement,
-        heading_error_deg=heading,
-        duration_s=run.t,
-        replans=run.replans,
-        events=tuple(run.events),
-        failure=failure,
-        trace_t=np.asarray(run.trace_t),
-        trace_poses=np.asarray(run.trace_p),
-    )
+    return judge_run(scenario, plant, seed=seed, failure=failure, estimates=run.est, goals=run.goals,
+                     nominal_goals=run.nominal_goals, docked=run.docked, shape_tol_um=opts.shape_tol_um, duration_s=run.t,
+                     replans=run.replans, events=run.events, trace_t=run.trace_t, trace_poses=run.trace_p)
