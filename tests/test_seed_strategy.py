@@ -223,6 +223,7 @@ def test_same_seed_same_run(small):
     a = assemble_seed(scn, SimulatedPlant(scn, seed=2), seed=2, plan=plan, time_budget_s=120.0)
     b = assemble_seed(scn, SimulatedPlant(scn, seed=2), seed=2, plan=plan, time_budget_s=120.0)
     assert a.events == b.events and a.success == b.success and a.failure == b.failure
+    assert a.final_true is not None and b.final_true is not None  # the simulator knows the truth
     assert np.array_equal(a.final_true, b.final_true) and np.array_equal(a.trace_poses, b.trace_poses)
 
 
