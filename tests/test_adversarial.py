@@ -375,19 +375,24 @@ def test_help_names_no_document_users_do_not_have(run_cli, monkeypatch):
     """--help speaks the user's terms: no SPEC sections, no "seed" for the paper, flags without a
     `<bool>` value, and the README section the top-level help points to exists."""
     import typer
+    import typer.core
 
     from stressbots.cli import app
 
     monkeypatch.setenv("COLUMNS", "400")
     monkeypatch.setenv("TERM", "dumb")
-    names = list(typer.main.get_command(app).commands)
+    group = typer.main.get_command(app)
+    assert isinstance(group, typer.core.TyperGroup)  # the app has subcommands
+    names = list(group.commands)
     for name in [None, *names]:
         r = run_cli("--help") if name is None else run_cli(name, "--help")
         assert r.code == 0, (name, r.err)
         for bad in ("SPEC", "seed App", "seed Appendix", "<bool>"):
             assert bad not in r.out, (name, bad)
     top = run_cli("--help").out
-    section = re.search(r"see README, '([^']+)'", top).group(1)
+    see = re.search(r"see README, '([^']+)'", top)
+    assert see is not None, top
+    section = see.group(1)
     readme = (EXAMPLES.parent / "README.md").read_text()
     assert re.search(rf"^#+ {re.escape(section)}\s*$", readme, re.M), section
 

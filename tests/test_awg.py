@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import struct
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -36,7 +37,7 @@ class RecordingInstrument:
     _encoding = "ascii"
 
     def __init__(self, replies: dict[str, list[str]] | None = None):
-        self.log: list[tuple[str, object]] = []
+        self.log: list[tuple[str, Any]] = []  # (kind, message): str for write/query, bytes for write_raw
         self.replies = {k: list(v) for k, v in (replies or {}).items()}
 
     def write(self, msg: str) -> None:
@@ -56,7 +57,8 @@ class RecordingInstrument:
         pytest.importorskip("pyvisa")
         from pyvisa.resources import MessageBasedResource
 
-        return MessageBasedResource.write_binary_values(self, *args, **kwargs)
+        # duck-typed on purpose: pyvisa's block encoder only needs write_raw and the two attributes above
+        return MessageBasedResource.write_binary_values(self, *args, **kwargs)  # type: ignore[arg-type]
 
 
 def _program() -> AwgProgram:

@@ -68,7 +68,9 @@ def test_report_loads_in_headless_chromium_without_errors(chromium, report, tmp_
     for sid, heading in SECTIONS:
         assert re.search(rf'<section id="{sid}"', dom), sid
         assert heading in dom, heading
-    html_tag = re.search(r"<html[^>]*>", dom).group(0)
+    tag = re.search(r"<html[^>]*>", dom)
+    assert tag is not None
+    html_tag = tag.group(0)
     assert 'data-js="ready"' in html_tag, html_tag  # the animation script ran to its end
     assert 'data-js-errors="0"' in html_tag, (html_tag, re.search(r'<pre id="js-errors"[^>]*>(.*?)</pre>', dom, re.S))
     # nothing on the browser console (the page logs nothing when all is well)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from .electro_reference import brute_force_states
 
 EXAMPLE = EXAMPLES / "four-robots.toml"
 
-EXPECTED_JSON = {
+EXPECTED_JSON: dict[str, Any] = {  # a JSON document: values of mixed types
     "robots": ["A", "B", "C", "D"],
     "string": True,
     "order": ["B", "D", "A", "C"],

@@ -185,9 +185,11 @@ def test_structure_targets_clear_of_later_orbits():
     scn = random_scenario(5, 3, shape="comb")
     goals = structure_targets(scn).goals
     order = analyse_scenario(scn).order_index
+    assert order is not None  # a STRING scenario has a docking order
     rank = {int(i): k + 1 for k, i in enumerate(order)}
     L, W, R = scn.lengths_um, scn.widths_um, scn.turn_radii_um
     centres, rs = turning_centres(scn.starts, R), orbit_radii(L, W, R)
+    assert scn.arena_um is not None  # random scenarios always have an arena
     w, h = scn.arena_um
     arena = shapely.box(0.0, 0.0, w, h)
     for a in range(scn.n):

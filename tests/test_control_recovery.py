@@ -128,6 +128,7 @@ def test_keeps_clear_of_an_orbit_that_drifted_into_its_way():
     from stressbots.electrostatics import analyse_scenario
 
     order = analyse_scenario(scn).order_index
+    assert order is not None  # a STRING scenario has a docking order
     d1, d2 = int(order[0]), int(order[1])
     dry = assemble(scn, SimulatedPlant(scn, seed=0), seed=0, plan=plan)
     assert dry.success and not any(e["kind"] == "detour" for e in dry.events)

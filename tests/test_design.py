@@ -235,8 +235,8 @@ def test_bad_limits_name_the_option(kwargs, option):
 
 def test_bad_yield_arguments():
     d = design_string(2, Electrodes())
-    for kwargs, option in [(dict(sd_V=-1.0), "--sd-V"), (dict(sd_V=1.0, trials=0), "--trials"), (dict(sd_V=1.0, seed=-3), "--seed")]:
-        sd = kwargs.pop("sd_V")
+    cases: list[tuple[float, dict[str, int], str]] = [(-1.0, {}, "--sd-V"), (1.0, {"trials": 0}, "--trials"), (1.0, {"seed": -3}, "--seed")]
+    for sd, kwargs, option in cases:
         with pytest.raises(DesignError) as info:
             estimate_yield(d, sd, **kwargs)
         assert info.value.source == option

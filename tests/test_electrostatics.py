@@ -83,7 +83,7 @@ def test_a_level_exactly_margin_from_two_thresholds_counts():
     a = analyse_thresholds([100.0, 110.0], [10.0, 20.0], e)
     assert a.is_string and a.count == 3
     assert 105.0 in a.levels.volts.tolist()
-    assert a.raise_levels_V[1] == 105.0
+    assert a.raise_levels_V is not None and a.raise_levels_V[1] == 105.0
     # A hair closer (both kinds) and no level tells them apart: only all-up and all-down remain.
     b = analyse_thresholds([100.0, 109.99], [10.0, 19.99], e)
     assert not b.is_string and b.count == 2
@@ -258,6 +258,7 @@ def test_string_closed_form_matches_search(design, data):
     closed = level_sequence(a, sj, sk)
     searched = es._search(a.levels.snaps, a.levels.releases, sj, target=sk)
     assert searched is not None and len(closed) == len(searched)
+    assert a.raise_levels_V is not None and a.release_levels_V is not None
     assert len(closed) == (0 if j == k else 1 if (np.isfinite(a.raise_levels_V[k]) if k > j else np.isfinite(a.release_levels_V[k])) else 2)
     s = tuple(int(x) for x in sj)
     for v in closed:
@@ -330,7 +331,8 @@ def test_analyse_accepts_robots_and_names_them():
     a = analyse(s.robots, s.electrodes)
     assert a.names == ("A", "B", "C", "D")
     assert a.primitive("P2").turning == ("B", "D")
-    assert a.primitive_for_state([0, 1, 0, 1]).name == "P2"
+    p2 = a.primitive_for_state([0, 1, 0, 1])
+    assert p2 is not None and p2.name == "P2"
     assert a.primitive_for_state([0, 0, 1, 0]) is None
     assert a.is_accessible(a.state_of(["B", "D"])) and not a.is_accessible(a.state_of(["C"]))
     with pytest.raises(KeyError):

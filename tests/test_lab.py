@@ -18,6 +18,12 @@ from stressbots.waveform import synthesize  # noqa: E402
 from tests.test_awg import RecordingInstrument  # noqa: E402
 
 
+def _is_plant(obj: object) -> bool:
+    """The runtime protocol check, kept out of the test's flow so that ``isinstance`` does not narrow the
+    lab object to ``Plant`` (the tests go on to use its lab-only attributes)."""
+    return isinstance(obj, Plant)
+
+
 @pytest.fixture(scope="module")
 def pair():
     return random_scenario(2, seed=1, shape="pair", noise=LITERATURE_NOISE)
@@ -25,7 +31,7 @@ def pair():
 
 def test_synthetic_lab_observes_through_frames(pair):
     lab = SyntheticLab(pair, seed=3, um_per_px=4.0, keep_frames=2)
-    assert isinstance(lab, Plant)
+    assert _is_plant(lab)
     obs = lab.observe()
     true = lab.true_poses()
     assert np.all(np.hypot(*(obs[:, :2] - true[:, :2]).T) < 3.0)
@@ -43,7 +49,7 @@ def test_image_in_the_loop_assembles_like_the_pose_camera(pair):
     assert lab.frames_observed > 5
     # the result's final poses are the simulator's truth, and the tracker saw them within a few um
     final = lab.true_poses()
-    assert np.allclose(res.final_true, final)
+    assert res.final_true is not None and np.allclose(res.final_true, final)
     assert np.all(np.hypot(*(lab.observe()[:, :2] - final[:, :2]).T) < 3.0)
 
 
@@ -67,7 +73,7 @@ def test_hardware_plant_uploads_plays_and_tracks(pair):
     awg = RecordingInstrument()
     waits: list[float] = []
     hw = HardwarePlant(pair, awg, cam, cal, gain=20.0, sample_rate_hz=50_000.0, sleep=waits.append)
-    assert isinstance(hw, Plant)
+    assert _is_plant(hw)
     a = analyse_scenario(pair)
     wf1 = synthesize(a, [("P1", 0.002)])
     hw.apply(wf1)

@@ -161,6 +161,7 @@ def test_summary_holds_the_contract_keys_and_statistics(four):
 def test_sweep_scales_the_noise_with_common_seeds(four):
     st = mc.run_study(four, 30, 2, workers=1, sweep=(0.0, 1.0, 2.0), assemble=fake_assemble, plan=PLAN)
     rows = st.sweep
+    assert rows is not None  # a sweep was asked for
     assert [r["noise_scale"] for r in rows] == [0.0, 1.0, 2.0]
     assert rows[1]["successes"] == st.summary["successes"]  # scale 1 is the main study
     rates = [r["success_rate"] for r in rows]

@@ -346,7 +346,9 @@ BRUTE_PAIRS = int(os.environ.get("STRESSBOTS_BRUTE_PAIRS", "240"))
 
 def test_brute_force_lp_never_beats_closed_form():
     rng = np.random.default_rng(2024)
-    gaps, excess, words = [], [], []
+    gaps: list[float] = []
+    excess: list[float] = []
+    words: list[str] = []
     for i in range(BRUTE_PAIRS):
         start, goal, r = random_pair(rng, i)
         p = shortest_path(start, goal, r)
@@ -355,11 +357,11 @@ def test_brute_force_lp_never_beats_closed_form():
         gaps.append((p.length - b) / scale)
         excess.append((b - p.length) / scale)
         words.append(p.word)
-    gaps = np.array(gaps)
-    print(f"\nLP brute force, {BRUTE_PAIRS} pairs: max (ours - brute)/scale = {gaps.max():.3g}; "
+    gap_arr = np.array(gaps)
+    print(f"\nLP brute force, {BRUTE_PAIRS} pairs: max (ours - brute)/scale = {gap_arr.max():.3g}; "
           f"median (brute - ours)/scale = {np.median(excess):.3g}; words {sorted(set(words))}, "
           f"SRS {words.count('SRS')}")
-    assert gaps.max() <= 1e-9
+    assert gap_arr.max() <= 1e-9
     # the search is effective: it finds the optimum to 1e-6 on nearly all pairs
     assert np.mean(np.array(excess) <= 1e-6) > 0.95
     assert words.count("SRS") > BRUTE_PAIRS // 20
@@ -586,14 +588,16 @@ def test_bad_poses_raise():
 
 
 def test_path_value_type():
-    p = Path((1.0, 2.0, -1.0), 100.0, (("S", 10.0), ("S", 5.0), ("R", 0.0), ("R", 50.0)))
+    # Path documents a plain (x, y, theta) start and coerces it to Pose; the field is typed as the Pose it
+    # stores, so the tuple starts below carry targeted ignores.
+    p = Path((1.0, 2.0, -1.0), 100.0, (("S", 10.0), ("S", 5.0), ("R", 0.0), ("R", 50.0)))  # type: ignore[arg-type]
     assert p.segments == (("S", 15.0), ("R", 50.0)) and p.word == "SR"
     assert p.start == Pose(1.0, 2.0, TWO_PI - 1.0)
     assert p.length == 65.0 and p.turn == pytest.approx(0.5)
     with pytest.raises(dataclasses.FrozenInstanceError):
         p.radius = 3.0  # type: ignore[misc]
-    assert p == Path((1.0, 2.0, TWO_PI - 1.0), 100.0, (("S", 15.0), ("R", 50.0)))
-    assert hash(p) == hash(Path((1.0, 2.0, -1.0), 100.0, (("S", 15.0), ("R", 50.0))))
+    assert p == Path((1.0, 2.0, TWO_PI - 1.0), 100.0, (("S", 15.0), ("R", 50.0)))  # type: ignore[arg-type]
+    assert hash(p) == hash(Path((1.0, 2.0, -1.0), 100.0, (("S", 15.0), ("R", 50.0))))  # type: ignore[arg-type]
     assert p.pose_at(0.0) == p.start
     assert p.pose_at(65.0) == pytest.approx(p.end)
     assert p.pose_at(15.0) == pytest.approx(tuple(km.move(list(p.start), 15.0, 0.0)))
@@ -604,11 +608,11 @@ def test_path_value_type():
     q = p.then(("R", 10.0), ("S", 1.0))
     assert q.word == "SRS" and q.segments[1] == ("R", 60.0)
     with pytest.raises(ValueError, match="kind"):
-        Path((0, 0, 0), 1.0, (("L", 1.0),))
+        Path((0, 0, 0), 1.0, (("L", 1.0),))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=">= 0"):
-        Path((0, 0, 0), 1.0, (("S", -1.0),))
+        Path((0, 0, 0), 1.0, (("S", -1.0),))  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="radius"):
-        Path((0, 0, 0), 0.0)
+        Path((0, 0, 0), 0.0)  # type: ignore[arg-type]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -814,10 +818,11 @@ def test_arc_through_special_points():
     poses = np.array([[0, 0, 0.3], [10, 5, 2.0]])
     pts = np.array([[50.0, 20.0], [30.0, -40.0]])
     res = arc_through(poses, pts)
+    radius = np.asarray(res.radius_um)  # vectorised input: an array, not the scalar case
     dx, dy = pts[:, 0] - poses[:, 0], pts[:, 1] - poses[:, 1]
     eq1 = (dx**2 + dy**2) / (2 * (dx * np.cos(poses[:, 2]) - dy * np.sin(poses[:, 2])))
-    np.testing.assert_allclose(res.radius_um[eq1 > 0], eq1[eq1 > 0])
-    assert np.all(np.isnan(res.radius_um[eq1 < 0]))
+    np.testing.assert_allclose(radius[eq1 > 0], eq1[eq1 > 0])
+    assert np.all(np.isnan(radius[eq1 < 0]))
 
 
 def test_never_shorter_than_ordinary_dubins_from_ompl():

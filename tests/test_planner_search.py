@@ -37,6 +37,7 @@ def _integrate(start, segments, radius) -> np.ndarray:
 def _planner(opts: PlannerOptions | None = None) -> _Planner:
     scn = load(EXAMPLES / "four-robots.toml")
     analysis = analyse_scenario(scn)
+    assert analysis.order_index is not None  # the example is a STRING
     st0 = target_structures([scn.robots[i] for i in analysis.order_index], scn.structure)[0]
     return _Planner(scn, analysis, st0, opts or PlannerOptions())
 

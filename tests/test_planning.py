@@ -113,7 +113,7 @@ def test_planner_solves_random_layouts_it_is_known_to_solve():
 
 def test_heterogeneous_rotated_structure_with_shuffled_file_order():
     scn = random_scenario(5, 11, shape="cross", heterogeneous=True, shuffle=True)
-    assert scn.structure.at.theta != 0.0
+    assert scn.structure is not None and scn.structure.at.theta != 0.0
     result = plan_assembly(scn)
     _independent_checks(scn, result)
     assert len({r.speed_um_s for r in scn.robots}) == 5

@@ -100,6 +100,7 @@ def test_run_assembles_without_noise_and_writes_the_report(main_job):
     assert html.count("data:image/png;base64,") >= 4
     # the animation data is valid JSON with a few hundred frames of n robots
     m = re.search(r'<script type="application/json" id="run-animation-data">(.*?)</script>', html, re.S)
+    assert m is not None
     data = json.loads(m.group(1).replace("<\\/", "</"))
     assert 100 <= len(data["t"]) <= 1000 and len(data["poses"][0]) == 3 * 4 and data["names"] == ["A", "B", "C", "D"]
 
@@ -246,6 +247,7 @@ def test_animation_draws_planned_slots_and_retargeted_slots_only_from_g1(main_jo
     res = _result(out)
     html = (out / "report.html").read_text(encoding="utf-8")
     m = re.search(r'<script type="application/json" id="run-animation-data">(.*?)</script>', html, re.S)
+    assert m is not None
     data = json.loads(m.group(1).replace("<\\/", "</"))
     planned = np.array([x["goal"] for x in res["robots"]], dtype=float)
     got = np.array(data["goals"], dtype=float)

@@ -40,14 +40,14 @@ def test_defaults_and_overrides():
     assert a.turn_radius_um == 150.0 and b.turn_radius_um == 300.0  # default vs per-robot override
     assert a.length_um == 260.0 and a.width_um == 60.0 and a.speed_um_s == 100.0  # SPEC defaults
     assert s.electrodes.margin_V == 2.0 and s.electrodes.max_V == 200.0
-    assert a.start.theta == pytest.approx(math.pi / 2)  # file degrees -> radians
+    assert a.start is not None and a.start.theta == pytest.approx(math.pi / 2)  # file degrees -> radians
     assert b.start is None and s.arena_um == (3000.0, 2000.0)
     assert b.snap_down_V == 140.0 and isinstance(b.snap_down_V, float)
 
 
 def test_example_loads():
     s = load(EXAMPLES / "four-robots.toml")
-    assert s.n == 4 and s.has_starts and s.structure.shape == "tee"
+    assert s.n == 4 and s.has_starts and s.structure is not None and s.structure.shape == "tee"
     assert s.noise.heading_drift_rad_per_um == pytest.approx(math.radians(3.7) / 1000)
 
 

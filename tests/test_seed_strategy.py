@@ -133,6 +133,13 @@ def test_proximity_region_membership_by_hand():
     assert inside.tolist() == [co.covers(Point(*p)) for p in pts] == [True, True, False, False, True]
 
 
+def _rejection(*args, **kwargs) -> str:
+    """``intermediate_reason`` for a pose the test expects rejected: the reason, never ``None``."""
+    reason = intermediate_reason(*args, **kwargs)
+    assert reason is not None, "expected a rejection"
+    return reason
+
+
 def test_intermediate_region_membership_by_hand():
     r = 200.0
     goal = np.array([0.0, 0.0, 0.0])  # slot at the origin, heading +y
@@ -146,15 +153,15 @@ def test_intermediate_region_membership_by_hand():
     kw = dict(region_um=40.0, region_rad=math.radians(8), cone_rad=math.radians(45))
     assert intermediate_reason(a_pose, a_pose, goal, r, co, **kw) is None
     far = a_pose + np.array([60.0, 0.0, 0.0])
-    assert "from a_i" in intermediate_reason(far, a_pose, goal, r, co, **kw)
+    assert "from a_i" in _rejection(far, a_pose, goal, r, co, **kw)
     turned = a_pose + np.array([0.0, 0.0, math.radians(12)])
-    assert "heading" in intermediate_reason(turned, a_pose, goal, r, co, **kw)
+    assert "heading" in _rejection(turned, a_pose, goal, r, co, **kw)
     inside = np.array([0.0, -200.0, 0.0])  # in C_O, the slot straight ahead
     assert intermediate_reason(inside, inside, goal, r, co, **kw) == "inside C_O"
     left = np.array([600.0, -600.0, math.radians(90)])  # heading +x: the slot lies to its left
-    assert "no clockwise arc" in intermediate_reason(left, left, goal, r, None, **kw)
+    assert "no clockwise arc" in _rejection(left, left, goal, r, None, **kw)
     sharp = np.array([-400.0, -100.0, 0.0])  # the slot is ahead-right, but its arc turns 152 deg on the way
-    assert "compliance cone" in intermediate_reason(sharp, sharp, goal, 10.0, None, **kw)
+    assert "compliance cone" in _rejection(sharp, sharp, goal, 10.0, None, **kw)
 
 
 def test_region_path_avoids_a_loop_and_ends_in_the_region():
@@ -223,6 +230,7 @@ def test_same_seed_same_run(small):
     a = assemble_seed(scn, SimulatedPlant(scn, seed=2), seed=2, plan=plan, time_budget_s=120.0)
     b = assemble_seed(scn, SimulatedPlant(scn, seed=2), seed=2, plan=plan, time_budget_s=120.0)
     assert a.events == b.events and a.success == b.success and a.failure == b.failure
+    assert a.final_true is not None and b.final_true is not None  # the simulator knows the truth
     assert np.array_equal(a.final_true, b.final_true) and np.array_equal(a.trace_poses, b.trace_poses)
 
 

@@ -23,7 +23,7 @@ from stressbots.plans import save as save_plan
 from stressbots.robots import Pose, Robot
 from stressbots.scenario import Noise, Scenario, load
 from stressbots.sim import SimulatedPlant, check_determinism, plan_waveform, run_plan
-from stressbots.waveform import Drive, Hold, replay
+from stressbots.waveform import Drive, Hold, Segment, replay
 
 from .conftest import EXAMPLES, assert_user_error
 
@@ -251,7 +251,7 @@ def _crowded(seed):
     (some with drive bands that flip or chatter arms)."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(2, 5))
-    poses = []
+    poses: list[np.ndarray] = []
     while len(poses) < n:
         p = np.array([rng.uniform(200, 1000), rng.uniform(200, 1000), rng.uniform(0, 2 * math.pi)])
         if all(np.hypot(*(p[:2] - q[:2])) > 300 for q in poses):
@@ -264,7 +264,7 @@ def _crowded(seed):
     sc = Scenario("crowded", robots, Electrodes(), (1200.0, 1200.0), noise=LITERATURE_NOISE.scaled(3.0))
     wfs = []
     for _ in range(25):
-        wf = []
+        wf: list[Segment] = []
         for _ in range(int(rng.integers(1, 4))):
             if rng.random() < 0.6:
                 wf.append(Hold(float(rng.choice([0, 25, 52, 130, 150, 170, 190])), 0.001))

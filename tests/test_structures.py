@@ -201,7 +201,7 @@ def test_canonical_tee_geometry_and_contacts():
     assert s.docking_order == ("D", "C", "B", "A") and s.order == ("A", "B", "C", "D")
     np.testing.assert_allclose(
         s.goal_poses(),
-        [[0, -420, 0], [0, -160, 0], [130, 0, 1.5 * math.pi], [-130, 0, 0.5 * math.pi]],
+        np.array([[0, -420, 0], [0, -160, 0], [130, 0, 1.5 * math.pi], [-130, 0, 0.5 * math.pi]]),
         atol=1e-9,
     )
     b = s.slot("B")
@@ -268,7 +268,7 @@ def test_moved_structure_is_congruent():
     m = s.moved(0.5, (100.0, -30.0))
     independent_check(m, robots_v(7))
     assert [sl.supports for sl in m.slots] == [sl.supports for sl in s.slots]
-    assert m.frame.theta == pytest.approx(0.5)
+    assert m.frame is not None and m.frame.theta == pytest.approx(0.5)
     np.testing.assert_allclose(m.slot("D7").front_midpoint, [100.0, -30.0], atol=1e-9)
 
 

@@ -49,11 +49,11 @@ def test_grid_cells_conditions_and_paired_seeds(tmp_path):
     base = load(FOUR)
     expected = list(itertools.product(["four-robots", "four-b"], [0.5, 2.0], [0.0, 1.0, 2.0]))  # last axis fastest
     assert [(c.params["layout"], c.params["control.replan_interval_s"], c.params["noise.scale"]) for c in cells] == expected
-    for c, (_, dt, scale) in zip(cells, expected, strict=False):
-        assert c.scenario.control.replan_interval_s == dt
-        assert c.scenario.noise == base.noise.scaled(scale)
-        assert dict(c.controller)["options"].clearance_um == 15.0
-        assert c.scenario.robots == base.robots
+    for cell, (_, dt, scale) in zip(cells, expected, strict=False):
+        assert cell.scenario.control.replan_interval_s == dt
+        assert cell.scenario.noise == base.noise.scaled(scale)
+        assert dict(cell.controller)["options"].clearance_um == 15.0
+        assert cell.scenario.robots == base.robots
     summary, _, outcomes = run_study(spec, store=tmp_path / "s.sqlite", workers=2)
     rows = read_rows(tmp_path / "s.sqlite")
     assert [r["trial"] for r in rows] == list(range(12 * 5))
@@ -68,14 +68,14 @@ def test_grid_cells_conditions_and_paired_seeds(tmp_path):
     by_cell = {c: [r["success"] for r in rows if r["cell"] == c] for c in range(12)}
     assert by_cell[0] == by_cell[6]  # the same conditions on the same scenario (two labels) -> identical trials
     for c, row in enumerate(summary["cells"]):  # paired comparison with the layout's first cell, from the store
-        base = c - c % 6
+        base_cell = c - c % 6
         pv = row["paired_vs_baseline"]
-        if c == base:
+        if c == base_cell:
             assert pv is None
             continue
-        pairs = list(zip(by_cell[c], by_cell[base], strict=False))
-        assert (pv["baseline_cell"], pv["gained"], pv["lost"]) == (base, sum(a and not b for a, b in pairs), sum(b and not a for a,
-                                                                                                                 b in pairs))
+        pairs = list(zip(by_cell[c], by_cell[base_cell], strict=False))
+        gained, lost = sum(a and not b for a, b in pairs), sum(b and not a for a, b in pairs)
+        assert (pv["baseline_cell"], pv["gained"], pv["lost"]) == (base_cell, gained, lost)
     assert summary["trials"] == 60 and summary["axes"] == {"control.replan_interval_s": [0.5, 2.0], "noise.scale": [0.0, 1.0, 2.0]}
 
 

@@ -19,6 +19,7 @@ from stressbots.scenario import load
 from stressbots.waveform import (
     Drive,
     Hold,
+    Segment,
     check_drive_band,
     decode,
     export,
@@ -64,7 +65,7 @@ def replay_samples(v: np.ndarray, vd, vu) -> np.ndarray:
     [
         (lambda: Hold(float("nan"), 1.0), "finite"),
         (lambda: Hold(10.0, -1.0), ">= 0"),
-        (lambda: Hold("10", 1.0), "number"),
+        (lambda: Hold("10", 1.0), "number"),  # type: ignore[arg-type]  # deliberately a str: the check under test
         (lambda: Hold(True, 1.0), "number"),
         (lambda: Drive(105.0, 75.0, 1.0), "below"),
         (lambda: Drive(75.0, 75.0, 1.0), "below"),
@@ -199,7 +200,7 @@ def test_decoder_flags_flips_and_chatter():
     vd = np.array([100.0, 150.0, 90.0])
     vu = np.array([20.0, 40.0, 80.0])
     # All up; the band [70, 120] snaps robot 0 (V_d 100) down, and robot 2 (V_u 80, V_d 90) chatters.
-    wf = [Hold(0.0, 0.001), Drive(70.0, 120.0, 1.0)]
+    wf: list[Segment] = [Hold(0.0, 0.001), Drive(70.0, 120.0, 1.0)]
     (d,) = decode(wf, vd, vu)
     assert d.entry.tolist() == [0, 0, 0]
     assert d.flipped.tolist() == [True, False, False]
@@ -228,7 +229,7 @@ def test_synthesised_levels_never_leave_the_limits():
 
 
 def test_square_wave_at_the_drive_frequency():
-    wf = [Hold(130.0, 0.001), Drive(75.0, 105.0, 0.01)]
+    wf: list[Segment] = [Hold(130.0, 0.001), Drive(75.0, 105.0, 0.01)]
     t, v = sample(wf, rate_hz=100_000.0, drive_frequency_hz=1000.0)
     assert t.size == 1100 and np.allclose(np.diff(t), 1e-5)
     assert np.all(v[:100] == 130.0)
@@ -241,7 +242,7 @@ def test_square_wave_at_the_drive_frequency():
 
 
 def test_sampling_refuses_rates_that_lose_the_waveform():
-    wf = [Hold(130.0, 0.001), Drive(75.0, 105.0, 0.01)]
+    wf: list[Segment] = [Hold(130.0, 0.001), Drive(75.0, 105.0, 0.01)]
     with pytest.raises(WaveformError, match="twice the drive frequency"):
         sample(wf, rate_hz=15_000.0, drive_frequency_hz=10_000.0)
     with pytest.raises(WaveformError, match="no sample"):
