@@ -17,12 +17,9 @@ import shapely
 from . import paths
 from .bounds import ErrorModel, cylinder
 from .collision import arena_gap, bodies_hit_discs, penetration_depth
-from .electrostatics import analyse_scenario
-from .errors import PlanningError
-from .estimation import Estimator
-from .robots import TWO_PI, angle_difference, orbit_radii, turning_centres
+from .control.loop import PlantLoop
+from .robots import TWO_PI, angle_difference, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s2f_steps
-from .waveform import synthesize
 
 __all__ = ["SeedLoop", "SeedSettings", "SeedStop", "dock_single", "intermediate_reason", "in_proximity", "nominal_intermediate",
            "region_path"]
@@ -184,37 +181,20 @@ def _cylinder(speed_um_s: float, radius_um: float, model: ErrorModel):
 # -- the plant loop --------------------------------------------------------------------------------
 
 
-class SeedLoop:
-    """The only code of the seed's strategy that calls ``plant.apply`` / ``plant.observe``.
+class SeedLoop(PlantLoop):
+    """The seed strategy's loop on :class:`~stressbots.control.loop.PlantLoop` (the only code calling the
+    plant), with the strategy's settings and its C_alpha cylinders.
 
     Holds the estimates (:class:`stressbots.estimation.Estimator`), the arm state, simulated time, the
     event log and the trace; refuses steps beyond the time budget (:class:`SeedStop`).
     """
 
     def __init__(self, scenario, plant, *, tx: float, budget_s: float, settings: SeedSettings):
-        self.scn, self.plant, self.tx, self.budget_s, self.cfg = scenario, plant, float(tx), float(budget_s), settings
-        self.analysis = analyse_scenario(scenario)
-        if not self.analysis.is_string:
-            raise PlanningError("the seed's strategy needs a STRING design: " + "; ".join(self.analysis.reasons))
-        n = scenario.n
-        self.n = n
-        self.rank = np.empty(n, dtype=int)
-        assert self.analysis.order_index is not None  # a STRING design always has its order
-        for k, i in enumerate(self.analysis.order_index):
-            self.rank[i] = k + 1
-        self.by_rank = {int(self.rank[i]): i for i in range(n)}
-        self.L, self.W = scenario.lengths_um, scenario.widths_um
+        super().__init__(scenario, plant, budget_s=budget_s, who="the seed's strategy")
+        self.tx, self.cfg = float(tx), settings
         self.v_nom, self.r_nom = scenario.speeds_um_s, scenario.turn_radii_um
-        self.docked = np.zeros(n, dtype=bool)
-        self.state = np.zeros(n, dtype=np.uint8)
-        self.t = 0.0
-        self.replans = 0
-        self.events: list[dict] = []
-        self.estimator = Estimator(np.asarray(plant.observe(), dtype=np.float64), scenario.starts, self.v_nom, self.r_nom)
-        self.trace_t = [0.0]
-        self.trace_p = [self.est.copy()]
         model = ErrorModel.from_noise(scenario.noise)
-        self.cylinders = tuple(_cylinder(float(self.v_nom[i]), float(self.r_nom[i]), model) for i in range(n))
+        self.cylinders = tuple(_cylinder(float(self.v_nom[i]), float(self.r_nom[i]), model) for i in range(self.n))
 
     def name(self, i: int) -> str:
         return self.scn.names[i]
@@ -223,43 +203,8 @@ class SeedLoop:
         """``name (D_k)``: the robot's name and its place in the voltage order."""
         return f"{self.scn.names[i]} (D_{int(self.rank[i])})"
 
-    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None:
-        self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.name(robot), "detail": detail})
-
-    @property
-    def est(self) -> np.ndarray:
-        return self.estimator.pose
-
-    @property
-    def v_hat(self) -> np.ndarray:
-        return self.estimator.speed
-
-    @property
-    def r_hat(self) -> np.ndarray:
-        return self.estimator.radius
-
-    @property
-    def omega_hat(self) -> np.ndarray:
-        return self.estimator.turn_rate
-
-    @property
-    def rstar(self) -> np.ndarray:
-        return orbit_radii(self.L, self.W, self.r_hat)
-
-    def drive(self, steps: Sequence[tuple[int, float]]) -> None:
-        """Apply primitive steps ``(k, duration_s)`` and take the next frame."""
-        steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]
-        if not steps:
-            return
-        total = math.fsum(d for _, d in steps)
-        if self.t + total > self.budget_s + 1e-9:
-            raise SeedStop(f"not assembled within the time budget of {self.budget_s:g} s (simulated)")
-        self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state))
-        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), self.plant.observe())
-        self.t += total
-        self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
-        self.trace_t.append(self.t)
-        self.trace_p.append(self.est.copy())
+    def over_budget(self) -> Exception:
+        return SeedStop(f"not assembled within the time budget of {self.budget_s:g} s (simulated)")
 
     def path_steps(self, path: paths.Path, i: int, turn_k: int, straight_k: int, limit_s: float | None = None):
         """The first ``limit_s`` seconds of robot ``i``'s ``path`` as primitive steps (all when None)."""

@@ -63,12 +63,10 @@ from ..collision import (
     penetration_depth,
     point_rectangle_distance,
 )
-from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
-from ..estimation import Estimator
 from ..kinematics import move
-from ..robots import TWO_PI, angle_difference, front_midpoints, orbit_radii, turning_centres
-from ..waveform import synthesize
+from ..robots import TWO_PI, angle_difference, front_midpoints, turning_centres
+from .loop import PlantLoop
 from .queries import (
     best_departure,
     in_funnel,
@@ -116,42 +114,21 @@ class _Budget(_Abort):
         super().__init__(f"not assembled within the time budget of {budget_s:g} s (simulated)")
 
 
-class _Runner:
+class _Runner(PlantLoop):
     def __init__(self, scenario, plant, plan_result, opts: ControllerOptions, seed):
-        self.scn = scenario
-        self.plant = plant
+        super().__init__(scenario, plant, budget_s=opts.time_budget_s, who="closed-loop assembly")
         self.opts = opts
         self.tune = opts.tuning
         self.seed = seed
         self.tx = float(opts.replan_interval_s or scenario.control.replan_interval_s)
-        self.analysis = analyse_scenario(scenario)
-        if not self.analysis.is_string:
-            raise PlanningError("closed-loop assembly needs a STRING design: " + "; ".join(self.analysis.reasons))
         # named random streams of this run (the roadmap's samples); never derived from the event count
         self.routes_rng = stream(seed, "routes")
         if not isinstance(plan_result, Targets):
             plan_result = Targets(plan_result.plan.goal_array(), tuple(plan_result.phases))
         self.pr = plan_result
-        n = scenario.n
-        self.n = n
-        self.rank = np.empty(n, dtype=int)
-        assert self.analysis.order_index is not None  # a STRING design always has its order
-        for k, i in enumerate(self.analysis.order_index):
-            self.rank[i] = k + 1
-        self.by_rank = {int(self.rank[i]): i for i in range(n)}
         self.v, self.r = scenario.speeds_um_s, scenario.turn_radii_um
-        self.L, self.W = scenario.lengths_um, scenario.widths_um
         self.nominal_goals = np.asarray(plan_result.goals, dtype=np.float64).copy()
         self.goals = self.nominal_goals.copy()
-        self.docked = np.zeros(n, dtype=bool)
-        self.state = np.zeros(n, dtype=np.uint8)
-        self.t = 0.0
-        self.replans = 0
-        self.events: list[dict] = []
-        obs = np.asarray(plant.observe(), dtype=np.float64)
-        self.estimator = Estimator(obs, scenario.starts, self.v, self.r)
-        self.trace_t = [0.0]
-        self.trace_p = [self.est.copy()]
         self._missed = False
         self._stuck = False
         self._plan: tuple[Any, Any, float] | None = None
@@ -161,50 +138,14 @@ class _Runner:
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
-    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None:
-        self.events.append({"t_s": round(self.t, 3), "kind": kind, "robot": None if robot is None else self.scn.names[robot],
-                            "detail": detail})
+    def over_budget(self) -> Exception:
+        return _Budget(self.budget_s)
 
-    @property
-    def est(self) -> np.ndarray:
-        """Filtered pose estimates (n, 3) (:class:`stressbots.estimation.Estimator`)."""
-        return self.estimator.pose
-
-    @property
-    def v_hat(self) -> np.ndarray:
-        return self.estimator.speed
-
-    @property
-    def omega_hat(self) -> np.ndarray:
-        return self.estimator.turn_rate
-
-    @property
-    def r_hat(self) -> np.ndarray:
-        return self.estimator.radius
-
-    @property
-    def rstar(self) -> np.ndarray:
-        """Radii (um) of the discs the robots sweep when orbiting, with their identified turning radii."""
-        return orbit_radii(self.L, self.W, self.r_hat)
-
-    def drive(self, steps: Sequence[tuple[int, float]]) -> None:
-        """Apply primitive steps ``(k, duration_s)``, then update the estimates from the next frame."""
-        steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]
-        if not steps:
-            return
-        total = sum(d for _, d in steps)
-        if self.t + total > self.opts.time_budget_s:
-            raise _Budget(self.opts.time_budget_s)
-        wf = synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state)
-        self.plant.apply(wf)
-        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), self.plant.observe())
-        self.t += total
-        self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
+    def after_drive(self, steps: Sequence[tuple[int, float]]) -> None:
+        """Failure detection after every frame: robots lost to the camera, orbits drifting into trouble."""
         for i in np.flatnonzero(self.estimator.unseen == 3):
             self.log("lost", int(i), "not seen for 3 frames; dead-reckoning")
         self.watch_orbits([i for i in range(self.n) if not self.docked[i] and self.rank[i] < min(k for k, _ in steps)])
-        self.trace_t.append(self.t)
-        self.trace_p.append(self.est.copy())
 
     def watch_orbits(self, orbiting: Sequence[int]) -> None:
         """Failure detection: an orbit (drifting with the heading noise) within 10 um of another orbit,
