@@ -16,16 +16,7 @@ from stressbots.generate import LITERATURE_NOISE, random_scenario
 from stressbots.scenario import Noise
 from stressbots.sim import SimulatedPlant
 
-
-class ProtocolOnly:
-    def __init__(self, inner):
-        self._inner = inner
-
-    def observe(self):
-        return self._inner.observe()
-
-    def apply(self, waveform):
-        self._inner.apply(waveform)
+from .plants import ProtocolOnly
 
 
 @pytest.fixture(scope="module")

@@ -17,19 +17,7 @@ from stressbots.scenario import Noise, load
 from stressbots.sim import SimulatedPlant
 
 from .conftest import EXAMPLES
-
-
-class ProtocolOnly:
-    """A plant that offers nothing but ``observe`` and ``apply`` (no truth for the controller to peek at)."""
-
-    def __init__(self, inner):
-        self._inner = inner
-
-    def observe(self):
-        return self._inner.observe()
-
-    def apply(self, waveform):
-        self._inner.apply(waveform)
+from .plants import ProtocolOnly
 
 
 @pytest.fixture(scope="module")

@@ -37,19 +37,7 @@ from stressbots.sim import SimulatedPlant
 from stressbots.strategies import STRATEGIES, assemble_with
 
 from .conftest import EXAMPLES
-
-
-class ProtocolOnly:
-    """Nothing but ``observe`` and ``apply``: the strategy cannot peek at the truth."""
-
-    def __init__(self, inner):
-        self._inner = inner
-
-    def observe(self):
-        return self._inner.observe()
-
-    def apply(self, waveform):
-        self._inner.apply(waveform)
+from .plants import ProtocolOnly
 
 
 def _drive(pose, steps, turning_ks, v, r):

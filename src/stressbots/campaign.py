@@ -140,7 +140,7 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
         names = {f.name for f in dataclasses.fields(options)} if options is not None else set()
         if options is None and ("options" in params or takes_kwargs):
             try:
-                from .edr import ControllerOptions
+                from .control import ControllerOptions
 
                 names = {f.name for f in dataclasses.fields(ControllerOptions)}
                 if "strategy" in names:

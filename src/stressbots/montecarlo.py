@@ -168,24 +168,12 @@ def default_assemble() -> Callable:
 
 
 def default_planner() -> Callable:
-    """The nominal planner a study shares between its trials: the controller's own choice
-    (``nominal_plan`` of :mod:`stressbots.control`, or of :mod:`stressbots.edr` where the controller lives)
-    when it offers one, else :func:`stressbots.planning.plan_assembly`. A trial then follows exactly the
-    plan ``assemble(..., plan=None)`` would have made."""
-    try:
-        from .control import nominal_plan
+    """The nominal planner a study shares between its trials: the controller's own
+    (:func:`stressbots.control.nominal_plan`), so a trial follows exactly the plan ``assemble(..., plan=None)``
+    would have made."""
+    from .control import nominal_plan
 
-        return nominal_plan
-    except ImportError:
-        pass
-    try:  # the controller's module, where control.assemble comes from
-        from .edr import nominal_plan
-
-        return nominal_plan
-    except ImportError:
-        from .planning import plan_assembly
-
-        return plan_assembly
+    return nominal_plan
 
 
 def run_trials(

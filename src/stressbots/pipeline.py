@@ -137,7 +137,7 @@ def plan_for(scenario, source: str | None = None, *, seed: int = 0, options=None
             return plan_assembly(scenario, options)
         from .control import nominal_plan
 
-        return nominal_plan(scenario, seed=seed) if seed else nominal_plan(scenario)
+        return nominal_plan(scenario, seed=seed)
     except StressbotsError as exc:
         if exc.source is None and source:
             exc.source = source

@@ -260,7 +260,7 @@ def _set_key(data: dict, key: str, value: Any, source: str) -> None:
 def _controller_options(values: Mapping[str, Any], source: str):
     if not values:
         return None
-    from .edr import ControllerOptions
+    from .control import ControllerOptions
 
     names = {f.name: f for f in dataclasses.fields(ControllerOptions)}
     for k, v in values.items():
