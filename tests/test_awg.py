@@ -237,6 +237,22 @@ def test_cli_awg_exports_and_uploads_to_the_simulated_instrument(run_cli, tmp_pa
     assert lines[0] == "File Format:1.10" and points == len(lines) - lines.index("Data:") - 2
 
 
+def test_upload_refuses_a_resource_where_nothing_answers():
+    inst = RecordingInstrument({"*IDN?": [""]})
+    with pytest.raises(AwgError, match="no instrument answers"):
+        upload(_program(), inst)
+    assert inst.log == [("query", "*IDN?")]  # nothing written after the silent *IDN?
+
+
+def test_cli_awg_names_an_unknown_simulated_resource(run_cli, tmp_path):
+    from tests.conftest import EXAMPLES, assert_user_error
+
+    pytest.importorskip("pyvisa_sim")
+    r = run_cli("awg", EXAMPLES / "four-robots.toml", "--steps", "P1:0.002", "--out", tmp_path / "wf.arb", "--gain", "25",
+                "--upload", "TCPIP::nothere::INSTR", "--visa-library", f"{DATA / 'awg-sim.yaml'}@sim", "--ascii")
+    assert_user_error(r, "--upload TCPIP::nothere::INSTR", "no instrument answers")
+
+
 def test_cli_awg_refuses_before_writing(run_cli, tmp_path):
     from tests.conftest import EXAMPLES, assert_user_error
 

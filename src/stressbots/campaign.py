@@ -132,8 +132,9 @@ def controller_kwargs(assemble: Callable, *, options=None, strategy: str | None 
     except (TypeError, ValueError):  # pragma: no cover - builtins
         params = {}
     takes_kwargs = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
-    if strategy not in (None, "default", "rendezvous"):  # the default strategy needs no argument
-        from .strategies import STRATEGIES
+    from .strategies import DEFAULT_STRATEGY, STRATEGIES
+
+    if strategy not in (None, "default", DEFAULT_STRATEGY):  # the default strategy needs no argument
 
         if "strategy" in params and strategy not in STRATEGIES:
             raise StressbotsError(f"unknown strategy {strategy!r}; choose one of {', '.join(STRATEGIES)}", source=source)

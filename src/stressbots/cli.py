@@ -1357,7 +1357,9 @@ def _upload_program(prog, resource: str, visa_library: str | None, *, name: str,
     try:
         inst.timeout = 60_000  # ms: large waveforms take a while
         upload(prog, inst, name=name, ascii=ascii_data, output_on=output_on)
-    except StressbotsError:
+    except StressbotsError as exc:
+        if exc.source is None and exc.field is None:
+            exc.source = f"--upload {resource}"
         raise
     except Exception as exc:  # noqa: BLE001 - an I/O failure on the bus, reported in one line
         raise StressbotsError(f"upload failed: {_one_line(exc)}", source="--upload") from None

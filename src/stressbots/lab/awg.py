@@ -311,14 +311,16 @@ def upload(program: AwgProgram, instrument, *, name: str = "stressbots", ascii: 
     int16 (after ``FORM:BORD SWAP``) or, with ``ascii``, as comma-separated codes; ``*OPC?``;
     ``SYST:ERR?``; the settings (arb name, function, sample rate, step filter, HIGH/LOW levels, high-Z
     load); ``SYST:ERR?``; ``OUTP1 ON`` only with ``output_on``. An instrument error aborts with the output
-    switched off.
+    switched off. A resource whose ``*IDN?`` reply is empty is refused before anything is written: nothing
+    answers there (pyvisa-sim opens any name and answers silence).
     """
     if not isinstance(program, AwgProgram):
         raise TypeError("program must be an AwgProgram from compile_awg")
     if not (name and name.replace("_", "").isalnum() and name[0].isalpha() and len(name) <= 12):
         raise AwgError(f"arb name {name!r} must start with a letter, hold letters, digits or _, at most 12 characters",
                        field="name")
-    instrument.query("*IDN?")
+    if not str(instrument.query("*IDN?")).strip():
+        raise AwgError("no instrument answers at this resource (*IDN? returned nothing): check the resource name")
     instrument.write("*CLS")
     instrument.write("SOUR1:DATA:VOL:CLE")
     if ascii:
