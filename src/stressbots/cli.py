@@ -865,7 +865,8 @@ def bounds(
     m = report.model
     out.print(
         f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
-        f"drift +-{math.degrees(m.drift_rad_per_um) * 1000:.3g} deg/mm; camera {m.camera_position_um:.3g} um / "
+        f"drift bias +-{math.degrees(m.drift_rad_per_um) * 1000:.3g} deg/mm plus random walk "
+        f"+-{math.degrees(m.drift_walk_rad_per_sqrt_um) * math.sqrt(1000.0):.3g} deg/sqrt(mm); camera {m.camera_position_um:.3g} um / "
         f"{math.degrees(m.camera_heading_rad):.3g} deg",
         highlight=False,
         soft_wrap=True,
