@@ -11,7 +11,7 @@ nominal plan (timed once, as Monte Carlo shares it), then ``control.assemble`` t
 
 Prints the median and the worst trial per layout (goal 5: median <= 1 s for 4 robots, <= 5 s for 8).
 
-Run: ``python benchmarks/bench_trial_time.py [LAYOUT.toml ...] [--seeds S] [--budget-s T]``
+Run: ``python benchmarks/bench_trial_time.py [LAYOUT.toml ...] [--seeds S] [--first-seed F] [--budget-s T]``
 """
 
 from __future__ import annotations
@@ -77,7 +77,8 @@ def trial(scn, plan, seed: int, budget_s: float | None):
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("layouts", nargs="*", type=Path, default=[ROOT / "examples" / "four-robots.toml"])
-    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--seeds", type=int, default=5, help="number of plant seeds")
+    ap.add_argument("--first-seed", type=int, default=0, help="first plant seed")
     ap.add_argument("--budget-s", type=float, default=None, help="simulated time budget per trial (default the controller's)")
     args = ap.parse_args()
     for path in args.layouts:
@@ -85,14 +86,15 @@ def main() -> None:
         t0 = time.perf_counter()
         plan = nominal_plan(scn)
         t_plan = time.perf_counter() - t0
-        rows = [trial(scn, plan, s, args.budget_s) for s in range(args.seeds)]
+        seeds = range(args.first_seed, args.first_seed + args.seeds)
+        rows = [trial(scn, plan, s, args.budget_s) for s in seeds]
         walls = np.array([r[0] for r in rows])
         keys = ("simulator", "estimator", "roadmap routes", "controller")
         share = {k: sum(r[2].get(k, 0.0) for r in rows) / walls.sum() for k in keys}
         print(f"{path.name}: {scn.n} robots, nominal plan {t_plan:.2f} s; {sum(r[1] for r in rows)}/{len(rows)} assembled; "
               f"wall per trial median {np.median(walls):.2f} s, max {walls.max():.2f} s; "
               + ", ".join(f"{k} {100 * v:.0f} %" for k, v in share.items()))
-        for s, (w, ok, parts) in enumerate(rows):
+        for s, (w, ok, parts) in zip(seeds, rows, strict=True):
             print(f"  seed {s}: {w:.2f} s {'ok' if ok else 'FAILED'}  " + "  ".join(f"{k} {v:.2f}" for k, v in parts.items()))
 
 
