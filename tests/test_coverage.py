@@ -195,3 +195,14 @@ def test_report_section_lists_the_regions():
                         "fraction": 0.75, "low": 0.3, "high": 0.95, "seed_verdict": "no"}]}
     html = coverage_page(doc, b"\x89PNG", title="t")
     assert "3/4" in html and "75 %" in html and "30-95 %" in html and "data:image/png;base64," in html
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.floats(-100, 100), st.floats(-1.4, 1.4), st.floats(100, 400), st.floats(20, 120))
+def test_capture_offset_is_mirror_symmetric_and_the_region_its_limits(e, psi, length, width):
+    assert float(C.capture_offset(-e, -psi, length, width)) == pytest.approx(-float(C.capture_offset(e, psi, length, width)), abs=1e-9)
+    cap = C.DockingCapture(30.0, math.radians(45.0), length, width)
+    lo, hi = cap.lateral_limits(psi)
+    inside = bool(cap.contains(e, psi))
+    assert inside == (abs(psi) <= cap.cone_rad and float(lo) - 1e-9 <= e <= float(hi) + 1e-9) or abs(e - float(lo)) < 1e-6 or abs(
+        e - float(hi)) < 1e-6
