@@ -166,16 +166,26 @@ def test_approach_moment_from_a_hand_built_record():
     assert C._approach_sample(scn, result, arc, regions, 1, {"A", "C"}, 5.0, 1.0, 0) == []
 
 
+def _three_robots(tmp_path):
+    """The example without its D_1 (B): a pair and one docking robot (a quicker closed loop)."""
+    text = (EXAMPLES / "four-robots.toml").read_text()
+    i = text.index('[[robots]]\nname = "B"')
+    j = text.index("[[robots]]", i + 5)
+    path = tmp_path / "three.toml"
+    path.write_text(text[:i] + text[j:])
+    return path
+
+
 def test_bounds_trials_table_json_and_files(run_cli, tmp_path):
     out = tmp_path / "b"
-    r = run_cli("bounds", EXAMPLES / "four-robots.toml", "--trials", "1", "--scales", "1", "--out", out)
+    r = run_cli("bounds", _three_robots(tmp_path), "--trials", "1", "--scales", "1", "--out", out)
     assert r.code == 0, r.err
     assert "rendezvous-capture" in r.out and "straight-in" in r.out and "seed A*" in r.out
     doc = json.loads((out / "bounds.json").read_text())
     cov = doc["controller_coverage"]
     assert cov["format"] == "stressbots.coverage/1" and cov["trials"] == 1 and cov["noise_scales"] == [1.0]
     regions = {(x["region"], x["robot"]) for x in cov["regions"]}
-    assert ("rendezvous-capture", "C+A") in regions  # D_4 = C, D_3 = A on the example
+    assert ("rendezvous-capture", "C+A") in regions and ("capture", "D") in regions  # D_3 = C, D_2 = A, D_1 = D
     for x in cov["regions"]:
         assert 0 <= x["inside"] <= x["samples"] == 1 and x["seed_verdict"] in ("no", "no / no")
         assert x["inside"] == sum(s["inside"] for s in cov["samples"] if s["region"] == x["region"] and s["robot"] == x["robot"])
