@@ -358,6 +358,9 @@ def test_bounds_command_writes_json_and_picture(run_cli, tmp_path):
     assert r.code == 0, r.err
     assert "guaranteed" in r.out and "timed forward projection" in r.out and "empirical coverage" in r.out
     assert "between two measurements" in r.out
+    # both drift terms of the error box: the bias (deg/mm) and the random walk (deg/sqrt(mm))
+    line = " ".join(r.out.split())
+    assert "drift bias +-" in line and "deg/mm plus random walk +-" in line and "deg/sqrt(mm)" in line
     doc = json.loads((out / "bounds.json").read_text())
     assert doc["format"] == "stressbots.bounds/1" and doc["error_model"]["k_sigma"] == 3.0
     assert [rb["verdict"] for rb in doc["robots"]] == ["not guaranteed"] * 4

@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from stressbots import montecarlo as mc
 from stressbots.errors import StressbotsError
@@ -260,3 +262,17 @@ def test_a_stored_study_summarises_like_an_in_memory_one(four, tmp_path):
     assert [(r["trial"], r["cell"], r["seed"], r["noise_scale"]) for r in rows] == [
         (c * 6 + k, c, seeds[k], cells[c]["params"]["noise_scale"]) for c in range(3) for k in range(6)]
     assert sum(r["success"] for r in rows if r["cell"] == 0) == stored.summary["successes"]
+
+
+def test_failure_kind_keeps_named_objects():
+    # the seed's named objects keep their subscripts; numbers and robot indices are replaced
+    assert mc.failure_kind("D_(n-1)'s straight move to its station orbit is blocked") == (
+        "D_(n-1)'s straight move to its station orbit is blocked")
+    assert mc.failure_kind("G_1 did not form: D_n stopped 12.5 um from D_{n-1}") == "G_1 did not form: D_n stopped # um from D_{n-1}"
+    assert mc.failure_kind("D3 did not dock in 6 attempts") == "D# did not dock in # attempts"
+    assert mc.failure_kind("A_2* is empty after 1e3 s") == "A_2* is empty after # s"
+
+
+@given(st.text(alphabet=st.characters().filter(lambda c: not c.isdigit()), max_size=40))
+def test_failure_kind_without_digits_is_unchanged(text):
+    assert mc.failure_kind(text) == text.strip()

@@ -804,8 +804,14 @@ def bounds(
         0, "--coverage-trials", min=0, max=10_000,
         help="Also simulate N open-loop runs per robot and report how often they stay inside delta(t)."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs."),
+    seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Seed of the coverage runs (open-loop and closed-loop)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (files are still written)."),
+    trials: int = typer.Option(
+        0, "--trials", min=0, max=10_000,
+        help="Also run N closed-loop assemblies per noise scale and report how often the true poses lie in the regions the "
+             "controller aims at (about 1-3 s each)."
+    ),
+    scales_text: str = typer.Option("1,2", "--scales", help="Noise scales of the --trials runs (multiples of [noise]), e.g. '1,2'."),
 ) -> None:
     """Error bounds of the EDR strategy (the paper's App. 3.4): delta(t), C_alpha,i, A_i* and a verdict per robot.
 
@@ -819,8 +825,16 @@ def bounds(
     slot with the whole cylinder, outside C_O; a robot is "guaranteed" when A_i* is not empty. Writes
     DIR/bounds.json and DIR/bounds.png (delta curves, A_i*, the reachable cones of S_2f and S_3f).
 
+    With --trials N it also describes the closed-loop controller as it runs: the regions it aims at (the
+    approach funnel where gross motion ends; the straight-in aim and the docking capture region G_i* at the
+    start of each final straight approach; the G_1 rendezvous region when the pair departs) and, over N
+    simulated assemblies per noise scale, how often the true pose lies in each (Wilson 95 % interval),
+    next to the seed's A_i* verdict. Adds "controller_coverage" to bounds.json and writes DIR/coverage.png
+    and DIR/coverage.html (the regions over the structure with the Monte Carlo moments).
+
     Examples: `stressbots bounds examples/four-robots.toml --out out/bounds`;
-    `stressbots bounds SCENARIO --k 2 --critical --coverage-trials 200 --json`.
+    `stressbots bounds SCENARIO --k 2 --critical --coverage-trials 200 --json`;
+    `stressbots bounds SCENARIO --trials 50 --scales 1,2 --out out/bounds`.
     """
     import math
 
@@ -831,17 +845,21 @@ def bounds(
     k = _finite_nonneg(k, "--k")
     if k > MAX_K:
         raise StressbotsError(f"must be in [0, {MAX_K:g}] standard deviations, got {k:g}", source="--k")
+    from .montecarlo import parse_sweep
+
+    noise_scales = parse_sweep(scales_text, option="--scales")
     scn = scenario_arg(scenario, moving=True)
     _check_structure_in_arena(scn, str(scenario))
     folder = None
     if out_dir is not None:
         folder = prepare_dir(out_dir, inputs=[scenario])
-        for name in ("bounds.json", "bounds.png"):
+        for name in ("bounds.json", "bounds.png", "coverage.png", "coverage.html"):
             check_not_input(folder / name, [scenario])
     show = not (quiet or as_json)
     with err.status("computing bounds...", spinner="dots") if show else _nullcontext() as status:
         say = (lambda m: status.update(f"{m}...")) if show else None
-        report = analyse_bounds(scn, k=k, progress=say)
+        plan = _shared_plan(scn) if trials else None  # the bounds and the trials share one nominal plan
+        report = analyse_bounds(scn, k=k, progress=say, structure=None if plan is None else plan.structure)
         scales = critical_noise_scales(scn, k=k, structure=report.structure, progress=say) if critical else None
     if coverage_trials:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -851,12 +869,16 @@ def bounds(
             task = bar.add_task("coverage", total=coverage_trials * scn.n)
             cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, _total: bar.update(task, completed=d))
         report = report.with_coverage(cov)
+    ctl = _controller_coverage(scn, report, plan, trials, seed, noise_scales, show) if trials else None
     doc = report.to_dict()
     if scales is not None:
         doc["critical_noise_scale"] = scales
+    if ctl is not None:
+        doc["controller_coverage"] = ctl.to_dict()
     if folder is not None:
         write_json(folder / "bounds.json", doc)
         save_figure(plot_bounds(scn, report), folder / "bounds.png")
+        _write_coverage_files(scn, ctl, folder)
     if as_json:
         sys.stdout.write(to_json(doc))
         return
@@ -865,7 +887,8 @@ def bounds(
     m = report.model
     out.print(
         f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
-        f"drift +-{math.degrees(m.drift_rad_per_um) * 1000:.3g} deg/mm; camera {m.camera_position_um:.3g} um / "
+        f"drift bias +-{math.degrees(m.drift_rad_per_um) * 1000:.3g} deg/mm plus random walk "
+        f"+-{math.degrees(m.drift_walk_rad_per_sqrt_um) * math.sqrt(1000.0):.3g} deg/sqrt(mm); camera {m.camera_position_um:.3g} um / "
         f"{math.degrees(m.camera_heading_rad):.3g} deg",
         highlight=False,
         soft_wrap=True,
@@ -896,10 +919,74 @@ def bounds(
             highlight=False,
             soft_wrap=True,
         )
+    if ctl is not None:
+        out.print(_coverage_table(ctl))
+        out.print("moments: funnel when gross motion ends; straight-in and capture (G_i*) at the start of the final straight "
+                  "approach; rendezvous when the G_1 pair departs", highlight=False, soft_wrap=True)
     for note in report.notes:
         out.print(f"note: {note}", highlight=False, soft_wrap=True)
     if folder is not None:
-        out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}", highlight=False, soft_wrap=True)
+        more = f", {folder / 'coverage.png'}, {folder / 'coverage.html'}" if ctl is not None else ""
+        out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}{more}", highlight=False, soft_wrap=True)
+
+
+def _shared_plan(scn):
+    """The nominal plan the closed-loop trials follow, when the bounds would resolve their structure from it
+    (a named shape and start poses); else None."""
+    from .control import nominal_plan
+    from .errors import PlanningError
+
+    if scn.structure is None or not scn.has_starts:
+        return None
+    try:
+        return nominal_plan(scn)
+    except PlanningError:
+        return None
+
+
+def _controller_coverage(scn, report, plan, trials: int, seed: int, noise_scales, show: bool):
+    """`bounds --trials`: the controller's regions and their Monte Carlo coverage, with a progress bar."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from .coverage import controller_coverage
+
+    verdicts = {rb.name: "yes" if rb.guaranteed else "no" for rb in report.robots}
+    with Progress(TextColumn("closed-loop trials"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
+                  disable=not show, transient=True) as bar:
+        task = bar.add_task("trials", total=trials * len(noise_scales))
+        return controller_coverage(scn, trials=trials, seed=seed, scales=noise_scales, verdicts=verdicts, plan=plan,
+                                   progress=lambda d, _total: bar.update(task, completed=d))
+
+
+def _write_coverage_files(scn, ctl, folder: Path) -> None:
+    """DIR/coverage.png and DIR/coverage.html of `bounds --trials` (nothing without trials)."""
+    from .outputs import figure_bytes, write_bytes, write_text
+    from .report import coverage_page
+    from .viz import plot_controller_coverage
+
+    if ctl is None:
+        return
+    png = figure_bytes(plot_controller_coverage(scn, ctl))
+    write_bytes(folder / "coverage.png", png)
+    write_text(folder / "coverage.html", coverage_page(ctl.to_dict(), png, title=f"stressbots bounds: {scn.name}"))
+
+
+def _coverage_table(ctl):
+    """The table of `bounds --trials`: region, its size, coverage with its Wilson interval, the seed's verdict."""
+    from rich import box
+    from rich.table import Table
+
+    succ = ", ".join(f"{s}/{ctl.trials} at {x:g}x" for x, s in zip(ctl.scales, ctl.successes, strict=True))
+    t = Table(title=f"the controller's regions: true pose inside at the moment it commits ({ctl.trials} trials per noise scale; "
+                    f"assembled {succ})",
+              caption="seed A*: the seed's verdict (guaranteed?)", box=box.SIMPLE_HEAD, pad_edge=False)
+    for col in ("region", "robot", "size", "noise", "inside", "95% CI", "seed A*"):
+        t.add_column(col, justify="left" if col in ("region", "robot", "size", "seed A*") else "right", no_wrap=col != "size",
+                     min_width=14 if col == "size" else None)
+    for r in ctl.regions:
+        t.add_row(r.region, r.robot, r.size, f"{r.scale:g}x", f"{r.inside}/{r.samples} {100 * r.fraction:.0f}%",
+                  f"{100 * r.low:.0f}-{100 * r.high:.0f}%", r.seed_verdict)
+    return t
 
 
 def _bounds_table(report, scales: dict[str, float] | None):

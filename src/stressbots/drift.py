@@ -151,14 +151,22 @@ class HeadingDrift:
 
         Consecutive pieces cut at the knots, each of constant drift curvature (1/um).
         """
-        delta = self.model.knot_um
-        length_um = max(float(length_um), 0.0)
-        k0 = int(math.floor(o0 / delta))
-        k1 = max(k0, int(math.ceil((o0 + length_um) / delta)) - 1)
+        k0, k1, end = self._knots(o0, length_um)
         tab = self._walk(i, k1)
-        edges = np.concatenate([[o0], delta * np.arange(k0 + 1, k1 + 1, dtype=np.float64), [o0 + length_um]])
-        edges = np.clip(edges, o0, o0 + length_um)
-        return np.diff(edges), self.bias[i] + tab[k0 : k1 + 1]
+        # the edges o0, the knots inside, o0 + length, clipped to that range; pieces are their differences
+        edges = np.empty(k1 - k0 + 2)
+        edges[0] = o0
+        edges[1:-1] = self.model.knot_um * np.arange(k0 + 1, k1 + 1, dtype=np.float64)
+        edges[-1] = end
+        np.minimum(np.maximum(edges, o0, out=edges), end, out=edges)
+        return edges[1:] - edges[:-1], self.bias[i] + tab[k0 : k1 + 1]
+
+    def _knots(self, o0: float, length_um: float) -> tuple[int, int, float]:
+        """``(k0, k1, o0 + length)``: the knot intervals ``k0..k1`` an odometer range ``[o0, o0 + length]`` meets."""
+        delta = self.model.knot_um
+        end = o0 + max(float(length_um), 0.0)
+        k0 = int(math.floor(o0 / delta))
+        return k0, max(k0, int(math.ceil(end / delta)) - 1), end
 
     def curvature_at(self, odometer) -> np.ndarray:
         """Drift curvature ``(n,)`` (1/um) each robot has at its odometer reading (um): the knot interval
@@ -175,7 +183,8 @@ class HeadingDrift:
         """Largest drift curvature magnitude (1/um) robot i meets over odometer ``[o0, o0 + length_um]``."""
         if not self.active:
             return 0.0
-        return float(np.max(np.abs(self.segments(i, o0, length_um)[1])))
+        k0, k1, _ = self._knots(o0, length_um)  # the curvatures of :meth:`segments`, without the lengths
+        return float(np.max(np.abs(self.bias[i] + self._walk(i, k1)[k0 : k1 + 1])))
 
     def heading_change(self, i: int, o0: float, length_um: float) -> float:
         """Heading drift (rad, clockwise positive) accumulated over odometer ``[o0, o0 + length_um]``."""

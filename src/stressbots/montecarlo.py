@@ -127,14 +127,26 @@ def percentiles(values, qs: Sequence[float] = (50, 90, 95)) -> dict[str, float |
     return out
 
 
-_NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+_NUMBER = r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?"
+# a named object of the seed's vocabulary: a letter, "_", then a subscript (G_1, D_n, D_(n-1), D_{n-1}, A_2*, t_4pi)
+_NAMED = r"(?<![A-Za-z0-9])[A-Za-z]+_(?:\([^()]*\)|\{[^{}]*\}|[A-Za-z0-9]+)"
+_KIND = re.compile(f"(?P<named>{_NAMED})|(?P<number>{_NUMBER})")
 
 
 def failure_kind(failure: str | None) -> str | None:
-    """A failure message with its numbers replaced by ``#`` (so that like failures count together)."""
+    """A failure message with its numbers replaced by ``#`` (so that like failures count together).
+
+    Numbers and robot indices (``D3`` -> ``D#``) are replaced; named objects of the seed's vocabulary
+    keep their subscripts, since they say which stage failed.
+
+    >>> failure_kind("D_(n-1)'s straight move to its station orbit is blocked after 12.5 s")
+    "D_(n-1)'s straight move to its station orbit is blocked after # s"
+    >>> failure_kind("G_1 did not form: D3 stopped 40 um from D_n")
+    'G_1 did not form: D# stopped # um from D_n'
+    """
     if failure is None:
         return None
-    return _NUMBER.sub("#", str(failure)).strip()
+    return _KIND.sub(lambda m: m.group("named") or "#", str(failure)).strip()
 
 
 def parse_sweep(text: str, *, option: str = "--sweep") -> tuple[float, ...]:

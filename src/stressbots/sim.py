@@ -279,6 +279,10 @@ class SimulatedPlant:
         Start poses (um, rad) instead of the scenario's, e.g. for constructed contacts.
     record : bool
         Keep a sampled trajectory (:meth:`trace`) for pictures; off by default (it costs time).
+    log_drives : bool
+        Keep the true poses at the end of every Drive and the arm states it ran with
+        (:meth:`drive_log`), for analyses of moments inside a waveform (:mod:`stressbots.coverage`). Cheap;
+        it changes nothing of the motion.
     drift : stressbots.drift.DriftModel, optional
         Knot spacing and bias/walk split of the heading drift (default
         :data:`stressbots.drift.DEFAULT_DRIFT`); its size is the scenario's ``heading_drift_deg_per_mm``.
@@ -291,7 +295,8 @@ class SimulatedPlant:
     """
 
     def __init__(
-        self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None
+        self, scenario, seed: int | None = None, *, poses=None, record: bool = False, drift: DriftModel | None = None,
+        log_drives: bool = False,
     ):
         self.scenario = scenario
         n = scenario.n
@@ -330,6 +335,7 @@ class SimulatedPlant:
         self._record = bool(record)
         self._trace_t: list[np.ndarray] = [np.zeros(1)]
         self._trace_p: list[np.ndarray] = [self._pose[None].copy()]
+        self._drive_log: list[tuple[float, np.ndarray, np.ndarray]] | None = [] if log_drives else None
 
     # -- the Plant protocol ------------------------------------------------------------------------
 
@@ -357,6 +363,8 @@ class SimulatedPlant:
             for i in np.flatnonzero(d.chatter):
                 self._log(t_start, int(i), "arm_chatter", None, f"its arm chatters in the drive band [{d.low_V:g}, {d.high_V:g}] V")
             self._drive(d.states.astype(bool), d.chatter, d.duration_s, t_start)
+            if self._drive_log is not None:
+                self._drive_log.append((t_start + d.duration_s, d.states.astype(bool) | d.chatter, self._pose.copy()))
         self._arms = np.asarray(dec.final, dtype=np.uint8).copy()
         self._t = t0 + dec.duration_s
 
@@ -433,6 +441,23 @@ class SimulatedPlant:
             t = np.append(t, self._t)
             p = np.concatenate([p, self._pose[None]])
         return t, p
+
+    def drive_log(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """With ``log_drives=True``: the end time ``(K,)`` (s) of every Drive so far, which robots turned in
+        it ``(K, n)`` (arm down or chattering) and the true poses at its end ``(K, n, 3)``.
+
+        Raises
+        ------
+        RuntimeError
+            The plant was made without ``log_drives=True``.
+        """
+        if self._drive_log is None:
+            raise RuntimeError("make the plant with log_drives=True to keep its drive log")
+        n = self.n
+        if not self._drive_log:
+            return np.zeros(0), np.zeros((0, n), dtype=bool), np.zeros((0, n, 3))
+        t, turning, poses = zip(*self._drive_log, strict=True)
+        return np.array(t), np.stack(turning), np.stack(poses)
 
     def copy(self) -> SimulatedPlant:
         """An independent copy that continues bit-identically (random streams included)."""

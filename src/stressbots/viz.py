@@ -493,3 +493,98 @@ def plot_final_structure(scenario, final, goals, docked=None, *, title: str = ""
     ax.legend(loc="upper right", fontsize=7.5)
     ax.set_title(title, fontsize=9.5)
     return fig
+
+
+# ----------------------------------------------------------------------------------------------------
+# the controller's regions and their Monte Carlo coverage (stressbots.coverage)
+
+
+def _coverage_structure(ax, scenario, cov, capture) -> None:
+    """Left panel: the slots, each docking robot's capture corridor (heading = the slot's) and the true
+    positions at the moments (filled: inside the capture region, crosses: outside)."""
+    from matplotlib.patches import Polygon as MplPolygon
+
+    names = list(scenario.names)
+    cols = robot_colours(scenario.n)
+    goals = np.asarray(cov.goals)
+    draw_bodies(ax, goals, scenario.lengths_um, scenario.widths_um, [(0.45, 0.45, 0.45, 1.0)] * scenario.n, lw=0.8, ls="--", zorder=2)
+    for nm in cov.order[:-2]:
+        i = names.index(nm)
+        g = goals[i]
+        h, rt = np.array([math.sin(g[2]), math.cos(g[2])]), np.array([math.cos(g[2]), -math.sin(g[2])])
+        tol, back = capture[nm].tol_um, 2.0 * float(scenario.lengths_um[i])
+        band = [g[:2] + a * h + b * rt for a, b in ((0, -tol), (0, tol), (-back, tol), (-back, -tol))]
+        ax.add_patch(MplPolygon(np.array(band), closed=True, fc=(*cols[i][:3], 0.18), ec=cols[i], lw=0.6, zorder=2))
+    for s in cov.samples:
+        if s.region not in ("capture", "rendezvous-capture"):
+            continue
+        i = names.index(s.robot.split("+")[0])
+        ax.plot(*s.xy, "o" if s.inside else "x", ms=3.5 if s.inside else 5, color=cols[i], alpha=0.8, zorder=4,
+                mfc=cols[i] if s.scale <= 1.0 else "none")
+    pts = np.concatenate([goals[:, :2], np.array([s.xy for s in cov.samples]).reshape(-1, 2)])
+    lo, hi = pts.min(axis=0) - 200.0, pts.max(axis=0) + 200.0
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (um)")
+    ax.set_ylabel("y (um)")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_title("true positions at the moments over the slots\n(bands: capture corridors; D_n at departure)", fontsize=8)
+
+
+def _coverage_plane(ax, cov, regions: tuple[str, str], boxes, xlabel: str, ylabel: str, title: str) -> None:
+    """A region's own coordinates: its outline(s) and the samples (filled: 1x noise, hollow: other scales)."""
+    for xy, style in boxes:
+        ax.plot(*np.asarray(xy).T, style, lw=1.0)
+    for s in cov.samples:
+        if s.region != regions[1]:
+            continue
+        c = "tab:green" if s.inside else "tab:red"
+        ax.plot(*s.coords, "o", ms=3.5, color=c, mfc=c if s.scale <= 1.0 else "none", alpha=0.8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.set_title(title, fontsize=8)
+
+
+def plot_controller_coverage(scenario, cov, *, title: str = ""):
+    """The controller's regions with the Monte Carlo moments (:func:`stressbots.coverage.controller_coverage`).
+
+    Left: the slots, each docking robot's capture corridor and the true positions at the moments. Middle:
+    the final straight approach in ``(e, psi)``: the capture region G_i* (solid) and the controller's aim
+    (dashed). Right: the predicted G_1 meeting in ``(w_y, alpha)``: self-alignment's limits (solid) and the
+    controller's departure test (dashed). Green inside the capture region, red outside; filled at the
+    scenario's noise, hollow at other scales.
+    """
+    from .control import ControllerOptions
+    from .coverage import ControllerRegions
+
+    plt = _plt()
+    reg = ControllerRegions.of(scenario, ControllerOptions())
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2))
+    _coverage_structure(axes[0], scenario, cov, reg.capture)
+    psi = np.radians(np.linspace(-45.0, 45.0, 91))
+    cap = reg.capture[cov.order[0]]
+    lo, hi = (np.asarray(x) for x in cap.lateral_limits(psi))
+    outline = np.concatenate([np.stack([lo, np.degrees(psi)], 1), np.stack([hi[::-1], np.degrees(psi[::-1])], 1), [[lo[0], -45.0]]])
+    a, h = reg.aim.lateral_um, math.degrees(reg.aim.heading_rad)
+    aim = [[-a, -h], [a, -h], [a, h], [-a, h], [-a, -h]]
+    _coverage_plane(axes[1], cov, ("straight-in", "capture"), [(outline, "k-"), (aim, "k--")], "e: lateral offset at the slot (um)",
+                    "psi: heading to the slot (deg)", "final straight approach: capture G_i* (solid), aim (dashed)")
+    axes[1].set_xlim(-80, 80)
+    axes[1].set_ylim(-20, 20)
+
+    def box(w: float, al: float):
+        return [[0, -al], [w, -al], [w, al], [0, al], [0, -al]]
+
+    mc, ma = reg.meet_capture, reg.meet_aim
+    _coverage_plane(axes[2], cov, ("rendezvous-aim", "rendezvous-capture"),
+                    [(box(mc.max_offset_um, math.degrees(mc.max_incidence_rad)), "k-"),
+                     (box(ma.fraction * ma.max_offset_um, math.degrees(ma.fraction * ma.max_incidence_rad)), "k--")],
+                    "|w_y| at the predicted meeting (um)", "alpha (deg)", "G_1 rendezvous: self-alignment (solid), departure test (dashed)")
+    axes[2].set_xlim(0, 120)
+    axes[2].set_ylim(-75, 75)
+    fig.suptitle(title or f"{scenario.name}: the controller's regions, {cov.trials} trials per noise scale "
+                          f"({', '.join(f'{s:g}x' for s in cov.scales)})", fontsize=10)
+    fig.tight_layout()
+    return fig
