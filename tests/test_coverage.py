@@ -216,3 +216,16 @@ def test_capture_offset_is_mirror_symmetric_and_the_region_its_limits(e, psi, le
     inside = bool(cap.contains(e, psi))
     assert inside == (abs(psi) <= cap.cone_rad and float(lo) - 1e-9 <= e <= float(hi) + 1e-9) or abs(e - float(lo)) < 1e-6 or abs(
         e - float(hi)) < 1e-6
+
+
+def test_main_job_report_shows_the_controller_regions(tmp_path):
+    from stressbots.pipeline import coverage_extra, run_job
+    from stressbots.scenario import load
+
+    scn = load(_three_robots(tmp_path))
+    calls: list[tuple[int, int]] = []
+    job = run_job(scn, tmp_path / "job", seed=0, extra=coverage_extra(1, scales=(1.0,), progress=lambda d, t: calls.append((d, t))))
+    html = job.report_path.read_text()
+    assert "Controller regions" in html and "rendezvous-capture" in html
+    assert (tmp_path / "job" / "coverage.png").stat().st_size > 10_000 and "coverage.png" in job.files
+    assert job.extra["controller_coverage"]["trials"] == 1 and calls == [(1, 1)]

@@ -145,6 +145,10 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print nothing but errors (the files are still written)."),
     strategy: StrategyChoice = _strategy_option(),
     camera: CameraChoice = typer.Option(CameraChoice.poses, "--camera", help=CAMERA_HELP),
+    region_trials: int = typer.Option(
+        0, "--region-trials", min=0, max=10_000,
+        help="Also run N closed-loop trials at 1x and 2x the scenario's noise and add the regions the controller aims at, "
+             "with their coverage by the true poses, to the report (section 'Controller regions', coverage.png). 0: skip."),
 ) -> None:
     """The main job: validate, analyse the design, plan, run closed loop on the simulator, write the report.
 
@@ -156,16 +160,27 @@ def run(
     log. Beside it: result.json, plan.json, states.json, waveform.json, waveform.npy and the pictures.
     A run that does not assemble is reported as "not assembled: <reason>" (exit status 0: the job ran).
 
+    With --region-trials N the report also shows the regions the controller aims at (approach funnel,
+    straight-in aim, docking capture G_i*, G_1 rendezvous) and how often the true pose was inside them
+    over N more runs at 1x and 2x the noise, beside the seed's A_i* verdict (as `stressbots bounds --trials`).
+
     Example: `stressbots run examples/four-robots.toml --out out/run --seed 1`
     """
-    from .pipeline import finite_budget, run_job
+    from .pipeline import coverage_extra, finite_budget, run_job
 
     budget = finite_budget(time_budget_s)
     scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
     from .console import RichJobObserver
 
+    observer = RichJobObserver(out, err, quiet=quiet)
+    extra = None
+    if region_trials:
+        def progress(done: int, total: int) -> None:
+            observer.stage("comparisons", total=total, completed=done, info="controller regions")
+
+        extra = coverage_extra(region_trials, seed=seed, progress=progress)
     run_job(scn, out_dir, seed=seed, source=str(scenario), inputs=[scenario], time_budget_s=budget,
-            observer=RichJobObserver(out, err, quiet=quiet), strategy=strategy.value, camera=camera.value)
+            observer=observer, strategy=strategy.value, camera=camera.value, extra=extra)
 
 
 def _with_noise_choice(scn, choice):

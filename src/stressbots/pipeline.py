@@ -344,6 +344,10 @@ class Extra:
     files: list[tuple[str, str]] = field(default_factory=list)
     lines: list[str] = field(default_factory=list)
     summary: dict[str, Any] = field(default_factory=dict)
+    coverage: dict[str, Any] | None = None
+    """The controller's regions and their coverage (:func:`coverage_extra`), a report section of its own."""
+    figures: dict[str, bytes] = field(default_factory=dict)
+    """Pictures the extra step adds (PNG bytes by figure name, e.g. ``coverage``)."""
 
 
 class JobObserver:
@@ -443,7 +447,8 @@ def run_job(
         if extra is not None:
             obs.stage("comparisons")
             more = extra(JobContext(scenario, analysis, plan_result, out, run))
-            obs.stage("comparisons", total=1, completed=1, info=f"{len(more.comparisons)} runs")
+            obs.stage("comparisons", total=1, completed=1,
+                      info=f"{len(more.comparisons)} runs" if more.comparisons or not more.lines else more.lines[0])
         doc, files, report_bytes = _write_outputs(scenario, analysis, plan_result, wf, run, more, out, obs,
                                                   source=source, title=title)
     wall = time.perf_counter() - t_job
@@ -468,13 +473,14 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     obs.stage("pictures and report", advance=1)
     run_figs, anim = run_pictures(scenario, run)
     figs.update(run_figs)
+    figs.update(more.figures)
     obs.stage("pictures and report", advance=1)
     plans.save(plan_result.plan, out / "plan.json")
     write_json(out / "states.json", analysis.to_json_dict())
     write_json(out / "waveform.json", to_json(wf))
     wsum = export(excerpt(wf, EXCERPT_S), out / "waveform.npy", rate_hz=RATE_HZ,
                   drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
-    for key in ("waveform", "plan", "run", "structure") + (("frames",) if "frames" in figs else ()):
+    for key in ("waveform", "plan", "run", "structure") + tuple(k for k in ("frames", "coverage") if k in figs):
         write_bytes(out / f"{key}.png", figs[key])
     doc = result_document(scenario, run, source=source, extra={
         "plan": {"file": "plan.json",
@@ -486,6 +492,8 @@ def _write_outputs(scenario, analysis, plan_result, wf, run: ClosedLoop, more: E
     files = [*OUTPUT_FILES, *more.files]
     if "frames" in figs:
         files.append(("frames.png", "camera frames of the image-in-the-loop run with the tracked poses"))
+    if "coverage" in figs:
+        files.append(("coverage.png", "the regions the controller aims at, with the true poses of the Monte Carlo trials"))
     write_text(out / "report.html", _report_html(scenario, analysis, plan_result, wf, wsum, run, doc, figs, anim, more, files,
                                                  source=source, title=title))
     report_bytes = (out / "report.html").stat().st_size
@@ -509,7 +517,7 @@ def _report_html(scenario, analysis, plan_result, wf, wsum, run: ClosedLoop, doc
         scenario=scenario, analysis=analysis, plan_summary=plan_result.summary, plan_steps=steps, plan_notes=plan_result.notes,
         goals=plan_result.plan.goal_array(), waveform_summary=full, result=doc, figures=figs, animation=anim,
         events=merged_events(run.result, run.plant), files=files, comparisons=more.comparisons,
-        provenance=doc.get("provenance"), source=source,
+        provenance=doc.get("provenance"), source=source, coverage=more.coverage,
     )
 
 
@@ -525,3 +533,32 @@ def finite_budget(value: float | None, option: str = "--time-budget-s") -> float
     if not (math.isfinite(value) and 0 < value <= MAX_TIME_BUDGET_S):
         raise StressbotsError(f"must be a number of seconds in (0, {MAX_TIME_BUDGET_S:g}], got {value:g}", source=option)
     return float(value)
+
+
+def coverage_extra(trials: int, *, seed: int = 0, scales: tuple[float, ...] = (1.0, 2.0),
+                   progress: Callable[[int, int], None] | None = None) -> Callable[[JobContext], Extra]:
+    """An ``extra`` step for :func:`run_job`: the regions the controller aims at and their coverage.
+
+    Runs ``trials`` closed-loop assemblies at each noise scale (the scenario's ``[noise]`` times the
+    scale) on the job's nominal plan (:func:`stressbots.coverage.controller_coverage`), with the seed's
+    ``A_i*`` verdict of each robot beside its regions, and adds them to the report as the section
+    "Controller regions" with ``coverage.png``. Costs ``trials * len(scales)`` assemblies.
+    """
+    from .bounds import analyse_bounds
+    from .coverage import controller_coverage
+    from .outputs import figure_bytes
+    from .viz import plot_controller_coverage
+
+    def step(ctx: JobContext) -> Extra:
+        report = analyse_bounds(ctx.scenario, structure=ctx.plan_result.structure)
+        verdicts = {rb.name: "yes" if rb.guaranteed else "no" for rb in report.robots}
+        ctl = controller_coverage(ctx.scenario, trials=trials, seed=seed, scales=scales, verdicts=verdicts,
+                                  plan=ctx.plan_result, progress=progress)
+        doc = ctl.to_dict()
+        lines = [f"controller regions: {trials} trials at {', '.join(f'{x:g}x' for x in scales)} noise, assembled "
+                 + ", ".join(f"{k}/{trials}" for k in ctl.successes)]
+        return Extra(lines=lines, coverage=doc, figures={"coverage": figure_bytes(plot_controller_coverage(ctx.scenario, ctl))},
+                     summary={"controller_coverage": {"trials": trials, "noise_scales": list(scales),
+                                                      "successes": list(ctl.successes)}})
+
+    return step
