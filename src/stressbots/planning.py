@@ -293,19 +293,16 @@ class NoRoute(Exception):
         self.reason = reason
 
 
-def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float):
+def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float,
+                   keep: np.ndarray | None = None):
     """Sample many 3-segment paths at once: poses ``(P, 3)`` and the path index of every sample ``(P,)``.
 
     ``seg_lengths`` is ``(E, S)``; ``words`` holds each path's kinds (e.g. ``"RSR"``). Samples are at most
-    ``step_um`` apart along each path and include both ends.
+    ``step_um`` apart along each path and include both ends. ``keep`` (``(E, S)`` bool) drops the samples
+    of the segments it marks False (the sample positions of the others do not change).
     """
     e, nseg = seg_lengths.shape
-    kinds = np.array([[w[j] == "R" for j in range(nseg)] for w in words.tolist()], dtype=bool)
-    curv = np.where(kinds, 1.0 / radius, 0.0)
-    joint_list = [starts]
-    for j in range(nseg - 1):
-        joint_list.append(move(joint_list[-1], seg_lengths[:, j], curv[:, j]))
-    joints = np.stack(joint_list, axis=1)  # (E, S, 3) pose at the start of each segment
+    curv, joints = _segment_joints(starts, seg_lengths, words, radius)
     total = seg_lengths.sum(axis=1)
     counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
     owner = np.repeat(np.arange(e), counts)
@@ -315,9 +312,58 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     cum = np.concatenate([np.zeros((e, 1)), np.cumsum(seg_lengths, axis=1)[:, :-1]], axis=1)  # (E, S)
     seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
     seg = np.clip(seg, 0, nseg - 1)
+    if keep is not None:
+        sel = keep[owner, seg]
+        owner, seg, s = owner[sel], seg[sel], s[sel]
     local = s - cum[owner, seg]
     poses = move(joints[owner, seg], local, curv[owner, seg])
     return poses, owner
+
+
+def _segment_joints(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float):
+    """Curvatures ``(E, S)`` and the poses ``(E, S + 1, 3)`` at the ends of every segment of many paths."""
+    nseg = seg_lengths.shape[1]
+    kinds = np.array([[w[j] == "R" for j in range(nseg)] for w in words.tolist()], dtype=bool).reshape(seg_lengths.shape)
+    curv = np.where(kinds, 1.0 / radius, 0.0)
+    joint_list = [starts]
+    for j in range(nseg):
+        joint_list.append(move(joint_list[-1], seg_lengths[:, j], curv[:, j]))
+    return curv, np.stack(joint_list, axis=1)
+
+
+def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray, curv: np.ndarray, radius: float,
+                   hd: float, clearance: float) -> np.ndarray:
+    """``(E, S)`` bool: whether any sample of a segment could fall in :meth:`Obstacles.hits`' near zone.
+
+    A segment of length ``s`` lies in the disc of radius ``s / 2`` about its chord's midpoint (every point
+    is at most ``s`` from both ends combined), and an arc in its turning circle; a segment whose disc keeps
+    out of every obstacle's near zone (obstacle, plus clearance and the body's half-diagonal ``hd``)
+    has no sample that ``hits`` would test, so it cannot be blocked. Exact pruning: no sampling change.
+    """
+    a, b = joints[:, :-1, :2], joints[:, 1:, :2]
+    centre = 0.5 * (a + b)
+    rho = 0.5 * seg_lengths
+    arc = curv > 0
+    if arc.any():
+        tc = a + radius * np.stack([np.cos(joints[:, :-1, 2]), -np.sin(joints[:, :-1, 2])], axis=-1)
+        use = arc & (radius < rho)
+        centre = np.where(use[..., None], tc, centre)
+        rho = np.where(use, radius, rho)
+    rho = rho + 1e-6 * (1.0 + rho)  # rounding of the sampled poses
+    near = np.zeros(rho.shape, dtype=bool)
+    if len(obst.disc_radii):
+        d = np.hypot(centre[..., None, 0] - obst.disc_centres[:, 0], centre[..., None, 1] - obst.disc_centres[:, 1])
+        near |= (d < rho[..., None] + obst.disc_radii + clearance + hd).any(axis=-1)
+    if len(obst.box_lengths):
+        box_hd = 0.5 * np.hypot(obst.box_lengths, obst.box_widths)
+        d = np.hypot(centre[..., None, 0] - obst.box_poses[:, 0], centre[..., None, 1] - obst.box_poses[:, 1])
+        near |= (d < rho[..., None] + box_hd + hd + clearance).any(axis=-1)
+    if obst.arena is not None:
+        w, h = obst.arena
+        m = hd + clearance
+        x, y = centre[..., 0], centre[..., 1]
+        near |= (x - rho < m) | (x + rho > w - m) | (y - rho < m) | (y + rho > h - m)
+    return near
 
 
 def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
@@ -326,6 +372,7 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
     Two stages: coarse samples with the clearance inflated by the most any body point moves between two
     samples (half a step, scaled by 1 + half-diagonal / radius on arcs) accept most edges cheaply and
     conservatively; the edges that fail are checked again at full resolution and the true clearance.
+    Segments far from every obstacle (:func:`_segments_near`) are not sampled at all.
     """
     if len(starts) == 0:
         return np.zeros(0, dtype=bool)
@@ -333,12 +380,20 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
     goals = np.asarray(goals, float)
     words, seg = pathlib.shortest_path_segments(starts, goals, radius)
     words = np.asarray(words)
+    curv, joints = _segment_joints(starts, seg, words, radius)
+    hd = 0.5 * math.hypot(length, width)
 
     def blocked(idx: np.ndarray, step: float, clearance: float) -> np.ndarray:
-        poses, owner = _batch_samples(starts[idx], seg[idx], words[idx], radius, step)
-        bad = obst.hits(poses, length, width, clearance)
         out = np.zeros(len(idx), dtype=bool)
-        np.logical_or.at(out, owner, bad)
+        near = _segments_near(obst, joints[idx], seg[idx], curv[idx], radius, hd, clearance)
+        some = np.flatnonzero(near.any(axis=1))
+        if len(some) == 0:
+            return out
+        poses, owner = _batch_samples(starts[idx[some]], seg[idx[some]], words[idx[some]], radius, step, keep=near[some])
+        bad = obst.hits(poses, length, width, clearance)
+        hit = np.zeros(len(some), dtype=bool)
+        np.logical_or.at(hit, owner, bad)
+        out[some] = hit
         return out
 
     step = 4.0 * opts.sample_um
@@ -425,66 +480,115 @@ def route(
         if hit is None:
             return int(index_of[s]), p, (np.asarray(target, float),)
         reasons.append(hit)
-    # 2. roadmaps of growing size: k-nearest edges, all checked in one batch, then Dijkstra
+    # 2. roadmaps of growing size: k-nearest edges, checked lazily along the shortest candidates
     region = _roadmap_region(sources, target, obst, radius, length)
-    ns = len(sources)
     for count in opts.roadmap_nodes:
         way = _sample_nodes(rng, count, region, obst, length, width, opts)
         nodes = np.vstack([sources, target[None, :], way])
-        k = len(nodes)
-        ti = ns
-        ii, jj = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
-        w = pathlib.shortest_path_lengths(nodes[ii.ravel()], nodes[jj.ravel()], radius).reshape(k, k)
-        np.fill_diagonal(w, np.inf)
-        w[:, :ns] = np.inf  # never route back into a source
-        w[ti, :] = np.inf  # the target is the end
-        knn = min(_KNN, k - 1)
-        nbr = np.argpartition(w, knn - 1, axis=1)[:, :knn]  # each node's nearest successors
-        src = np.repeat(np.arange(k), knn)
-        dst = nbr.ravel()
-        # Sources and target connect to every node: near a tight goal only a few approaches are clear.
-        others = np.arange(ns + 1, k)
-        src = np.concatenate([src, others, np.repeat(np.arange(ns), len(others))])
-        dst = np.concatenate([dst, np.full(len(others), ti), np.tile(others, ns)])
-        pairs = np.unique(np.stack([src, dst], axis=1), axis=0)
-        pairs = pairs[np.isfinite(w[pairs[:, 0], pairs[:, 1]])]
-        ends = (pairs[:, 0] < ns) | (pairs[:, 1] == ti)  # edges at a source or the target: check finely
-        ok = _edges_clear(obst, nodes[pairs[:, 0]], nodes[pairs[:, 1]], radius, length, width, opts, recheck=ends)
-        pairs = pairs[ok]
-        if not len(pairs):
-            continue
-        # super-source (index k) to every source with its waiting cost
-        rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
-        cols = np.concatenate([pairs[:, 1], np.arange(ns)])
-        vals = np.concatenate([w[pairs[:, 0], pairs[:, 1]], source_costs + 1e-9]) + 1e-9
-        graph = csr_matrix((vals, (rows, cols)), shape=(k + 1, k + 1))
-        for _ in range(20):
-            dist, pred = csgraph_dijkstra(graph, directed=True, indices=k, return_predecessors=True)
-            if not np.isfinite(dist[ti]):
-                break
-            seq = [ti]
-            while pred[seq[-1]] != k:
-                seq.append(int(pred[seq[-1]]))
-            seq = seq[::-1]
-            segs: list = []
-            for a, b in zip(seq[:-1], seq[1:], strict=False):
-                segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
-            path = pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
-            veto = extra_check(int(index_of[seq[0]]), path) if extra_check is not None else None
-            if veto is None:
-                return int(index_of[seq[0]]), path, tuple(nodes[q].copy() for q in seq[1:])
-            reasons.append(veto)
-            vetoes.append(veto)
-            # forbid this route's first leg and look for another
-            graph = graph.tolil()
-            graph[seq[0], seq[1] if len(seq) > 1 else ti] = 0
-            graph = graph.tocsr()
-            graph.eliminate_zeros()
+        found = _roadmap_search(nodes, len(sources), source_costs, radius, length, width, obst, opts,
+                                None if extra_check is None else (lambda s, p: extra_check(int(index_of[s]), p)), reasons, vetoes)
+        if found is not None:
+            s, path, way_nodes = found
+            return int(index_of[s]), path, way_nodes
     if extra_check is not None and vetoes:
         common = max(set(vetoes), key=vetoes.count)
         raise NoRoute(f"{who}: no usable route found ({common})")
     common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
     raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
+
+
+def _roadmap_edges(nodes: np.ndarray, ns: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Directed roadmap edges ``(E, 2)`` (sorted, unique) and their lengths ``(E,)`` (um).
+
+    Nodes ``0..ns-1`` are the sources, ``ns`` the target, the rest waypoints. Every node links to its
+    ``_KNN`` nearest successors (by shortest-path length); sources and target link to every waypoint,
+    since near a tight goal only a few approaches are clear. No edge enters a source or leaves the target.
+    """
+    k = len(nodes)
+    ti = ns
+    ii, jj = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+    w = pathlib.shortest_path_lengths(nodes[ii.ravel()], nodes[jj.ravel()], radius).reshape(k, k)
+    np.fill_diagonal(w, np.inf)
+    w[:, :ns] = np.inf  # never route back into a source
+    w[ti, :] = np.inf  # the target is the end
+    knn = min(_KNN, k - 1)
+    nbr = np.argpartition(w, knn - 1, axis=1)[:, :knn]  # each node's nearest successors
+    src = np.repeat(np.arange(k), knn)
+    dst = nbr.ravel()
+    others = np.arange(ns + 1, k)
+    src = np.concatenate([src, others, np.repeat(np.arange(ns), len(others))])
+    dst = np.concatenate([dst, np.full(len(others), ti), np.tile(others, ns)])
+    pairs = np.unique(np.stack([src, dst], axis=1), axis=0)
+    pairs = pairs[np.isfinite(w[pairs[:, 0], pairs[:, 1]])]
+    return pairs, w[pairs[:, 0], pairs[:, 1]]
+
+
+_LAZY_ROUNDS = 200  # Dijkstra rounds that check only the candidate route's edges; then every edge left is checked at once
+
+
+def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, width: float, obst: Obstacles,
+                    opts: PlannerOptions, veto, reasons: list[str], vetoes: list[str]):
+    """The shortest clear route through one roadmap: ``(source, path, waypoints)`` or None.
+
+    Lazy collision checking: Dijkstra runs on every edge not yet known to be blocked, only the edges of
+    the route it returns are checked, blocked ones are dropped and the search repeats. A route whose
+    edges are all clear is the shortest among the clear edges, so the answer is the one a search over the
+    fully checked roadmap gives, at a fraction of the checks. ``veto(source, path)`` may reject a clear
+    route (its first leg is then dropped, at most 20 times), recorded in ``reasons`` and ``vetoes``.
+    """
+    k, ti = len(nodes), ns
+    pairs, lengths = _roadmap_edges(nodes, ns, radius)
+    ends = (pairs[:, 0] < ns) | (pairs[:, 1] == ti)  # edges at a source or the target: checked finely
+    state = np.zeros(len(pairs), dtype=np.int8)  # 0 unknown, 1 clear, -1 blocked or dropped
+    key = pairs[:, 0] * k + pairs[:, 1]  # sorted, since pairs are
+
+    def check(idx: np.ndarray) -> None:
+        ok = _edges_clear(obst, nodes[pairs[idx, 0]], nodes[pairs[idx, 1]], radius, length, width, opts, recheck=ends[idx])
+        state[idx] = np.where(ok, 1, -1)
+
+    vals = np.concatenate([lengths, np.asarray(source_costs, float) + 1e-9]) + 1e-9
+    rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
+    cols = np.concatenate([pairs[:, 1], np.arange(ns)])
+    rounds = vetoed = 0
+    while vetoed < 20:
+        keep = np.concatenate([state >= 0, np.ones(ns, dtype=bool)])
+        graph = csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(k + 1, k + 1))
+        dist, pred = csgraph_dijkstra(graph, directed=True, indices=k, return_predecessors=True)
+        if not np.isfinite(dist[ti]):
+            return None
+        seq = [ti]
+        while pred[seq[-1]] != k:
+            seq.append(int(pred[seq[-1]]))
+        seq = seq[::-1]
+        on = np.searchsorted(key, np.asarray(seq[:-1]) * k + np.asarray(seq[1:]))
+        unknown = on[state[on] == 0]
+        if len(unknown):
+            rounds += 1
+            check(np.flatnonzero(state == 0) if rounds > _LAZY_ROUNDS else unknown)
+            bad = on[state[on] < 0]
+            if len(bad):
+                # a blocked first or last leg: the start or the approach is cramped, so check that whole star
+                star = np.zeros(len(pairs), dtype=bool)
+                if (pairs[bad, 1] == ti).any():
+                    star |= pairs[:, 1] == ti
+                if (pairs[bad, 0] < ns).any():
+                    star |= pairs[:, 0] < ns
+                star &= state == 0
+                if star.any():
+                    check(np.flatnonzero(star))
+                continue
+        segs: list = []
+        for a, b in zip(seq[:-1], seq[1:], strict=False):
+            segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
+        path = pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
+        why = veto(seq[0], path) if veto is not None else None
+        if why is None:
+            return seq[0], path, tuple(nodes[q].copy() for q in seq[1:])
+        reasons.append(why)
+        vetoes.append(why)
+        state[on[0]] = -1  # forbid this route's first leg and look for another
+        vetoed += 1
+    return None
 
 
 # ----------------------------------------------------------------------------------------------------
