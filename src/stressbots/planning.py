@@ -47,6 +47,7 @@ from .collision import (
     pairwise_overlaps,
     penetration_depth,
     point_rectangle_distance,
+    point_rectangle_distance_rows,
 )
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
@@ -215,12 +216,13 @@ class Obstacles:
         hd = 0.5 * math.hypot(length, width)
         xy = samples[:, :2]
         if len(self.disc_radii):
-            d = np.hypot(xy[:, None, 0] - self.disc_centres[None, :, 0], xy[:, None, 1] - self.disc_centres[None, :, 1])
-            near = (d < (self.disc_radii + clearance + hd)[None, :]).any(axis=1)
-            if near.any():
-                idx = np.flatnonzero(near)
-                hit = bodies_hit_discs(samples[idx], length, width, self.disc_centres, self.disc_radii + clearance)
-                bad[idx] |= hit.any(axis=1)
+            # squared distances against a reach enlarged by 1e-6 um: a superset of the pairs within reach
+            reach = self.disc_radii + clearance + hd + 1e-6
+            d2 = (xy[:, None, 0] - self.disc_centres[None, :, 0]) ** 2 + (xy[:, None, 1] - self.disc_centres[None, :, 1]) ** 2
+            si, ci = np.nonzero(d2 < (reach * reach)[None, :])
+            if len(si):
+                dist = point_rectangle_distance_rows(self.disc_centres[ci], samples[si], length, width)
+                np.logical_or.at(bad, si[dist < (self.disc_radii + clearance)[ci]], True)
         if len(self.box_lengths):
             box_hd = 0.5 * np.hypot(self.box_lengths, self.box_widths)
             d = np.hypot(xy[:, None, 0] - self.box_poses[None, :, 0], xy[:, None, 1] - self.box_poses[None, :, 1])
