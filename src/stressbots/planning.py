@@ -34,6 +34,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 from scipy.sparse import csr_matrix
@@ -174,6 +175,26 @@ class PlanResult:
 # Obstacles
 
 
+class NearMasks(NamedTuple):
+    """Which obstacles each collision sample may reach: discs ``(M, K)``, boxes ``(M, B)``, arena ``(M,)``."""
+
+    discs: np.ndarray
+    boxes: np.ndarray
+    arena: np.ndarray
+
+
+def _pairs(samples: np.ndarray, centres: np.ndarray, reach: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(sample, obstacle)`` index pairs whose centres are closer than ``reach`` (among ``mask``'s pairs)."""
+    if mask is None:
+        d2 = (samples[:, None, 0] - centres[None, :, 0]) ** 2 + (samples[:, None, 1] - centres[None, :, 1]) ** 2
+        si, ci = np.nonzero(d2 < (reach * reach)[None, :])
+        return si, ci
+    si, ci = np.nonzero(mask)
+    d2 = (samples[si, 0] - centres[ci, 0]) ** 2 + (samples[si, 1] - centres[ci, 1]) ** 2
+    keep = d2 < reach[ci] ** 2
+    return si[keep], ci[keep]
+
+
 @dataclass(frozen=True)
 class Obstacles:
     """Static obstacles for one robot's route: orbit discs, docked bodies (boxes) and the arena.
@@ -205,38 +226,39 @@ class Obstacles:
             self.arena,
         )
 
-    def hits(self, samples: np.ndarray, length: float, width: float, clearance: float) -> np.ndarray:
+    def hits(self, samples: np.ndarray, length: float, width: float, clearance: float, *,
+             near: NearMasks | None = None) -> np.ndarray:
         """Per sample, whether the body hits any obstacle (keeping ``clearance``): ``(M,)`` bool.
 
         A cheap test on the body centre (half-diagonal ``hd``) first; the exact rectangle test runs only
-        on the samples near an obstacle.
+        on the sample-obstacle pairs near each other. ``near`` (per sample: which discs, boxes and
+        whether the arena edge can be within reach, e.g. from :func:`_segments_near`) skips the pairs
+        known to be out of reach; it must mark every pair within reach.
         """
         samples = np.asarray(samples, dtype=np.float64)
         bad = np.zeros(len(samples), dtype=bool)
         hd = 0.5 * math.hypot(length, width)
-        xy = samples[:, :2]
         if len(self.disc_radii):
             # squared distances against a reach enlarged by 1e-6 um: a superset of the pairs within reach
-            reach = self.disc_radii + clearance + hd + 1e-6
-            d2 = (xy[:, None, 0] - self.disc_centres[None, :, 0]) ** 2 + (xy[:, None, 1] - self.disc_centres[None, :, 1]) ** 2
-            si, ci = np.nonzero(d2 < (reach * reach)[None, :])
+            si, ci = _pairs(samples, self.disc_centres, self.disc_radii + clearance + hd + 1e-6, None if near is None else near.discs)
             if len(si):
                 dist = point_rectangle_distance_rows(self.disc_centres[ci], samples[si], length, width)
-                np.logical_or.at(bad, si[dist < (self.disc_radii + clearance)[ci]], True)
+                bad[si[dist < (self.disc_radii + clearance)[ci]]] = True
         if len(self.box_lengths):
-            box_hd = 0.5 * np.hypot(self.box_lengths, self.box_widths)
-            d = np.hypot(xy[:, None, 0] - self.box_poses[None, :, 0], xy[:, None, 1] - self.box_poses[None, :, 1])
-            near = d < (box_hd + hd + clearance)[None, :]
-            si, bi = np.nonzero(near)
+            box_reach = 0.5 * np.hypot(self.box_lengths, self.box_widths) + hd + clearance + 1e-6
+            si, bi = _pairs(samples, self.box_poses[:, :2], box_reach, None if near is None else near.boxes)
             if len(si):
                 depth = penetration_depth(samples[si], length, width, self.box_poses[bi], self.box_lengths[bi], self.box_widths[bi])
-                np.logical_or.at(bad, si[depth > -clearance], True)
+                bad[si[depth > -clearance]] = True
         if self.arena is not None:
             w, h = self.arena
             m = hd + clearance
-            near = (xy[:, 0] < m) | (xy[:, 0] > w - m) | (xy[:, 1] < m) | (xy[:, 1] > h - m)
-            if near.any():
-                idx = np.flatnonzero(near)
+            xy = samples[:, :2]
+            close = (xy[:, 0] < m) | (xy[:, 0] > w - m) | (xy[:, 1] < m) | (xy[:, 1] > h - m)
+            if near is not None:
+                close &= near.arena
+            if close.any():
+                idx = np.flatnonzero(close)
                 shifted = samples[idx] - np.array([clearance, clearance, 0.0])
                 bad[idx] |= outside_arena(shifted, length, width, (w - 2 * clearance, h - 2 * clearance)) > 0
         return bad
@@ -297,7 +319,7 @@ class NoRoute(Exception):
 
 def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float,
                    keep: np.ndarray | None = None):
-    """Sample many 3-segment paths at once: poses ``(P, 3)`` and the path index of every sample ``(P,)``.
+    """Sample many 3-segment paths at once: poses ``(P, 3)``, the path and segment index of every sample.
 
     ``seg_lengths`` is ``(E, S)``; ``words`` holds each path's kinds (e.g. ``"RSR"``). Samples are at most
     ``step_um`` apart along each path and include both ends. ``keep`` (``(E, S)`` bool) drops the samples
@@ -319,7 +341,7 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
         owner, seg, s = owner[sel], seg[sel], s[sel]
     local = s - cum[owner, seg]
     poses = move(joints[owner, seg], local, curv[owner, seg])
-    return poses, owner
+    return poses, owner, seg
 
 
 def _segment_joints(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float):
@@ -334,13 +356,13 @@ def _segment_joints(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarr
 
 
 def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray, curv: np.ndarray, radius: float,
-                   hd: float, clearance: float) -> np.ndarray:
-    """``(E, S)`` bool: whether any sample of a segment could fall in :meth:`Obstacles.hits`' near zone.
+                   hd: float, clearance: float) -> NearMasks:
+    """Which obstacles any sample of each segment could reach in :meth:`Obstacles.hits`: masks ``(E, S, .)``.
 
     A segment of length ``s`` lies in the disc of radius ``s / 2`` about its chord's midpoint (every point
-    is at most ``s`` from both ends combined), and an arc in its turning circle; a segment whose disc keeps
-    out of every obstacle's near zone (obstacle, plus clearance and the body's half-diagonal ``hd``)
-    has no sample that ``hits`` would test, so it cannot be blocked. Exact pruning: no sampling change.
+    is at most ``s`` from both ends combined), and an arc in its turning circle; an obstacle whose near
+    zone (obstacle, plus clearance and the body's half-diagonal ``hd``) keeps out of that disc cannot be
+    reached by any sample of the segment. Exact pruning: ``hits`` gives the same answers with the masks.
     """
     a, b = joints[:, :-1, :2], joints[:, 1:, :2]
     centre = 0.5 * (a + b)
@@ -352,20 +374,20 @@ def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray,
         centre = np.where(use[..., None], tc, centre)
         rho = np.where(use, radius, rho)
     rho = rho + 1e-6 * (1.0 + rho)  # rounding of the sampled poses
-    near = np.zeros(rho.shape, dtype=bool)
-    if len(obst.disc_radii):
-        d = np.hypot(centre[..., None, 0] - obst.disc_centres[:, 0], centre[..., None, 1] - obst.disc_centres[:, 1])
-        near |= (d < rho[..., None] + obst.disc_radii + clearance + hd).any(axis=-1)
-    if len(obst.box_lengths):
-        box_hd = 0.5 * np.hypot(obst.box_lengths, obst.box_widths)
-        d = np.hypot(centre[..., None, 0] - obst.box_poses[:, 0], centre[..., None, 1] - obst.box_poses[:, 1])
-        near |= (d < rho[..., None] + box_hd + hd + clearance).any(axis=-1)
+
+    def reach(centres: np.ndarray, extent: np.ndarray) -> np.ndarray:
+        d = np.hypot(centre[..., None, 0] - centres[:, 0], centre[..., None, 1] - centres[:, 1])
+        return d < rho[..., None] + extent + clearance + hd
+
+    discs = reach(obst.disc_centres, obst.disc_radii)
+    boxes = reach(obst.box_poses[:, :2], 0.5 * np.hypot(obst.box_lengths, obst.box_widths))
+    arena = np.zeros(rho.shape, dtype=bool)
     if obst.arena is not None:
         w, h = obst.arena
         m = hd + clearance
         x, y = centre[..., 0], centre[..., 1]
-        near |= (x - rho < m) | (x + rho > w - m) | (y - rho < m) | (y + rho > h - m)
-    return near
+        arena = (x - rho < m) | (x + rho > w - m) | (y - rho < m) | (y + rho > h - m)
+    return NearMasks(discs, boxes, arena)
 
 
 def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
@@ -388,13 +410,16 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
     def blocked(idx: np.ndarray, step: float, clearance: float) -> np.ndarray:
         out = np.zeros(len(idx), dtype=bool)
         near = _segments_near(obst, joints[idx], seg[idx], curv[idx], radius, hd, clearance)
-        some = np.flatnonzero(near.any(axis=1))
+        any_near = near.discs.any(axis=2) | near.boxes.any(axis=2) | near.arena  # (E, S)
+        some = np.flatnonzero(any_near.any(axis=1))
         if len(some) == 0:
             return out
-        poses, owner = _batch_samples(starts[idx[some]], seg[idx[some]], words[idx[some]], radius, step, keep=near[some])
-        bad = obst.hits(poses, length, width, clearance)
+        poses, owner, sseg = _batch_samples(starts[idx[some]], seg[idx[some]], words[idx[some]], radius, step, keep=any_near[some])
+        e_of = some[owner]
+        masks = NearMasks(near.discs[e_of, sseg], near.boxes[e_of, sseg], near.arena[e_of, sseg])
+        bad = obst.hits(poses, length, width, clearance, near=masks)
         hit = np.zeros(len(some), dtype=bool)
-        np.logical_or.at(hit, owner, bad)
+        hit[owner[bad]] = True
         out[some] = hit
         return out
 
@@ -525,6 +550,7 @@ def _roadmap_edges(nodes: np.ndarray, ns: int, radius: float) -> tuple[np.ndarra
     return pairs, w[pairs[:, 0], pairs[:, 1]]
 
 
+_STAR_AFTER = 3  # blocked first (last) legs after which every edge leaving a source (entering the target) is checked
 _LAZY_ROUNDS = 200  # Dijkstra rounds that check only the candidate route's edges; then every edge left is checked at once
 
 
@@ -551,7 +577,7 @@ def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, 
     vals = np.concatenate([lengths, np.asarray(source_costs, float) + 1e-9]) + 1e-9
     rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
     cols = np.concatenate([pairs[:, 1], np.arange(ns)])
-    rounds = vetoed = 0
+    rounds = vetoed = tstar = sstar = 0
     while vetoed < 20:
         keep = np.concatenate([state >= 0, np.ones(ns, dtype=bool)])
         graph = csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(k + 1, k + 1))
@@ -569,12 +595,16 @@ def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, 
             check(np.flatnonzero(state == 0) if rounds > _LAZY_ROUNDS else unknown)
             bad = on[state[on] < 0]
             if len(bad):
-                # a blocked first or last leg: the start or the approach is cramped, so check that whole star
+                # blocked first or last legs: the start or the approach is cramped, so check that whole star
                 star = np.zeros(len(pairs), dtype=bool)
                 if (pairs[bad, 1] == ti).any():
-                    star |= pairs[:, 1] == ti
+                    tstar += 1
+                    if tstar >= _STAR_AFTER:
+                        star |= pairs[:, 1] == ti
                 if (pairs[bad, 0] < ns).any():
-                    star |= pairs[:, 0] < ns
+                    sstar += 1
+                    if sstar >= _STAR_AFTER:
+                        star |= pairs[:, 0] < ns
                 star &= state == 0
                 if star.any():
                     check(np.flatnonzero(star))
