@@ -329,19 +329,42 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     curv, joints = _segment_joints(starts, seg_lengths, words, radius)
     total = seg_lengths.sum(axis=1)
     counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
-    owner = np.repeat(np.arange(e), counts)
-    offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    frac = (np.arange(owner.size) - offsets[owner]) / (counts[owner] - 1)
-    s = frac * total[owner]
     cum = np.concatenate([np.zeros((e, 1)), np.cumsum(seg_lengths, axis=1)[:, :-1]], axis=1)  # (E, S)
+    if keep is None:
+        owner = np.repeat(np.arange(e), counts)
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        index = np.arange(owner.size) - offsets[owner]
+    else:
+        owner, index, wanted = _kept_indices(keep, counts, cum, total)
+    s = index / (counts[owner] - 1) * total[owner]
     seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
     seg = np.clip(seg, 0, nseg - 1)
     if keep is not None:
-        sel = keep[owner, seg]
+        sel = seg == wanted
         owner, seg, s = owner[sel], seg[sel], s[sel]
     local = s - cum[owner, seg]
     poses = move(joints[owner, seg], local, curv[owner, seg])
     return poses, owner, seg
+
+
+def _kept_indices(keep: np.ndarray, counts: np.ndarray, cum: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Path index, sample index and wanted segment ``(P,)`` of candidate samples of the kept segments: a
+    superset by two samples at each end (the caller keeps those that fall in the wanted segment). Sample
+    positions rise with the index, so each segment's samples are one range of indices."""
+    nseg = keep.shape[1]
+    ke, kj = np.nonzero(keep)
+    den = (counts[ke] - 1).astype(np.float64)
+    safe = np.where(total[ke] > 0, total[ke], 1.0)
+    lo = np.floor(cum[ke, kj] / safe * den).astype(int) - 2
+    nxt = np.where(kj + 1 < nseg, cum[ke, np.minimum(kj + 1, nseg - 1)], np.inf)
+    hi = np.where(kj + 1 < nseg, np.ceil(np.minimum(nxt, total[ke]) / safe * den), den).astype(int) + 2
+    lo = np.where(total[ke] > 0, np.clip(lo, 0, None), 0)
+    hi = np.where(total[ke] > 0, np.minimum(hi, counts[ke] - 1), counts[ke] - 1)
+    n_i = np.maximum(hi - lo + 1, 0)
+    rep = np.repeat(np.arange(len(ke)), n_i)
+    starts = np.concatenate([[0], np.cumsum(n_i)[:-1]])
+    index = lo[rep] + (np.arange(rep.size) - starts[rep])
+    return ke[rep], index, kj[rep]
 
 
 def _segment_joints(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float):
