@@ -318,12 +318,13 @@ class NoRoute(Exception):
 
 
 def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float,
-                   keep: np.ndarray | None = None):
+                   keep: np.ndarray | None = None, part: tuple[int, int] = (0, 1)):
     """Sample many 3-segment paths at once: poses ``(P, 3)``, the path and segment index of every sample.
 
     ``seg_lengths`` is ``(E, S)``; ``words`` holds each path's kinds (e.g. ``"RSR"``). Samples are at most
     ``step_um`` apart along each path and include both ends. ``keep`` (``(E, S)`` bool) drops the samples
-    of the segments it marks False (the sample positions of the others do not change).
+    of the segments it marks False (the sample positions of the others do not change). ``part = (q, Q)``
+    returns only every Q-th sample of each path, from its q-th (a coarse pass first, for early exits).
     """
     e, nseg = seg_lengths.shape
     curv, joints = _segment_joints(starts, seg_lengths, words, radius)
@@ -336,6 +337,11 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
         index = np.arange(owner.size) - offsets[owner]
     else:
         owner, index, wanted = _kept_indices(keep, counts, cum, total)
+    if part[1] > 1:
+        pick = index % part[1] == part[0]
+        owner, index = owner[pick], index[pick]
+        if keep is not None:
+            wanted = wanted[pick]
     s = index / (counts[owner] - 1) * total[owner]
     seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
     seg = np.clip(seg, 0, nseg - 1)
@@ -413,6 +419,9 @@ def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray,
     return NearMasks(discs, boxes, arena)
 
 
+_SAMPLE_PASSES = 4  # interleaved sampling passes per edge check (every 4th sample first): blocked edges exit early
+
+
 def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
     """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool.
 
@@ -434,16 +443,19 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
         out = np.zeros(len(idx), dtype=bool)
         near = _segments_near(obst, joints[idx], seg[idx], curv[idx], radius, hd, clearance)
         any_near = near.discs.any(axis=2) | near.boxes.any(axis=2) | near.arena  # (E, S)
-        some = np.flatnonzero(any_near.any(axis=1))
-        if len(some) == 0:
-            return out
-        poses, owner, sseg = _batch_samples(starts[idx[some]], seg[idx[some]], words[idx[some]], radius, step, keep=any_near[some])
-        e_of = some[owner]
-        masks = NearMasks(near.discs[e_of, sseg], near.boxes[e_of, sseg], near.arena[e_of, sseg])
-        bad = obst.hits(poses, length, width, clearance, near=masks)
-        hit = np.zeros(len(some), dtype=bool)
-        hit[owner[bad]] = True
-        out[some] = hit
+        live = np.flatnonzero(any_near.any(axis=1))
+        for q in range(_SAMPLE_PASSES):  # interleaved passes: an edge found blocked is not sampled further
+            if len(live) == 0:
+                break
+            e = idx[live]
+            poses, owner, sseg = _batch_samples(starts[e], seg[e], words[e], radius, step, keep=any_near[live], part=(q, _SAMPLE_PASSES))
+            e_of = live[owner]
+            masks = NearMasks(near.discs[e_of, sseg], near.boxes[e_of, sseg], near.arena[e_of, sseg])
+            bad = obst.hits(poses, length, width, clearance, near=masks)
+            hit = np.zeros(len(live), dtype=bool)
+            hit[owner[bad]] = True
+            out[live[hit]] = True
+            live = live[~hit]
         return out
 
     step = 4.0 * opts.sample_um
