@@ -162,13 +162,14 @@ def run_one(lay: Layout, mode: str) -> dict:
     known = PlannerOptions.__dataclass_fields__  # older planners lack some options: use those they have
     over = {"seed": SEED_SCHEME, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
     opts = PlannerOptions(**{k: v for k, v in over.items() if k in known})
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         res = plan_assembly(scn, opts)
     except PlanningError as exc:
-        rec.update(status="failed", reason=exc.message, plan_s=time.perf_counter() - t0)
+        rec.update(status="failed", reason=exc.message, plan_s=time.perf_counter() - t0, plan_cpu_s=time.process_time() - c0)
         return rec
     rec["plan_s"] = time.perf_counter() - t0
+    rec["plan_cpu_s"] = time.process_time() - c0  # CPU time: less sensitive to a shared machine's load
     plan = plans.from_dict(json.loads(json.dumps(res.plan.to_dict())))
     rep = replay(plan, scn, max_step_um=1.0)
     rank = {name: k + 1 for k, name in enumerate(res.analysis.order)}
@@ -226,6 +227,21 @@ def run_all(todo: list[tuple[Layout, str]], jobs: int, timeout: float, out: Path
     return records
 
 
+def _per_size(rs: list[dict]) -> list[str]:
+    """One line per robot count: planned fraction, planning time median / max (planned layouts), efficiency."""
+    lines = []
+    for n in sorted({r["n"] for r in rs}):
+        at = [r for r in rs if r["n"] == n]
+        ok = [r for r in at if r["status"] == "planned"]
+        t = [r["plan_s"] for r in ok]
+        cpu = [r["plan_cpu_s"] for r in ok if "plan_cpu_s" in r]
+        eff = [r["lower_bound_s"] / r["duration_s"] for r in ok if r.get("duration_s")]
+        lines.append(f"    n={n:2d}: planned {len(ok)}/{len(at)}, planning time median {statistics.median(t) if t else 0:5.1f} s, "
+                     f"max {max(t) if t else 0:5.1f} s (CPU median {statistics.median(cpu) if cpu else 0:5.1f} s, "
+                     f"max {max(cpu) if cpu else 0:5.1f} s), efficiency median {statistics.median(eff) if eff else 0:.2f}")
+    return lines
+
+
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
@@ -242,10 +258,11 @@ def summarise(records: list[dict]) -> str:
             f"timeouts {sum(r['status'] == 'timeout' for r in rs)}; planning time median {statistics.median(times) if times else 0:.1f} s, "
             f"max {max(times) if times else 0:.1f} s; lower bound / duration median {statistics.median(eff) if eff else 0:.2f}"
         )
-        for lo, hi in ((2, 8), (10, 16)):
+        for lo, hi in ((2, 8), (9, 16)):
             t = [r["plan_s"] for r in ok if lo <= r["n"] <= hi]
             n_all = sum(lo <= r["n"] <= hi for r in rs)
             lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, max {max(t) if t else 0:.1f} s")
+        lines.extend(_per_size(rs))
     both = [(by[(k, "full")], by[(k, "seed")]) for k, m in by if m == "full" and (k, "seed") in by]
     both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
     if both:
