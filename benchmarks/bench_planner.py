@@ -38,8 +38,8 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   planned in 7 s (the baseline timed out at 45 s under heavier load: the same search, not a gain).
 - lazy, pruned roadmap search (issue 15 speed; plans bit-identical), load average 7-11 from other work,
   so wall times are 3-10x the CPU times (``plan_cpu_s``): n = 2-8, full and seed, 60 s limit, 2 at once:
-  full planned 26/29 finished (tee-8 timed out; ladder-4, cross-8 fail G_1; the run was stopped before
-  gap-8, comb-8, ladder-8), lower bound / duration median 0.43; seed scheme planned 6/29; full / seed
+  full planned 27/32 (ladder-4, cross-8 fail G_1; tee-8, comb-8, ladder-8 hit the 60 s limit: alone,
+  comb-8 plans in 24 s of CPU), lower bound / duration median 0.42; seed scheme planned 6/32; full / seed
   duration on the 6 both planned: median 1.05 (0.90-2.09), total 1.20. n = 9-16, full, 120 s limit, one
   at a time: see README (9-13 robots: 16/21 planned, CPU median 2.5 s, max 6.2 s; failures: tee-10 and
   tee-13 at D1's last docking, gap-10 and gap-13 at G_1, tee-14 at D8's route). 'short' (SHORTEST), n =
