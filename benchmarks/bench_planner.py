@@ -41,8 +41,10 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   full planned 27/32 (ladder-4, cross-8 fail G_1; tee-8, comb-8, ladder-8 hit the 60 s limit: alone,
   comb-8 plans in 24 s of CPU), lower bound / duration median 0.42; seed scheme planned 6/32; full / seed
   duration on the 6 both planned: median 1.05 (0.90-2.09), total 1.20. n = 9-16, full, 120 s limit, one
-  at a time: see README (9-13 robots: 16/21 planned, CPU median 2.5 s, max 6.2 s; failures: tee-10 and
-  tee-13 at D1's last docking, gap-10 and gap-13 at G_1, tee-14 at D8's route). 'short' (SHORTEST), n =
+  at a time: 23/30 planned, no replay failure; CPU median / max per size: n = 9 1.5 / 3.4 s (5/5),
+  10 2.3 / 2.5 s (3/5), 12 3.7 / 6.2 s (5/5), 13 3.7 / 4.2 s (3/5), 14 18.7 / 19.6 s (3/5, comb-14
+  timed out), 16 8.9 / 86.8 s (4/5); lower bound / duration median 0.58. Failures: tee-10 and tee-13 at
+  D1's last docking, gap-10, gap-13 and gap-16 at G_1, tee-14 at D8's route (D1's orbit). 'short' (SHORTEST), n =
   2-8: duration vs full on the 24 both planned median 0.955, total 0.88; it also plans tee-8 and cross-8.
 """
 
