@@ -178,20 +178,44 @@ class PlanResult:
 
 
 class NearMasks(NamedTuple):
-    """Which obstacles each collision sample may reach: discs ``(M, K)``, boxes ``(M, B)``, arena ``(M,)``."""
+    """Which obstacles each path segment may reach: discs ``(E, S, K)``, boxes ``(E, S, B)``, arena ``(E, S)``."""
 
     discs: np.ndarray
     boxes: np.ndarray
     arena: np.ndarray
 
 
-def _pairs(samples: np.ndarray, centres: np.ndarray, reach: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """``(sample, obstacle)`` index pairs whose centres are closer than ``reach`` (among ``mask``'s pairs)."""
-    if mask is None:
+class NearPairs(NamedTuple):
+    """Candidate ``(sample, obstacle)`` index pairs for :meth:`Obstacles.hits`: discs and boxes as
+    ``(sample_indices, obstacle_indices)``, and per sample whether the arena edge may be in reach."""
+
+    discs: tuple[np.ndarray, np.ndarray]
+    boxes: tuple[np.ndarray, np.ndarray]
+    arena: np.ndarray
+
+
+def _sample_pairs(mask: np.ndarray, e_of: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Expand a segment mask ``(E, S, K)`` to the ``(sample, obstacle)`` pairs of samples on segment
+    ``(e_of[m], seg[m])``, without a ``(samples, K)`` array (most segments reach one obstacle or none)."""
+    e, nseg, k = mask.shape
+    fseg, obj = np.nonzero(mask.reshape(e * nseg, k))  # sorted by segment
+    count = np.bincount(fseg, minlength=e * nseg)
+    first = np.concatenate([[0], np.cumsum(count)[:-1]])
+    fs = e_of * nseg + seg
+    rep = count[fs]
+    si = np.repeat(np.arange(len(fs)), rep)
+    j = np.arange(si.size) - np.repeat(np.cumsum(rep) - rep, rep)
+    return si, obj[first[fs][si] + j]
+
+
+def _pairs(samples: np.ndarray, centres: np.ndarray, reach: np.ndarray,
+           cand: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(sample, obstacle)`` index pairs whose centres are closer than ``reach`` (among ``cand``'s pairs)."""
+    if cand is None:
         d2 = (samples[:, None, 0] - centres[None, :, 0]) ** 2 + (samples[:, None, 1] - centres[None, :, 1]) ** 2
         si, ci = np.nonzero(d2 < (reach * reach)[None, :])
         return si, ci
-    si, ci = np.nonzero(mask)
+    si, ci = cand
     d2 = (samples[si, 0] - centres[ci, 0]) ** 2 + (samples[si, 1] - centres[ci, 1]) ** 2
     keep = d2 < reach[ci] ** 2
     return si[keep], ci[keep]
@@ -229,13 +253,13 @@ class Obstacles:
         )
 
     def hits(self, samples: np.ndarray, length: float, width: float, clearance: float, *,
-             near: NearMasks | None = None) -> np.ndarray:
+             near: NearPairs | None = None) -> np.ndarray:
         """Per sample, whether the body hits any obstacle (keeping ``clearance``): ``(M,)`` bool.
 
         A cheap test on the body centre (half-diagonal ``hd``) first; the exact rectangle test runs only
-        on the sample-obstacle pairs near each other. ``near`` (per sample: which discs, boxes and
-        whether the arena edge can be within reach, e.g. from :func:`_segments_near`) skips the pairs
-        known to be out of reach; it must mark every pair within reach.
+        on the sample-obstacle pairs near each other. ``near`` (the candidate pairs, e.g. from
+        :func:`_segments_near`) skips the pairs known to be out of reach; it must hold every pair within
+        reach.
         """
         samples = np.asarray(samples, dtype=np.float64)
         bad = np.zeros(len(samples), dtype=bool)
@@ -452,8 +476,8 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
             e = idx[live]
             poses, owner, sseg = _batch_samples(starts[e], seg[e], words[e], radius, step, keep=any_near[live], part=(q, _SAMPLE_PASSES))
             e_of = live[owner]
-            masks = NearMasks(near.discs[e_of, sseg], near.boxes[e_of, sseg], near.arena[e_of, sseg])
-            bad = obst.hits(poses, length, width, clearance, near=masks)
+            cand = NearPairs(_sample_pairs(near.discs, e_of, sseg), _sample_pairs(near.boxes, e_of, sseg), near.arena[e_of, sseg])
+            bad = obst.hits(poses, length, width, clearance, near=cand)
             hit = np.zeros(len(live), dtype=bool)
             hit[owner[bad]] = True
             out[live[hit]] = True
