@@ -36,6 +36,16 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   of n <= 8 (90 s limit, lighter load): comb-3-s1053 planned (180.7 s, 27 s planning); ladder-4-s1071,
   cross-8-s1137, ladder-8-s1139 still fail (arena edge, with advice); tee-8-s1136 timed out; tee-7-s1119
   planned in 7 s (the baseline timed out at 45 s under heavier load: the same search, not a gain).
+- lazy, pruned roadmap search (issue 15 speed; plans bit-identical), load average 7-11 from other work,
+  so wall times are 3-10x the CPU times (``plan_cpu_s``): n = 2-8, full and seed, 60 s limit, 2 at once:
+  full planned 27/32 (ladder-4, cross-8 fail G_1; tee-8, comb-8, ladder-8 hit the 60 s limit: alone,
+  comb-8 plans in 24 s of CPU), lower bound / duration median 0.42; seed scheme planned 6/32; full / seed
+  duration on the 6 both planned: median 1.05 (0.90-2.09), total 1.20. n = 9-16, full, 120 s limit, one
+  at a time: 23/30 planned, no replay failure; CPU median / max per size: n = 9 1.5 / 3.4 s (5/5),
+  10 2.3 / 2.5 s (3/5), 12 3.7 / 6.2 s (5/5), 13 3.7 / 4.2 s (3/5), 14 18.7 / 19.6 s (3/5, comb-14
+  timed out), 16 8.9 / 86.8 s (4/5); lower bound / duration median 0.58. Failures: tee-10 and tee-13 at
+  D1's last docking, gap-10, gap-13 and gap-16 at G_1, tee-14 at D8's route (D1's orbit). 'short' (SHORTEST), n =
+  2-8: duration vs full on the 24 both planned median 0.955, total 0.88; it also plans tee-8 and cross-8.
 """
 
 from __future__ import annotations
@@ -162,13 +172,14 @@ def run_one(lay: Layout, mode: str) -> dict:
     known = PlannerOptions.__dataclass_fields__  # older planners lack some options: use those they have
     over = {"seed": SEED_SCHEME, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
     opts = PlannerOptions(**{k: v for k, v in over.items() if k in known})
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         res = plan_assembly(scn, opts)
     except PlanningError as exc:
-        rec.update(status="failed", reason=exc.message, plan_s=time.perf_counter() - t0)
+        rec.update(status="failed", reason=exc.message, plan_s=time.perf_counter() - t0, plan_cpu_s=time.process_time() - c0)
         return rec
     rec["plan_s"] = time.perf_counter() - t0
+    rec["plan_cpu_s"] = time.process_time() - c0  # CPU time: less sensitive to a shared machine's load
     plan = plans.from_dict(json.loads(json.dumps(res.plan.to_dict())))
     rep = replay(plan, scn, max_step_um=1.0)
     rank = {name: k + 1 for k, name in enumerate(res.analysis.order)}
@@ -226,6 +237,21 @@ def run_all(todo: list[tuple[Layout, str]], jobs: int, timeout: float, out: Path
     return records
 
 
+def _per_size(rs: list[dict]) -> list[str]:
+    """One line per robot count: planned fraction, planning time median / max (planned layouts), efficiency."""
+    lines = []
+    for n in sorted({r["n"] for r in rs}):
+        at = [r for r in rs if r["n"] == n]
+        ok = [r for r in at if r["status"] == "planned"]
+        t = [r["plan_s"] for r in ok]
+        cpu = [r["plan_cpu_s"] for r in ok if "plan_cpu_s" in r]
+        eff = [r["lower_bound_s"] / r["duration_s"] for r in ok if r.get("duration_s")]
+        lines.append(f"    n={n:2d}: planned {len(ok)}/{len(at)}, planning time median {statistics.median(t) if t else 0:5.1f} s, "
+                     f"max {max(t) if t else 0:5.1f} s (CPU median {statistics.median(cpu) if cpu else 0:5.1f} s, "
+                     f"max {max(cpu) if cpu else 0:5.1f} s), efficiency median {statistics.median(eff) if eff else 0:.2f}")
+    return lines
+
+
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
@@ -242,10 +268,11 @@ def summarise(records: list[dict]) -> str:
             f"timeouts {sum(r['status'] == 'timeout' for r in rs)}; planning time median {statistics.median(times) if times else 0:.1f} s, "
             f"max {max(times) if times else 0:.1f} s; lower bound / duration median {statistics.median(eff) if eff else 0:.2f}"
         )
-        for lo, hi in ((2, 8), (10, 16)):
+        for lo, hi in ((2, 8), (9, 16)):
             t = [r["plan_s"] for r in ok if lo <= r["n"] <= hi]
             n_all = sum(lo <= r["n"] <= hi for r in rs)
             lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, max {max(t) if t else 0:.1f} s")
+        lines.extend(_per_size(rs))
     both = [(by[(k, "full")], by[(k, "seed")]) for k, m in by if m == "full" and (k, "seed") in by]
     both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
     if both:

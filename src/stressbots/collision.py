@@ -37,6 +37,21 @@ def point_rectangle_distance(points, poses, length_um, width_um) -> np.ndarray:
     return outside + inside
 
 
+def point_rectangle_distance_rows(points, poses, length_um, width_um) -> np.ndarray:
+    """Signed distance (um) from ``points[m]`` to the body at ``poses[m]``, row by row: ``(M,)``.
+
+    The same formula as :func:`point_rectangle_distance` for matched pairs only (no ``(M, K)`` matrix):
+    the collision checks of the planner evaluate just the sample-obstacle pairs that are close.
+    """
+    poses = _as_poses(poses)
+    pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+    s, c = np.sin(poses[:, 2]), np.cos(poses[:, 2])
+    dx, dy = pts[:, 0] - poses[:, 0], pts[:, 1] - poses[:, 1]
+    u = np.abs(dx * s + dy * c) - 0.5 * np.asarray(length_um, dtype=np.float64)
+    v = np.abs(dx * c - dy * s) - 0.5 * np.asarray(width_um, dtype=np.float64)
+    return np.hypot(np.maximum(u, 0.0), np.maximum(v, 0.0)) + np.minimum(np.maximum(u, v), 0.0)
+
+
 def bodies_hit_discs(poses, length_um, width_um, centres, radii, *, tol_um: float = 0.0) -> np.ndarray:
     """Whether each body intersects each disc by more than ``tol_um``: ``(M, K)`` bool."""
     dist = point_rectangle_distance(centres, poses, length_um, width_um)

@@ -19,7 +19,7 @@ from .electrostatics import Electrodes
 from .errors import PlanningError
 from .robots import TWO_PI, Pose, Robot, body_corners, orbit_radii, turning_centres
 from .scenario import ControlSettings, Noise, Scenario, StructureSpec
-from .structures import candidate_structures
+from .structures import Structure, candidate_structures
 
 LITERATURE_NOISE = Noise(
     speed_rel_sd=0.05,
@@ -78,15 +78,12 @@ def random_scenario(
             size = (side, side)
         else:
             size = arena_um
-        w, h = size
         robots_in_order = [
             Robot(names[k], des.snap_down_V[k], des.release_V[k], float(L[k]), float(W[k]), float(v[k]), float(r[k]))
             for k in range(n)
         ]
-        at = Pose(float(rng.uniform(0.4, 0.6) * w), float(rng.uniform(0.4, 0.6) * h), float(rng.uniform(0, TWO_PI)))
-        spec = StructureSpec(shape, at)
         try:
-            struct = candidate_structures(robots_in_order, spec)[0]
+            spec, struct, (w, h) = _place_structure(rng, robots_in_order, shape, size, grow=arena_um is None, gap_um=gap_um)
             break
         except PlanningError:  # e.g. a wider robot cannot dock on a narrower one's rear edge: redraw
             if attempt == 49:
@@ -160,3 +157,28 @@ def random_scenario(
         control=ControlSettings(),
         source=None,
     )
+
+
+def _place_structure(rng: np.random.Generator, robots_in_order: list[Robot], shape: str, size: tuple[float, float], *,
+                     grow: bool, gap_um: float) -> tuple[StructureSpec, Structure, tuple[float, float]]:
+    """The target structure at a random place (0.4-0.6 of the arena) and rotation, inside the arena.
+
+    Long structures (a tee of 12 robots) can reach past the edge of the default arena: then the arena
+    grows by 10 % at a time (``grow``, the structure keeping its relative place) until every slot is at
+    least ``gap_um`` inside; with a given arena the draw is refused (:class:`PlanningError`, redrawn).
+    """
+    w, h = size
+    fx, fy, th = rng.uniform(0.4, 0.6), rng.uniform(0.4, 0.6), rng.uniform(0, TWO_PI)
+    names = [rb.name for rb in robots_in_order]
+    L = np.array([rb.length_um for rb in robots_in_order])
+    W = np.array([rb.width_um for rb in robots_in_order])
+    for _ in range(40):
+        spec = StructureSpec(shape, Pose(float(fx * w), float(fy * h), float(th)))
+        struct = candidate_structures(robots_in_order, spec)[0]
+        corners = body_corners(struct.goal_poses(names), L, W).reshape(-1, 2)
+        if corners.min() >= gap_um and (corners[:, 0] <= w - gap_um).all() and (corners[:, 1] <= h - gap_um).all():
+            return spec, struct, (w, h)
+        if not grow:
+            break
+        w, h = w * 1.1, h * 1.1
+    raise PlanningError(f"the {shape} of {len(names)} robots does not fit in the {w:.0f} x {h:.0f} um arena")
