@@ -137,6 +137,8 @@ class DockView:
     goal: np.ndarray
     length_um: float
     nominal_speed_um_s: float
+    drift_rad_per_um: float = 0.0
+    """Identified straight-line curvature (+ = clockwise; :class:`~stressbots.control.straight_drift.StraightDrift`)."""
 
 
 def _fix(view: DockView, aim_left_um: float) -> LineFix:
@@ -179,7 +181,12 @@ def line_approach(
         if (float(np.hypot(*(view.pose[:2] - view.goal[:2]))) <= opts.dock_tol_um
                 and abs(float(angle_difference(view.pose[2], view.goal[2]))) <= math.radians(opts.dock_tol_deg)):
             break  # at the structure already: push and judge
-        lead = lead_um(behind, view.length_um, tune.lead_drift_deg_per_mm, tune.aim_left_um)
+        # aim left by what the identified drift plus a margin (its random part) adds before the robot docks
+        kappa = math.degrees(view.drift_rad_per_um) * 1000.0 + tune.lead_drift_deg_per_mm
+        lead = lead_um(behind, view.length_um, kappa, tune.aim_left_um)
+        # ... and by the docking offset a heading estimate off by ``aim_heading_sigma_deg`` would cause: a burst
+        # planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left
+        lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind, 0.0) + 0.5 * view.length_um)
         # line coordinates about the aim point, ``lead`` left of the slot
         fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
         steps = _frame(fix, view, k, opts, tx, loop_blocked, log)
@@ -200,14 +207,22 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
     final = fix.behind_um <= tune.final_run_um
     frame_s = tune.final_frame_s if final else min(tx, (fix.behind_um - tune.final_run_um) / v + 1e-3)
     burst: Steps = []
-    if fix.offset_um < -tune.reaim_tol_um and (final or abs(fix.psi_rad) <= math.radians(tune.reaim_max_deg)):
-        turn = reaim_turn_rad(fix, view.length_um, tune.reaim_max_deg)
-        burst = [(k, turn / view.turn_rate_rad_s)]
-    elif fix.offset_um > (tune.final_right_um if final else tune.aligned_um):
-        if not final:
+    if fix.offset_um < -tune.reaim_tol_um:
+        turn = reaim_turn_rad(fix, view.length_um, 1e3)
+        if turn > math.radians(tune.reaim_max_deg):  # too far left for a burst: merge, or loop back
             m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
             if m is not None:
                 return _merge_steps(m, fix, view, k, opts, tx)
+            if not loop_blocked():
+                log("miss", f"would dock {-fix.offset_um:.0f} um left of its aim ({fix.right_um:.0f} um, "
+                            f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
+                return None
+            turn = math.radians(tune.reaim_max_deg)
+        burst = [(k, turn / view.turn_rate_rad_s)]
+    elif fix.offset_um > (tune.final_right_um if final else tune.aligned_um):
+        m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
+        if m is not None:
+            return _merge_steps(m, fix, view, k, opts, tx)
         small = fix.offset_um <= tune.small_miss_um and abs(fix.right_um) <= tune.small_miss_um
         blocked = loop_blocked()
         if not small and fix.offset_um <= tune.late_miss_um and blocked:

@@ -69,6 +69,7 @@ from ..robots import TWO_PI, angle_difference, front_midpoints, turning_centres
 from . import docking
 from .docking import DockOutcome, DockView
 from .loop import PlantLoop
+from .parking import orbit_gaps, park_move
 from .queries import (
     best_departure,
     in_funnel,
@@ -216,6 +217,31 @@ class _Runner(PlantLoop):
         if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
             return True
         return False
+
+    def park_orbits(self, k: int) -> None:
+        """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
+        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each."""
+        waiting = [self.by_rank[j] for j in range(1, k + 1)]
+        docked = np.flatnonzero(self.docked)
+        gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
+                          self.est[docked], self.L[docked], self.W[docked])
+        for idx in np.argsort(gaps):
+            i = waiting[int(idx)]
+            j = int(self.rank[i])
+            if gaps[idx] >= self.tune.park_margin_um or j == k:
+                continue
+            movers = [self.by_rank[m] for m in range(j, k + 1)]
+            still = [self.by_rank[m] for m in range(1, j)]
+            move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                              self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                              clearance_um=self.tune.park_clearance_um)
+            if move_ is None:
+                self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble and no clear move takes it away")
+                continue
+            self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
+                                f"{self.tune.park_shift_um:.0f} um away")
+            self.replans += 1
+            self.drive([(k, move_.wait_s), (j - 1, move_.straight_s)])
 
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]
@@ -406,6 +432,7 @@ class _Runner(PlantLoop):
         corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
         """
         i = self.by_rank[k]
+        self.park_orbits(k)
         orbiting = self.orbiting_below(k)
         if self._motion is not None and (abs(self._motion[0]) > math.radians(5.0) or np.hypot(*(self._motion[2] - self._motion[1])) > 60.0):
             route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
@@ -481,7 +508,7 @@ class _Runner(PlantLoop):
     def dock_view(self, i: int) -> DockView:
         """A frozen view of robot ``i`` for the docking policy (estimates as of the last frame)."""
         return DockView(self.est[i].copy(), float(self.v_hat[i]), float(self.r_hat[i]), float(self.omega_hat[i]),
-                        self.goals[i].copy(), float(self.L[i]), float(self.v[i]))
+                        self.goals[i].copy(), float(self.L[i]), float(self.v[i]), float(self.straight_drift.kappa[i]))
 
     def play(self, policy) -> Any:
         """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""

@@ -95,6 +95,14 @@ class Tuning:
         Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through.
     station_leg_cost_um:
         Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length.
+    park_margin_um:
+        Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or
+        another orbit is moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading
+        noise, and one that reaches an obstacle traps its robot.
+    park_shift_um:
+        How far such an orbit is moved.
+    park_clearance_um:
+        Clearance every robot driving straight during that move keeps (or, if closer already, does not lose).
     approach_frames:
         Frames the fine motion along an approach line may take before it gives up.
     aligned_um, aligned_deg:
@@ -114,6 +122,10 @@ class Tuning:
         would add before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then
         carries it onto the slot, one to the left is corrected by a clockwise burst (about half the
         literature's 3.7 deg/mm: the random part of the drift goes either way).
+    aim_heading_sigma_deg:
+        The aim also leads left by the docking offset a heading estimate error of this much would cause,
+        ``(behind + L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per
+        frame, filtered), and only what ends up left is fixed later.
     reaim_max_deg:
         Largest single clockwise re-aim burst (a larger one means the robot is not on its line).
     final_right_um:
@@ -163,6 +175,9 @@ class Tuning:
     via_tol_um: float = 60.0
     station_grid_um: float = 150.0
     station_leg_cost_um: float = 300.0
+    park_margin_um: float = 40.0
+    park_shift_um: float = 150.0
+    park_clearance_um: float = 25.0
     approach_frames: int = 80
     aligned_um: float = 3.0
     aligned_deg: float = 1.0
@@ -171,6 +186,7 @@ class Tuning:
     final_frame_s: float = 0.3
     reaim_tol_um: float = 1.0
     lead_drift_deg_per_mm: float = 2.0
+    aim_heading_sigma_deg: float = 0.6
     reaim_max_deg: float = 4.0
     final_right_um: float = 6.0
     settle_frames: int = 6
