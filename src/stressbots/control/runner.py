@@ -281,6 +281,7 @@ class _Runner(PlantLoop):
         next replan, a turn cut short costs a slight turn.
         """
         stalls = 0
+        quiet = 0  # cycles left before the roadmap is asked again after it found no way around
         self._stuck = False
         for _ in range(max_cycles):
             v, r = self.v_hat[i], self.r_hat[i]
@@ -289,7 +290,9 @@ class _Runner(PlantLoop):
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via:
+                if via and quiet > 0:
+                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
+                elif via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     c_eff = self.opts.clearance_um if clearance is None else clearance
@@ -303,7 +306,11 @@ class _Runner(PlantLoop):
                                 return True
                         if self.t > t_before:
                             continue
-                    path = self._route_or_detour(i, target, orbiting, extra_discs, routed, path)
+                    found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
+                    if found is None:
+                        quiet = self.tune.no_route_quiet_cycles
+                        self.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
+                    path = path if found is None else found
                 else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
             self.replans += 1

@@ -95,6 +95,9 @@ class Tuning:
         Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through.
     station_leg_cost_um:
         Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length.
+    no_route_quiet_cycles:
+        After the roadmap found no way around the obstacles, gross motion drives on this many t_x before it
+        asks again (each failed query costs a full roadmap build: failing runs spent minutes there).
     park_margin_um:
         Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or
         another orbit is moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading
@@ -175,6 +178,7 @@ class Tuning:
     via_tol_um: float = 60.0
     station_grid_um: float = 150.0
     station_leg_cost_um: float = 300.0
+    no_route_quiet_cycles: int = 5
     park_margin_um: float = 40.0
     park_shift_um: float = 150.0
     park_clearance_um: float = 25.0
