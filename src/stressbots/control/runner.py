@@ -318,15 +318,8 @@ class _Runner(PlantLoop):
             whole = path.length / v <= self.tune.whole_leg_factor * self.tx
             limit = None if whole else self.tx
             steps = self.path_steps(path, v, turn_k, straight_k, limit)
-            segs = path.segments
-            if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
-                cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
-                biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
-                                                                       clearance=clearance, target=target):
-                    steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
-                    steps.insert(1, (straight_k, cut_um / v))
-                    steps = trim_steps(steps, self.tx)
+            if not whole:
+                steps = self._left_biased(i, path, steps, straight_k, orbiting, extra_discs, clearance, target)
             before = self.est[i].copy()
             self.drive(steps)
             if float(np.hypot(*(self.est[i, :2] - before[:2]))) < self.tune.stall_fraction * v * sum(d for _, d in steps):
@@ -340,6 +333,21 @@ class _Runner(PlantLoop):
             if whole:
                 return True
         return False
+
+    def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
+        """``steps`` with the turn into a long straight cut short by ``Tuning.left_bias_deg`` when that path is clear
+        (see :meth:`steer`)."""
+        v, r = self.v_hat[i], self.r_hat[i]
+        segs = path.segments
+        if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx):
+            return steps
+        cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
+        biased = pathlib.Path(self.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
+        if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
+                                                               clearance=clearance, target=target):
+            steps = [(steps[0][0], steps[0][1] - cut_um / v), (straight_k, cut_um / v), *steps[1:]]
+            steps = trim_steps(steps, self.tx)
+        return steps
 
     def arrived(self, pose: np.ndarray, target: np.ndarray) -> bool:
         """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
