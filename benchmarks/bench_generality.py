@@ -23,6 +23,10 @@ assembly for 4 and 8 robots (controller + simulator; the nominal plan, shared by
 excluded). Output is incremental (one line per layout as it finishes) and, with ``--jsonl``, one JSON
 record per layout.
 
+``--plan-cache DIR`` pickles each layout's nominal plan (the controller does not change it), so repeated
+runs while developing the controller skip the planning; ``--seeds 0,1,2`` picks plant seeds; failing
+trials keep their last twelve controller events in the JSONL record (``events_tail``).
+
 Run (long: use ``nice`` and the background)::
 
     nice python benchmarks/bench_generality.py --set tuning --layouts 60 --jsonl tuning.jsonl > tuning.txt
