@@ -164,9 +164,13 @@ def lead_um(behind_um: float, length_um: float, kappa_deg_per_mm: float, base_um
 
 def line_approach(
     see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: float, *, loop_blocked: Callable[[], bool],
-    log: Callable[[str, str], None],
+    log: Callable[[str, str], None], attempt: int = 0,
 ) -> Generator[Steps, None, DockOutcome]:
     """Fine motion along the approach line of robot ``D_k`` (P_k turns it, P_{k-1} drives it straight).
+
+    ``attempt`` (0 first): each earlier miss widens the offsets accepted without a loop by
+    ``Tuning.miss_relax_um`` and the largest re-aim burst by ``Tuning.reaim_max_deg`` (at twice the
+    literature's noise a robot could otherwise loop back six times and never dock).
 
     Merge (straight, interpolated clockwise arc) onto the line, then drive along it aiming
     :func:`lead_um` left of the slot, with a clockwise burst whenever the predicted docking offset
@@ -189,7 +193,7 @@ def line_approach(
         lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind, 0.0) + 0.5 * view.length_um)
         # line coordinates about the aim point, ``lead`` left of the slot
         fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
-        steps = _frame(fix, view, k, opts, tx, loop_blocked, log)
+        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt)
         if steps is None:
             return DockOutcome.MISSED
         yield steps
@@ -200,16 +204,18 @@ def line_approach(
     return (yield from settle(see, k, opts, tx))
 
 
-def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log) -> Steps | None:
+def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0) -> Steps | None:
     """The steps of one frame along the line (``fix`` relative to the aim point); None: loop back."""
     tune = opts.tuning
+    relax_um = tune.miss_relax_um * attempt
+    burst_max = math.radians(tune.reaim_max_deg * (1 + attempt))
     v, r = view.speed_um_s, view.radius_um
     final = fix.behind_um <= tune.final_run_um
     frame_s = tune.final_frame_s if final else min(tx, (fix.behind_um - tune.final_run_um) / v + 1e-3)
     burst: Steps = []
     if fix.offset_um < -tune.reaim_tol_um:
         turn = reaim_turn_rad(fix, view.length_um, 1e3)
-        if turn > math.radians(tune.reaim_max_deg):  # too far left for a burst: merge, or loop back
+        if turn > burst_max:  # too far left for a burst: merge, or loop back
             m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
             if m is not None:
                 return _merge_steps(m, fix, view, k, opts, tx)
@@ -217,13 +223,13 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
                 log("miss", f"would dock {-fix.offset_um:.0f} um left of its aim ({fix.right_um:.0f} um, "
                             f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
                 return None
-            turn = math.radians(tune.reaim_max_deg)
+            turn = burst_max
         burst = [(k, turn / view.turn_rate_rad_s)]
-    elif fix.offset_um > (tune.final_right_um if final else tune.aligned_um):
+    elif fix.offset_um > (tune.final_right_um + relax_um if final else tune.aligned_um):
         m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
         if m is not None:
             return _merge_steps(m, fix, view, k, opts, tx)
-        small = fix.offset_um <= tune.small_miss_um and abs(fix.right_um) <= tune.small_miss_um
+        small = fix.offset_um <= tune.small_miss_um + relax_um and abs(fix.right_um) <= tune.small_miss_um + relax_um
         blocked = loop_blocked()
         if not small and fix.offset_um <= tune.late_miss_um and blocked:
             # a loop from here would meet the structure (a turning robot cannot pivot off it): drive on

@@ -465,6 +465,7 @@ class _Runner(PlantLoop):
         if self._motion is not None and (abs(self._motion[0]) > math.radians(5.0) or np.hypot(*(self._motion[2] - self._motion[1])) > 60.0):
             route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
+        misses = 0
         for attempt in range(self.tune.dock_attempts):
             goal = self.goals[i]
             back = self.approach_length(i)
@@ -488,13 +489,14 @@ class _Runner(PlantLoop):
                 self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
             if back is not None:
-                outcome = self.line_approach(i, k)
+                outcome = self.line_approach(i, k, misses)
             else:
                 outcome = DockOutcome.DOCKED if self.fine_dock(i, k) else DockOutcome.STUCK
             if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
                 return
             if outcome is DockOutcome.MISSED:
                 # no contact: the gross motion (obstacle-checked) loops back into the funnel
+                misses += 1
                 self.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
                 continue
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
@@ -548,11 +550,12 @@ class _Runner(PlantLoop):
         except StopIteration as stop:
             return stop.value
 
-    def line_approach(self, i: int, k: int) -> DockOutcome:
+    def line_approach(self, i: int, k: int, attempt: int = 0) -> DockOutcome:
         """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
         outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, self.opts, self.tx,
                                                   loop_blocked=lambda: self.loop_blocked(i, k),
-                                                  log=lambda kind, detail: self.log(kind, i, f"{self.scn.names[i]} {detail}")))
+                                                  log=lambda kind, detail: self.log(kind, i, f"{self.scn.names[i]} {detail}"),
+                                                  attempt=attempt))
         return self.dock_verdict(i, outcome)
 
     def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:

@@ -138,6 +138,9 @@ class Tuning:
     final_right_um:
         In the final run, a predicted offset further right than this loops back when a loop is clear
         (a one-way robot cannot turn left; a robot that docks off its slot cannot leave it).
+    miss_relax_um:
+        After each miss of the same robot, the offsets its approach accepts without looping back grow by
+        this much (and its largest re-aim burst by ``reaim_max_deg``): precision first, then docking at all.
     settle_frames:
         Push frames after the run in, waiting for the robot to stop.
     settle_fraction:
@@ -198,6 +201,7 @@ class Tuning:
     aim_heading_sigma_deg: float = 0.6
     reaim_max_deg: float = 4.0
     final_right_um: float = 6.0
+    miss_relax_um: float = 5.0
     settle_frames: int = 6
     settle_fraction: float = 0.2
     flush_um: float = 15.0
