@@ -290,13 +290,9 @@ class _Runner(PlantLoop):
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via and quiet > 0 and self.orbit_clear(i, orbiting, extra_discs):
-                    # the roadmap found nothing a moment ago (asking every t_x only costs time): wait on its own
-                    # orbit rather than drive into the obstacle
-                    quiet -= 1
-                    self.drive([(turn_k, self.tx)])
-                    continue
-                if via:
+                if via and quiet > 0:
+                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
+                elif via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     c_eff = self.opts.clearance_um if clearance is None else clearance
@@ -311,11 +307,9 @@ class _Runner(PlantLoop):
                         if self.t > t_before:
                             continue
                     found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
-                    if found is None and self.orbit_clear(i, orbiting, extra_discs):
+                    if found is None:
                         quiet = self.tune.no_route_quiet_cycles
-                        self.log("no-route", i, f"no way around the obstacles to its target; waits on its orbit {quiet} t_x")
-                        self.drive([(turn_k, self.tx)])
-                        continue
+                        self.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
                     path = path if found is None else found
                 else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
@@ -339,13 +333,6 @@ class _Runner(PlantLoop):
             if whole:
                 return True
         return False
-
-    def orbit_clear(self, i: int, orbiting, extra_discs=()) -> bool:
-        """Whether a full clockwise loop of robot ``i`` from where it is stays clear of everything, up to
-        ``Tuning.orbit_slack_um`` of apparent overlap (a robot that waited on this orbit has been driving it)."""
-        r = float(self.r_hat[i])
-        loop = move(self.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
-        return not self.obstacles_hit(loop, i, orbiting, extra_discs=extra_discs, clearance=-self.tune.orbit_slack_um)
 
     def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
         """``steps`` with the turn into a long straight cut short by ``Tuning.left_bias_deg`` when that path is clear

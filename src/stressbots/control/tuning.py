@@ -96,12 +96,8 @@ class Tuning:
     station_leg_cost_um:
         Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length.
     no_route_quiet_cycles:
-        After the roadmap found no way around the obstacles, gross motion waits on its orbit (when a loop
-        is clear; otherwise it asks again every t_x) this many t_x before it asks again (each failed query
-        costs a full roadmap build: failing runs spent minutes there).
-    orbit_slack_um:
-        A loop on the robot's own orbit counts as clear for waiting up to this much apparent overlap (the
-        estimated centre and radius are a few um off, and it has been driving that orbit while it waited).
+        After the roadmap found no way around the obstacles, gross motion drives on this many t_x before it
+        asks again (each failed query costs a full roadmap build: failing runs spent minutes there).
     park_margin_um:
         Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or
         another orbit is moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading
@@ -186,7 +182,6 @@ class Tuning:
     station_grid_um: float = 150.0
     station_leg_cost_um: float = 300.0
     no_route_quiet_cycles: int = 5
-    orbit_slack_um: float = 10.0
     park_margin_um: float = 40.0
     park_shift_um: float = 150.0
     park_clearance_um: float = 25.0
