@@ -23,6 +23,10 @@ assembly for 4 and 8 robots (controller + simulator; the nominal plan, shared by
 excluded). Output is incremental (one line per layout as it finishes) and, with ``--jsonl``, one JSON
 record per layout.
 
+``--plan-cache DIR`` pickles each layout's nominal plan (the controller does not change it), so repeated
+runs while developing the controller skip the planning; ``--seeds 0,1,2`` picks plant seeds; failing
+trials keep their last twelve controller events in the JSONL record (``events_tail``).
+
 Run (long: use ``nice`` and the background)::
 
     nice python benchmarks/bench_generality.py --set tuning --layouts 60 --jsonl tuning.jsonl > tuning.txt
@@ -91,8 +95,30 @@ def failure_kind(failure: str, names) -> str:
     return _NUM.sub("#", text).strip()
 
 
-def run_layout(set_name: str, j: int, plant_seeds: int, noise_scale: float, cap_s: float | None = None) -> dict:
-    """Plan layout ``j`` and run its plant seeds; a JSON-able record."""
+def _cached_plan(cache_dir: str, key: str, make):
+    """``make()`` once per ``key``: nominal plans do not depend on the controller, so iterating on the
+    controller need not re-plan every layout (pickled under ``cache_dir``; delete it after planner changes)."""
+    import os
+    import pickle
+
+    if not cache_dir:
+        return make()
+    path = os.path.join(cache_dir, f"{key}.pkl")
+    if os.path.exists(path):
+        with open(path, "rb") as fh:
+            return pickle.load(fh)
+    value = make()
+    os.makedirs(cache_dir, exist_ok=True)
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "wb") as fh:
+        pickle.dump(value, fh)
+    os.replace(tmp, path)
+    return value
+
+
+def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: float | None = None,
+               plan_cache: str = "") -> dict:
+    """Plan layout ``j`` (or load its plan from ``plan_cache``) and run its plant seeds; a JSON-able record."""
     from stressbots.control import assemble, nominal_plan, structure_targets
     from stressbots.errors import PlanningError
     from stressbots.generate import LITERATURE_NOISE, random_scenario
@@ -108,7 +134,9 @@ def run_layout(set_name: str, j: int, plant_seeds: int, noise_scale: float, cap_
         return rec
     t0 = time.perf_counter()
     try:
-        plan = nominal_plan(scn)
+        plan = _cached_plan(plan_cache, f"{set_name}-{j}-x{noise_scale:g}", lambda: _plan_or_error(nominal_plan, scn))
+        if isinstance(plan, PlanningError):
+            raise plan
         rec["status"] = "ran"
     except PlanningError as exc:
         # counted apart (issue 15): the controller still runs, on the structure's slots alone
@@ -122,14 +150,17 @@ def run_layout(set_name: str, j: int, plant_seeds: int, noise_scale: float, cap_
             return rec
     rec["plan_s"] = time.perf_counter() - t0
     trials = []
-    for ps in range(plant_seeds):
+    for ps in (range(plant_seeds) if isinstance(plant_seeds, int) else plant_seeds):
         t0 = time.perf_counter()
         try:
             r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan)
             ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
+            tail = [] if ok else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]]
         except WallTimeCap as exc:
+            tail = []
             ok, failure, sim_s, shape_err = False, f"wall-time cap: {exc} ({cap_s:g} s)", float("nan"), float("nan")
         except Exception as exc:  # a controller exception is a failure of the trial, with its type
+            tail = []
             ok, failure, sim_s, shape_err = False, f"controller error: {type(exc).__name__}: {exc}", float("nan"), float("nan")
             rec.setdefault("tracebacks", []).append(traceback.format_exc(limit=4))
         trials.append(
@@ -141,11 +172,22 @@ def run_layout(set_name: str, j: int, plant_seeds: int, noise_scale: float, cap_
                 "wall_s": time.perf_counter() - t0,
                 "sim_s": sim_s,
                 "shape_error_um": shape_err,
+                "events_tail": tail,
             }
         )
     rec["trials"] = trials
     rec["successes"] = sum(t["success"] for t in trials)
     return rec
+
+
+def _plan_or_error(nominal_plan, scn):
+    """The nominal plan, or the PlanningError (cached like a plan: an unplannable layout stays so)."""
+    from stressbots.errors import PlanningError
+
+    try:
+        return nominal_plan(scn)
+    except PlanningError as exc:
+        return exc
 
 
 def _wilson(s: int, n: int) -> tuple[float, float]:
@@ -201,6 +243,8 @@ def main(argv=None) -> None:
     ap.add_argument("--workers", type=int, default=2, help="processes (at most 2 on the shared machine)")
     ap.add_argument("--jsonl", default="", help="append one JSON record per layout to this file")
     ap.add_argument("--cap-s", type=float, default=60.0, help="wall-time cap per trial (s); a capped trial fails")
+    ap.add_argument("--plan-cache", default="", help="directory of pickled nominal plans (reused across controller runs)")
+    ap.add_argument("--seeds", default="", help="comma-separated plant seeds (overrides --plant-seeds)")
     ap.add_argument("--summarise", default="", help="only print the summary of the records in this JSONL file")
     a = ap.parse_args(argv)
     if a.summarise:
@@ -213,11 +257,12 @@ def main(argv=None) -> None:
         return
     idx = [int(x) for x in a.only.split(",")] if a.only else list(range(a.first, a.first + a.layouts))
     workers = max(1, min(a.workers, 2))
-    print(f"set {a.set}, {len(idx)} layouts x {a.plant_seeds} plant seeds, noise x{a.noise_scale:g}, {workers} processes, "
+    seeds = [int(x) for x in a.seeds.split(",")] if a.seeds else list(range(a.plant_seeds))
+    print(f"set {a.set}, {len(idx)} layouts x plant seeds {seeds}, noise x{a.noise_scale:g}, {workers} processes, "
           f"wall-time cap {a.cap_s:g} s per trial", flush=True)
     records = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futs = {pool.submit(run_layout, a.set, j, a.plant_seeds, a.noise_scale, a.cap_s or None): j for j in idx}
+        futs = {pool.submit(run_layout, a.set, j, seeds, a.noise_scale, a.cap_s or None, a.plan_cache): j for j in idx}
         for fut in as_completed(futs):
             rec = fut.result()
             records.append(rec)

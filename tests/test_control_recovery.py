@@ -134,3 +134,45 @@ def test_keeps_clear_of_an_orbit_that_drifted_into_its_way():
     assert not hits, hits
     assert any(e["kind"] == "detour" and e["robot"] == scn.names[d2] for e in result.events)  # it went around
     assert result.success, (result.failure, result.events[-6:])
+
+
+class SideShove(ProtocolOnly):
+    """Fault injection: when ``robot`` is within ``near_um`` of its slot, its true pose is pushed ``shift_um``
+    to its right (as by a drift burst the camera saw too late): it meets the face off its slot."""
+
+    def __init__(self, inner, robot: int, goal, near_um: float, shift_um: float):
+        super().__init__(inner)
+        self.robot, self.goal, self.near_um, self.shift_um = robot, np.asarray(goal, float), near_um, shift_um
+        self.done = False
+
+    def apply(self, waveform):
+        sim = self._inner
+        p = sim.true_poses()[self.robot]
+        if not self.done and np.hypot(*(p[:2] - self.goal[:2])) < self.near_um:
+            sim._pose[self.robot, :2] += self.shift_um * np.array([np.cos(p[2]), -np.sin(p[2])])
+            self.done = True
+        super().apply(waveform)
+
+
+def test_a_robot_stopped_flush_off_its_slot_is_docked_not_backed_off():
+    """A robot that meets its slot's face 35 um to the side cannot leave it (front contact: it can neither
+    turn off nor reverse). The controller records it as docked off its slot and goes on; before, it
+    'backed off' against the face six times and the run failed."""
+    scn = random_scenario(3, 11, shape="tee", noise=Noise())
+    plan = structure_targets(scn)
+    from stressbots.electrostatics import analyse_scenario
+
+    order = analyse_scenario(scn).order_index
+    assert order is not None
+    d1 = int(order[0])
+    dry = assemble(scn, SimulatedPlant(scn, seed=0), seed=0, plan=plan)
+    assert dry.success
+    sim = SimulatedPlant(scn, seed=0)
+    plant = SideShove(sim, d1, dry.goals[d1], near_um=0.5 * float(scn.lengths_um[d1]) + 20.0, shift_um=35.0)
+    result = assemble(scn, plant, seed=0, plan=plan)
+    assert plant.done
+    assert sim.docked[d1]  # the simulator's own record: flush against the structure
+    mine = [e for e in result.events if e["robot"] == scn.names[d1]]
+    assert any(e["kind"] == "docked" and "off its slot" in e["detail"] for e in mine), mine[-4:]
+    assert not any(e["kind"] == "stuck" for e in mine)
+    assert result.docked.all() and (result.failure is None or result.failure.startswith("shape error"))

@@ -22,6 +22,7 @@ from ..errors import PlanningError
 from ..estimation import Estimator
 from ..robots import orbit_radii
 from ..waveform import synthesize
+from .straight_drift import StraightDrift
 
 __all__ = ["PlantLoop"]
 
@@ -61,6 +62,8 @@ class PlantLoop:
         self.events: list[dict] = []
         obs = np.asarray(plant.observe(), dtype=np.float64)
         self.estimator = Estimator(obs, scenario.starts, scenario.speeds_um_s, scenario.turn_radii_um)
+        self.straight_drift = StraightDrift(n)
+        self.straight_drift.frame(obs, np.zeros(n, dtype=bool), np.zeros(n))  # the first frame starts no run
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
 
@@ -110,7 +113,10 @@ class PlantLoop:
         if self.t + total > self.budget_s + 1e-9:
             raise self.over_budget()
         self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state))
-        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), self.plant.observe())
+        frame = self.plant.observe()
+        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame)
+        straight = (self.rank > max(k for k, _ in steps)) & ~self.docked
+        self.straight_drift.frame(frame, straight, self.v_hat * total)
         self.t += total
         self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
         self.after_drive(steps)

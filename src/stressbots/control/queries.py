@@ -13,7 +13,8 @@ import numpy as np
 from .. import paths as pathlib
 from ..robots import TWO_PI, angle_difference
 
-__all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "best_departure"]
+__all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "best_departure",
+           "interpolated_steps"]
 
 
 def turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um: float = 3.0):
@@ -154,3 +155,23 @@ def best_departure(pN, vN: float, LN: float, cM, rM: float, thM: float, wM: floa
     if not np.isfinite(cost[j]) or cost[j] > cost_max:
         return None
     return float(wait[j]), float(cost[j])
+
+
+def interpolated_steps(rho_turn: float, duration: float, turn_k: int, straight_k: int, period_s: float) -> list[tuple[int, float]]:
+    """S_2f for ``duration`` s: symmetric cycles (half turn, straight, half turn) with turn fraction ``rho_turn``.
+
+    The mean radius is ``r / rho_turn`` (SPEC 8); cycles last at most ``period_s``.
+
+    >>> interpolated_steps(0.5, 0.4, 3, 2, 0.2)
+    [(3, 0.05), (2, 0.1), (3, 0.05), (3, 0.05), (2, 0.1), (3, 0.05)]
+    """
+    if rho_turn >= 0.995:
+        return [(turn_k, duration)]
+    if rho_turn <= 0.005:
+        return [(straight_k, duration)]
+    cycles = max(1, math.ceil(duration / period_s - 1e-9))
+    T = duration / cycles
+    out: list[tuple[int, float]] = []
+    for _ in range(cycles):
+        out += [(turn_k, 0.5 * rho_turn * T), (straight_k, (1 - rho_turn) * T), (turn_k, 0.5 * rho_turn * T)]
+    return out

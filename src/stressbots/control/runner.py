@@ -66,10 +66,14 @@ from ..collision import (
 from ..errors import PlanningError
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints, turning_centres
+from . import docking
+from .docking import DockOutcome, DockView
 from .loop import PlantLoop
+from .parking import orbit_gaps, park_move
 from .queries import (
     best_departure,
     in_funnel,
+    interpolated_steps,
     line_coords,
     line_pose,
     merge,
@@ -78,6 +82,7 @@ from .queries import (
     turn_fraction,
 )
 from .result import AssemblyResult, judge_run
+from .station import orbit_route
 from .targets import Targets, nominal_plan, structure_targets
 from .tuning import ControllerOptions
 
@@ -129,7 +134,6 @@ class _Runner(PlantLoop):
         self.v, self.r = scenario.speeds_um_s, scenario.turn_radii_um
         self.nominal_goals = np.asarray(plan_result.goals, dtype=np.float64).copy()
         self.goals = self.nominal_goals.copy()
-        self._missed = False
         self._stuck = False
         self._plan: tuple[Any, Any, float] | None = None
         self._warned: set = set()
@@ -214,6 +218,31 @@ class _Runner(PlantLoop):
             return True
         return False
 
+    def park_orbits(self, k: int) -> None:
+        """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
+        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each."""
+        waiting = [self.by_rank[j] for j in range(1, k + 1)]
+        docked = np.flatnonzero(self.docked)
+        gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
+                          self.est[docked], self.L[docked], self.W[docked])
+        for idx in np.argsort(gaps):
+            i = waiting[int(idx)]
+            j = int(self.rank[i])
+            if gaps[idx] >= self.tune.park_margin_um or j == k:
+                continue
+            movers = [self.by_rank[m] for m in range(j, k + 1)]
+            still = [self.by_rank[m] for m in range(1, j)]
+            move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                              self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                              clearance_um=self.tune.park_clearance_um)
+            if move_ is None:
+                self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble and no clear move takes it away")
+                continue
+            self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
+                                f"{self.tune.park_shift_um:.0f} um away")
+            self.replans += 1
+            self.drive([(k, move_.wait_s), (j - 1, move_.straight_s)])
+
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]
 
@@ -252,6 +281,7 @@ class _Runner(PlantLoop):
         next replan, a turn cut short costs a slight turn.
         """
         stalls = 0
+        quiet = 0  # cycles left before the roadmap is asked again after it found no way around
         self._stuck = False
         for _ in range(max_cycles):
             v, r = self.v_hat[i], self.r_hat[i]
@@ -260,7 +290,9 @@ class _Runner(PlantLoop):
                 return True
             path = pathlib.shortest_path(p, target, r)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via:
+                if via and quiet > 0:
+                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
+                elif via:
                     # commit to one roadmap route: steer through its waypoints (replanning every t_x
                     # between them), instead of a new random route every t_x
                     c_eff = self.opts.clearance_um if clearance is None else clearance
@@ -274,7 +306,11 @@ class _Runner(PlantLoop):
                                 return True
                         if self.t > t_before:
                             continue
-                    path = self._route_or_detour(i, target, orbiting, extra_discs, routed, path)
+                    found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
+                    if found is None:
+                        quiet = self.tune.no_route_quiet_cycles
+                        self.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
+                    path = path if found is None else found
                 else:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
             self.replans += 1
@@ -282,15 +318,8 @@ class _Runner(PlantLoop):
             whole = path.length / v <= self.tune.whole_leg_factor * self.tx
             limit = None if whole else self.tx
             steps = self.path_steps(path, v, turn_k, straight_k, limit)
-            segs = path.segments
-            if not whole and len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx:
-                cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
-                biased = pathlib.Path(p, r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-                if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
-                                                                       clearance=clearance, target=target):
-                    steps[0] = (steps[0][0], steps[0][1] - cut_um / v)
-                    steps.insert(1, (straight_k, cut_um / v))
-                    steps = trim_steps(steps, self.tx)
+            if not whole:
+                steps = self._left_biased(i, path, steps, straight_k, orbiting, extra_discs, clearance, target)
             before = self.est[i].copy()
             self.drive(steps)
             if float(np.hypot(*(self.est[i, :2] - before[:2]))) < self.tune.stall_fraction * v * sum(d for _, d in steps):
@@ -304,6 +333,21 @@ class _Runner(PlantLoop):
             if whole:
                 return True
         return False
+
+    def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
+        """``steps`` with the turn into a long straight cut short by ``Tuning.left_bias_deg`` when that path is clear
+        (see :meth:`steer`)."""
+        v, r = self.v_hat[i], self.r_hat[i]
+        segs = path.segments
+        if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx):
+            return steps
+        cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
+        biased = pathlib.Path(self.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
+        if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
+                                                               clearance=clearance, target=target):
+            steps = [(steps[0][0], steps[0][1] - cut_um / v), (straight_k, cut_um / v), *steps[1:]]
+            steps = trim_steps(steps, self.tx)
+        return steps
 
     def arrived(self, pose: np.ndarray, target: np.ndarray) -> bool:
         """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
@@ -350,17 +394,8 @@ class _Runner(PlantLoop):
         return [np.asarray(w, float) for w in points], routed
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
-        """S_2f for ``duration`` s: symmetric cycles (half turn, straight, half turn) with turn fraction rho."""
-        if rho_turn >= 0.995:
-            return [(turn_k, duration)]
-        if rho_turn <= 0.005:
-            return [(straight_k, duration)]
-        cycles = max(1, math.ceil(duration / self.opts.switch_period_s))
-        T = duration / cycles
-        out = []
-        for _ in range(cycles):
-            out += [(turn_k, 0.5 * rho_turn * T), (straight_k, (1 - rho_turn) * T), (turn_k, 0.5 * rho_turn * T)]
-        return out
+        """S_2f for ``duration`` s (:func:`~stressbots.control.queries.interpolated_steps`)."""
+        return interpolated_steps(rho_turn, duration, turn_k, straight_k, self.opts.switch_period_s)
 
     def fine_start(self, i: int, goal: np.ndarray) -> np.ndarray:
         """The intermediate pose a_i: back along a clockwise arc that ends exactly in the slot.
@@ -412,10 +447,12 @@ class _Runner(PlantLoop):
         corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
         """
         i = self.by_rank[k]
+        self.park_orbits(k)
         orbiting = self.orbiting_below(k)
         if self._motion is not None and (abs(self._motion[0]) > math.radians(5.0) or np.hypot(*(self._motion[2] - self._motion[1])) > 60.0):
             route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
+        misses = 0
         for attempt in range(self.tune.dock_attempts):
             goal = self.goals[i]
             back = self.approach_length(i)
@@ -438,11 +475,15 @@ class _Runner(PlantLoop):
             if back is not None and not self.in_funnel(i, back):
                 self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
-            ok = self.line_approach(i, k) if back is not None else self.fine_dock(i, k)
-            if ok:
+            if back is not None:
+                outcome = self.line_approach(i, k, misses)
+            else:
+                outcome = DockOutcome.DOCKED if self.fine_dock(i, k) else DockOutcome.STUCK
+            if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
                 return
-            if self._missed:
+            if outcome is DockOutcome.MISSED:
                 # no contact: the gross motion (obstacle-checked) loops back into the funnel
+                misses += 1
                 self.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
                 continue
             self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
@@ -481,50 +522,41 @@ class _Runner(PlantLoop):
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.r_hat[i]), self.tune)
 
-    def line_approach(self, i: int, k: int) -> bool:
-        """Fine motion along the approach line: merge (straight, interpolated arc), straight in, push.
+    def dock_view(self, i: int) -> DockView:
+        """A frozen view of robot ``i`` for the docking policy (estimates as of the last frame)."""
+        return DockView(self.est[i].copy(), float(self.v_hat[i]), float(self.r_hat[i]), float(self.omega_hat[i]),
+                        self.goals[i].copy(), float(self.L[i]), float(self.v[i]), float(self.straight_drift.kappa[i]))
 
-        False when it did not dock; ``self._missed`` then tells a miss (off the line, no contact: loop
-        back) from a robot stuck against the structure (back off first).
-        """
-        self._missed = False
-        for _ in range(80):
-            v, r = float(self.v_hat[i]), float(self.r_hat[i])
-            behind, right, psi = self.line_coords(i)
-            miss = right + behind * math.sin(psi)  # lateral miss at the slot if it went straight on
-            aligned = abs(miss) <= 3.0 and abs(psi) <= math.radians(1.0)
-            last = behind <= 1.6 * v * self.tx
-            if self.near_slot(i) or (aligned and last):
-                self.drive([(k - 1, max(behind, 0.0) / v + self.opts.push_s)])
-                return self.check_docked(i, k)
-            if aligned:
-                self.drive([(k - 1, self.tx)])
-                continue
-            m = self.merge(i, behind, right, psi)
-            if m is None:
-                small = abs(miss) <= self.tune.small_miss_um and abs(right) <= self.tune.small_miss_um  # ~6 um RMS
-                if not small and abs(miss) <= self.tune.late_miss_um and self.loop_blocked(i, k):
-                    # a loop from here would meet the structure (and a turning robot cannot pivot off it):
-                    # drive in with the miss; docking compliance takes the angle, the offset stays
-                    self.log("late", i, f"{self.scn.names[i]} drives in {miss:.0f} um off its line: a loop here would meet the structure")
-                    small = True
-                if small:  # no better without a loop
-                    self.drive([(k - 1, (max(behind, 0.0) / v + self.opts.push_s) if last else self.tx)])
-                    if last:
-                        return self.check_docked(i, k)
-                    continue
-                self.log("miss", i, f"off its approach line ({right:.0f} um, {math.degrees(psi):.1f} deg): loops back")
-                self._missed = True
-                return False
-            s1, R = m
-            t1, arc_t = s1 / v, R * (-psi) / v
-            whole = t1 + arc_t <= 1.6 * self.tx
-            steps = [(k - 1, t1 if whole else min(t1, self.tx))]
-            left = (t1 + arc_t if whole else self.tx) - steps[0][1]
-            if left > 1e-9:
-                steps += self.interpolated_steps(r / R, min(arc_t, left), k, k - 1)
-            self.drive(steps)
-        return False
+    def play(self, policy) -> Any:
+        """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""
+        try:
+            steps = next(policy)
+            while True:
+                self.drive(steps)
+                steps = policy.send(None)
+        except StopIteration as stop:
+            return stop.value
+
+    def line_approach(self, i: int, k: int, attempt: int = 0) -> DockOutcome:
+        """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
+        outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, self.opts, self.tx,
+                                                  loop_blocked=lambda: self.loop_blocked(i, k),
+                                                  log=lambda kind, detail: self.log(kind, i, f"{self.scn.names[i]} {detail}"),
+                                                  attempt=attempt))
+        return self.dock_verdict(i, outcome)
+
+    def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
+        """Record a docking outcome: docked robots join the structure; the others are logged."""
+        pose, goal = self.est[i], self.goals[i]
+        dpos = float(np.hypot(*(pose[:2] - goal[:2])))
+        dth = math.degrees(abs(angle_difference(pose[2], goal[2])))
+        if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
+            self.docked[i] = True
+            off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
+            self.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
+        elif outcome is DockOutcome.STUCK:
+            self.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
+        return outcome
 
     def loop_blocked(self, i: int, k: int) -> bool:
         """Whether a full clockwise loop of robot ``i`` from where it is would meet the structure, a lower
@@ -582,22 +614,9 @@ class _Runner(PlantLoop):
         )
 
     def check_docked(self, i: int, k: int) -> bool:
-        """Push until the robot stops; docked if it stopped at its slot, stuck (H) if elsewhere."""
-        for _ in range(6):
-            before = self.est[i].copy()
-            self.drive([(k - 1, self.tx)])
-            moved = float(np.hypot(*(self.est[i, :2] - before[:2])))
-            if moved < 0.2 * self.v[i] * self.tx:
-                goal = self.goals[i]
-                dpos = float(np.hypot(*(self.est[i, :2] - goal[:2])))
-                dth = abs(angle_difference(self.est[i, 2], goal[2]))
-                if dpos <= self.opts.dock_tol_um and dth <= math.radians(self.opts.dock_tol_deg):
-                    self.docked[i] = True
-                    self.log("docked", i, f"{dpos:.1f} um, {math.degrees(dth):.1f} deg from the slot")
-                    return True
-                self.log("stuck", i, f"stopped {dpos:.0f} um / {math.degrees(dth):.0f} deg from the slot (failure region H)")
-                return False
-        return False
+        """Push until the robot stops; docked if it stopped at its slot (or flush off it), stuck (H) if elsewhere."""
+        outcome = self.dock_verdict(i, self.play(docking.settle(lambda: self.dock_view(i), k, self.opts, self.tx)))
+        return outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT)
 
     def back_off(self, i: int, k: int) -> None:
         """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
@@ -789,12 +808,32 @@ class _Runner(PlantLoop):
         any clear track is shortened (900, 600, 400 um) when D_{n-1} can orbit at its end.
         """
         q_next = self.approach_pose(N, M, c_star, D)
+        route = self.station_route(M, c_star, lower)
+        for w in route[:-1]:
+            self.log("transfer", M, f"{self.scn.names[M]}'s way to its station is blocked: it goes via an orbit at "
+                                    f"({w[0]:.0f}, {w[1]:.0f}) um")
+            self.transfer_leg(N, M, w, q_next, lower, final=False)
+        self.transfer_leg(N, M, c_star, q_next, lower, final=True)
+
+    def station_route(self, M: int, c_star: np.ndarray, lower) -> list[np.ndarray]:
+        """Orbit centres D_{n-1} moves through to ``c_star`` (:func:`~stressbots.control.station.orbit_route`),
+        clear of the lower orbits and the arena edge; ``[c_star]`` (one straight move) when there is no route."""
+        cl = self.opts.clearance_um + 10.0  # transfer_option's check of D_{n-1}'s track
+        cs = turning_centres(self.est[lower], self.r_hat[lower]) if lower else np.zeros((0, 2))
+        rs = self.rstar[lower] if lower else np.zeros(0)
+        route = orbit_route(self.centre(M), np.asarray(c_star, float), float(self.rstar[M]), cs, rs, self.scn.arena_um,
+                            clearance=cl, spacing_um=self.tune.station_grid_um, leg_cost_um=self.tune.station_leg_cost_um)
+        return route if route else [np.asarray(c_star, float)]
+
+    def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
+        """Move D_{n-1}'s orbit to ``c_star`` (one stage of :meth:`transfer`); an intermediate orbit of a
+        route (``final`` False) counts as reached within ``Tuning.station_tol_um``."""
         failed_runs = 0
         for attempt in range(8):
             cM = self.centre(M)
             d_vec = c_star - cM
             d = float(np.hypot(*d_vec))
-            if d <= (60.0 if attempt == 0 else self.tune.station_tol_um):
+            if d <= (self.tune.via_tol_um if attempt == 0 or not final else self.tune.station_tol_um):
                 break
             u = d_vec / d
             th_dep = float(np.mod(math.atan2(u[0], u[1]) - math.radians(3.0), TWO_PI))
@@ -840,8 +879,9 @@ class _Runner(PlantLoop):
                     continue
                 self.wait_straight(M, th_dep)
             self.straight_leg(N, M, c_next, lower)
-        miss = float(np.hypot(*(c_star - self.centre(M))))
-        self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
+        if final:
+            miss = float(np.hypot(*(c_star - self.centre(M))))
+            self.log("station", M, f"{self.scn.names[M]} orbits {miss:.0f} um from its station")
 
     def wait_straight(self, M: int, th_dep: float) -> None:
         """D_n straight (P_{n-1}) while D_{n-1} orbits on to heading ``th_dep``."""

@@ -88,6 +88,65 @@ class Tuning:
         meet the structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um).
     orbit_watch_um:
         An orbit closer than this to another orbit, a docked body or the arena edge is logged.
+    via_tol_um:
+        D_{n-1}'s orbit counts as at an intermediate orbit of its route (and, on the first try, at its
+        station) within this.
+    station_grid_um:
+        Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through.
+    station_leg_cost_um:
+        Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length.
+    no_route_quiet_cycles:
+        After the roadmap found no way around the obstacles, gross motion drives on this many t_x before it
+        asks again (each failed query costs a full roadmap build: failing runs spent minutes there).
+    park_margin_um:
+        Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or
+        another orbit is moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading
+        noise, and one that reaches an obstacle traps its robot.
+    park_shift_um:
+        How far such an orbit is moved.
+    park_clearance_um:
+        Clearance every robot driving straight during that move keeps (or, if closer already, does not lose).
+    approach_frames:
+        Frames the fine motion along an approach line may take before it gives up.
+    aligned_um, aligned_deg:
+        On the approach line: predicted docking offset (:func:`~stressbots.control.docking.contact_offset`)
+        and heading error below these need no merge.
+    aim_left_um:
+        A robot on its approach line aims at least this far left of its slot (see ``lead_drift_deg_per_mm``).
+    final_run_um:
+        The last stretch before the slot is driven in short frames with clockwise re-aim bursts: heading
+        drift over it (3.7 deg/mm at the literature's noise) moves the docking point by several um.
+    final_frame_s:
+        Frame length (s) of the final run: shorter than t_x, so a drift is seen while it can be corrected.
+    reaim_tol_um:
+        In the final run, a predicted offset further left than this is corrected by a clockwise burst.
+    lead_drift_deg_per_mm:
+        On its approach line a robot aims left of its slot by what a clockwise heading drift of this much
+        would add before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then
+        carries it onto the slot, one to the left is corrected by a clockwise burst (about half the
+        literature's 3.7 deg/mm: the random part of the drift goes either way).
+    aim_heading_sigma_deg:
+        The aim also leads left by the docking offset a heading estimate error of this much would cause,
+        ``(behind + L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per
+        frame, filtered), and only what ends up left is fixed later.
+    reaim_max_deg:
+        Largest single clockwise re-aim burst (a larger one means the robot is not on its line).
+    final_right_um:
+        In the final run, a predicted offset further right than this loops back when a loop is clear
+        (a one-way robot cannot turn left; a robot that docks off its slot cannot leave it).
+    miss_relax_um:
+        After each miss of the same robot, the offsets its approach accepts without looping back grow by
+        this much (and its largest re-aim burst by ``reaim_max_deg``): precision first, then docking at all.
+    settle_frames:
+        Push frames after the run in, waiting for the robot to stop.
+    settle_fraction:
+        A pushing robot that moved less than this fraction of a frame's nominal travel has stopped.
+    flush_um:
+        A robot stopped within this of its slot's face line, heading within the docking tolerance, is flush
+        against the face it was to dock on.
+    off_slot_um:
+        ... and counts as docked off its slot up to this far along the face: its front touches the structure,
+        so it can neither turn (every front point moves forward) nor reverse; recovery is impossible.
     """
 
     g1_clearance_um: float = 25.0
@@ -119,6 +178,29 @@ class Tuning:
     small_miss_um: float = 12.0
     late_miss_um: float = 25.0
     orbit_watch_um: float = 10.0
+    via_tol_um: float = 60.0
+    station_grid_um: float = 150.0
+    station_leg_cost_um: float = 300.0
+    no_route_quiet_cycles: int = 5
+    park_margin_um: float = 40.0
+    park_shift_um: float = 150.0
+    park_clearance_um: float = 25.0
+    approach_frames: int = 80
+    aligned_um: float = 3.0
+    aligned_deg: float = 1.0
+    aim_left_um: float = 0.0
+    final_run_um: float = 220.0
+    final_frame_s: float = 0.3
+    reaim_tol_um: float = 1.0
+    lead_drift_deg_per_mm: float = 2.0
+    aim_heading_sigma_deg: float = 0.6
+    reaim_max_deg: float = 4.0
+    final_right_um: float = 6.0
+    miss_relax_um: float = 5.0
+    settle_frames: int = 6
+    settle_fraction: float = 0.2
+    flush_um: float = 15.0
+    off_slot_um: float = 90.0
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,271 @@
+"""Fine motion of a single robot along its slot's approach line: pure queries and the docking policy.
+
+A docking robot drives straight into its slot; the slot's face is the structure's edge. Where it ends
+is decided by two things the earlier controller looked at only in part:
+
+- its *lateral miss* when its front reaches the face: ``right + behind * tan(psi)`` (line coordinates
+  of :func:`~stressbots.control.queries.line_coords`);
+- *docking compliance*: a robot that meets the face at incidence ``psi`` rotates about its leading front
+  corner until flush, which moves its centre along the face by ``(L/2) sin(psi)`` (plus a second-order
+  ``(W/2)(1 - cos psi)``). A robot 2 deg off and 250 um long ends 4.4 um further to that side.
+
+:func:`contact_offset` predicts the final offset along the face from both. A one-way robot corrects
+that offset cheaply only clockwise (a short turn adds to ``psi``), so the policy re-aims with short
+clockwise bursts close to the slot, in frames shorter than t_x (:class:`~stressbots.control.tuning.Tuning`
+``final_frame_s``): heading drift over the last hundred um is what the earlier single open-loop run
+could not see.
+
+A robot whose *front* touches anything can never leave it: turning about its turning centre (to its
+right, outside the body) moves every point of its front edge forward, and it cannot reverse. So a robot
+that stops flush against the face near its slot is docked there, off the slot or not
+(:class:`DockOutcome.DOCKED_OFF_SLOT`): backing off is impossible, and the shape is judged as a whole.
+
+Everything here is a function of a frozen :class:`~stressbots.control.loop.Snapshot`; the policy
+:func:`line_approach` yields the primitive steps it wants applied and returns a :class:`DockOutcome`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from ..robots import angle_difference
+from .queries import interpolated_steps, line_coords, merge
+from .tuning import ControllerOptions
+
+__all__ = ["DockOutcome", "DockView", "LineFix", "contact_offset", "lead_um", "reaim_turn_rad", "stopped_verdict", "line_approach",
+           "settle"]
+
+Steps = list[tuple[int, float]]
+
+
+class DockOutcome(Enum):
+    """How a docking attempt ended."""
+
+    DOCKED = "docked"
+    """Stopped in its slot within the docking tolerances."""
+    DOCKED_OFF_SLOT = "docked off its slot"
+    """Stopped flush against the slot's face, beyond the tolerance along it: it cannot leave (front contact)."""
+    MISSED = "missed"
+    """Off its approach line without contact: gross motion loops it back into the funnel."""
+    STUCK = "stuck"
+    """Stopped elsewhere (failure region H): back off, if it can, and try again."""
+    GAVE_UP = "gave up"
+    """The approach ran out of frames without docking."""
+
+
+@dataclass(frozen=True)
+class LineFix:
+    """A robot relative to its slot's approach line, with the offset it would dock at."""
+
+    behind_um: float
+    right_um: float
+    psi_rad: float
+    offset_um: float
+    """:func:`contact_offset`: where along the face it ends if it drives straight on (+ = right)."""
+
+
+def contact_offset(behind_um: float, right_um: float, psi_rad: float, length_um: float) -> float:
+    """Predicted offset (um, + = right of the slot) along the face of a robot that drives straight in.
+
+    ``right + behind * tan(psi)`` is where its centre line meets the face; docking compliance then turns it
+    flush about its leading front corner, moving the centre by ``(L/2) sin(psi) + sign(psi) (W/2)(1 - cos psi)``
+    (the second term is below 0.1 um for |psi| < 5 deg and is left out).
+
+    >>> round(contact_offset(100.0, 0.0, 0.0, 250.0), 6)
+    0.0
+    >>> round(contact_offset(0.0, 3.0, math.radians(2.0), 250.0), 2)   # 3 um right, then (125 um) sin 2 deg
+    7.36
+    """
+    return float(right_um + max(behind_um, 0.0) * math.tan(psi_rad) + 0.5 * length_um * math.sin(psi_rad))
+
+
+def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float) -> float:
+    """Clockwise turn (rad, >= 0) that brings a negative predicted offset back to zero, at most ``max_deg``.
+
+    A turn by ``d`` adds about ``(behind + L/2) d`` to :func:`contact_offset` (the arc's own sideways step,
+    ``r (1 - cos d)``, is second order). Zero when the robot would end on or right of its slot: a one-way
+    robot cannot turn left.
+
+    >>> fix = LineFix(200.0, 0.0, 0.0, -6.5)
+    >>> round(math.degrees(reaim_turn_rad(fix, 250.0, 5.0)), 3)
+    1.146
+    """
+    if fix.offset_um >= 0.0:
+        return 0.0
+    lever = max(fix.behind_um, 0.0) + 0.5 * length_um
+    return float(min(-fix.offset_um / lever, math.radians(max_deg)))
+
+
+def stopped_verdict(pose, goal, *, dock_tol_um: float, dock_tol_deg: float, flush_um: float, off_slot_um: float) -> DockOutcome:
+    """What a robot that stopped while pushing toward its slot is: docked, docked off its slot, or stuck.
+
+    Docked within ``dock_tol_um`` / ``dock_tol_deg`` of the slot; docked off its slot when its heading is
+    within ``dock_tol_deg``, its centre within ``flush_um`` of the slot's face line and within
+    ``off_slot_um`` along it (flush against the face it was to dock on: it cannot leave); stuck otherwise.
+
+    >>> g = np.array([0.0, 0.0, 0.0])
+    >>> stopped_verdict(np.array([5.0, 0.0, 0.0]), g, dock_tol_um=30, dock_tol_deg=15, flush_um=12, off_slot_um=80).name
+    'DOCKED'
+    >>> stopped_verdict(np.array([45.0, -3.0, 0.01]), g, dock_tol_um=30, dock_tol_deg=15, flush_um=12, off_slot_um=80).name
+    'DOCKED_OFF_SLOT'
+    >>> stopped_verdict(np.array([5.0, -60.0, 0.0]), g, dock_tol_um=30, dock_tol_deg=15, flush_um=12, off_slot_um=80).name
+    'STUCK'
+    """
+    pose, goal = np.asarray(pose, float), np.asarray(goal, float)
+    dth = abs(float(angle_difference(pose[2], goal[2])))
+    if float(np.hypot(*(pose[:2] - goal[:2]))) <= dock_tol_um and dth <= math.radians(dock_tol_deg):
+        return DockOutcome.DOCKED
+    behind, right, _ = line_coords(goal, pose)
+    if dth <= math.radians(dock_tol_deg) and abs(behind) <= flush_um and abs(right) <= off_slot_um:
+        return DockOutcome.DOCKED_OFF_SLOT
+    return DockOutcome.STUCK
+
+
+@dataclass(frozen=True)
+class DockView:
+    """What the docking policy reads each frame (a frozen view of the loop's estimates for one robot)."""
+
+    pose: np.ndarray
+    speed_um_s: float
+    radius_um: float
+    turn_rate_rad_s: float
+    goal: np.ndarray
+    length_um: float
+    nominal_speed_um_s: float
+    drift_rad_per_um: float = 0.0
+    """Identified straight-line curvature (+ = clockwise; :class:`~stressbots.control.straight_drift.StraightDrift`)."""
+
+
+def _fix(view: DockView, aim_left_um: float) -> LineFix:
+    behind, right, psi = line_coords(view.goal, view.pose)
+    right += aim_left_um  # aim a little left of the slot: every later correction is then clockwise
+    return LineFix(behind, right, psi, contact_offset(behind, right, psi, view.length_um))
+
+
+def lead_um(behind_um: float, length_um: float, kappa_deg_per_mm: float, base_um: float) -> float:
+    """How far left of its slot (um) a robot ``behind_um`` out aims: the offset a clockwise heading drift of
+    ``kappa_deg_per_mm`` would add before it docks (the arc's ``kappa s^2 / 2`` plus compliance's
+    ``(L/2) kappa s``), plus ``base_um``. Drift to the right then carries it onto the slot; drift to the
+    left is corrected by clockwise bursts (:func:`reaim_turn_rad`), the only cheap correction.
+
+    >>> round(lead_um(0.0, 250.0, 2.0, 1.0), 6)
+    1.0
+    >>> round(lead_um(200.0, 250.0, 2.0, 0.0), 2)   # (200^2 / 2 + 125 * 200) um^2 * 2 deg/mm
+    1.57
+    """
+    s = max(behind_um, 0.0)
+    return float(base_um + math.radians(kappa_deg_per_mm) / 1000.0 * (0.5 * s * s + 0.5 * length_um * s))
+
+
+def line_approach(
+    see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: float, *, loop_blocked: Callable[[], bool],
+    log: Callable[[str, str], None], attempt: int = 0,
+) -> Generator[Steps, None, DockOutcome]:
+    """Fine motion along the approach line of robot ``D_k`` (P_k turns it, P_{k-1} drives it straight).
+
+    ``attempt`` (0 first): each earlier miss widens the offsets accepted without a loop by
+    ``Tuning.miss_relax_um`` and the largest re-aim burst by ``Tuning.reaim_max_deg`` (at twice the
+    literature's noise a robot could otherwise loop back six times and never dock).
+
+    Merge (straight, interpolated clockwise arc) onto the line, then drive along it aiming
+    :func:`lead_um` left of the slot, with a clockwise burst whenever the predicted docking offset
+    (:func:`contact_offset`) falls further left than that; the last ``Tuning.final_run_um`` go in frames of
+    ``Tuning.final_frame_s``. Drive in, push, wait for the robot to stop and judge where
+    (:func:`stopped_verdict`). ``see()`` gives the latest view after each yielded list of steps was applied.
+    """
+    tune = opts.tuning
+    for _ in range(tune.approach_frames):
+        view = see()
+        behind, right, psi = line_coords(view.goal, view.pose)
+        if (float(np.hypot(*(view.pose[:2] - view.goal[:2]))) <= opts.dock_tol_um
+                and abs(float(angle_difference(view.pose[2], view.goal[2]))) <= math.radians(opts.dock_tol_deg)):
+            break  # at the structure already: push and judge
+        # aim left by what the identified drift plus a margin (its random part) adds before the robot docks
+        kappa = math.degrees(view.drift_rad_per_um) * 1000.0 + tune.lead_drift_deg_per_mm
+        lead = lead_um(behind, view.length_um, kappa, tune.aim_left_um)
+        # ... and by the docking offset a heading estimate off by ``aim_heading_sigma_deg`` would cause: a burst
+        # planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left
+        lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind, 0.0) + 0.5 * view.length_um)
+        # line coordinates about the aim point, ``lead`` left of the slot
+        fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
+        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt)
+        if steps is None:
+            return DockOutcome.MISSED
+        yield steps
+        if steps[-1][0] == k - 1 and steps[-1][1] > max(tx, tune.final_frame_s) + 1e-9:  # the run in, with the push
+            break
+    else:
+        return DockOutcome.GAVE_UP
+    return (yield from settle(see, k, opts, tx))
+
+
+def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0) -> Steps | None:
+    """The steps of one frame along the line (``fix`` relative to the aim point); None: loop back."""
+    tune = opts.tuning
+    relax_um = tune.miss_relax_um * attempt
+    burst_max = math.radians(tune.reaim_max_deg * (1 + attempt))
+    v, r = view.speed_um_s, view.radius_um
+    final = fix.behind_um <= tune.final_run_um
+    frame_s = tune.final_frame_s if final else min(tx, (fix.behind_um - tune.final_run_um) / v + 1e-3)
+    burst: Steps = []
+    if fix.offset_um < -tune.reaim_tol_um:
+        turn = reaim_turn_rad(fix, view.length_um, 1e3)
+        if turn > burst_max:  # too far left for a burst: merge, or loop back
+            m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
+            if m is not None:
+                return _merge_steps(m, fix, view, k, opts, tx)
+            if not loop_blocked():
+                log("miss", f"would dock {-fix.offset_um:.0f} um left of its aim ({fix.right_um:.0f} um, "
+                            f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
+                return None
+            turn = burst_max
+        burst = [(k, turn / view.turn_rate_rad_s)]
+    elif fix.offset_um > (tune.final_right_um + relax_um if final else tune.aligned_um):
+        m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
+        if m is not None:
+            return _merge_steps(m, fix, view, k, opts, tx)
+        small = fix.offset_um <= tune.small_miss_um + relax_um and abs(fix.right_um) <= tune.small_miss_um + relax_um
+        blocked = loop_blocked()
+        if not small and fix.offset_um <= tune.late_miss_um and blocked:
+            # a loop from here would meet the structure (a turning robot cannot pivot off it): drive on
+            log("late", f"drives on {fix.offset_um:.0f} um off its line: a loop here would meet the structure")
+            small = True
+        if not (small or (final and blocked)):
+            log("miss", f"would dock {fix.offset_um:.0f} um right of its aim ({fix.right_um:.0f} um, "
+                        f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
+            return None
+    left_s = max(fix.behind_um, 0.0) / v
+    if final and left_s <= tune.final_frame_s:
+        return burst + [(k - 1, left_s + opts.push_s)]
+    return burst + [(k - 1, frame_s)]
+
+
+def _merge_steps(m, fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float) -> Steps:
+    """Straight, then an interpolated clockwise arc of radius ``R`` onto the line (at most a frame of it)."""
+    s1, R = m
+    v, r = view.speed_um_s, view.radius_um
+    t1, arc_t = s1 / v, R * (-fix.psi_rad) / v
+    whole = t1 + arc_t <= 1.6 * tx
+    steps = [(k - 1, t1 if whole else min(t1, tx))]
+    left = (t1 + arc_t if whole else tx) - steps[0][1]
+    if left > 1e-9:
+        steps += interpolated_steps(r / R, min(arc_t, left), k, k - 1, opts.switch_period_s)
+    return steps
+
+
+def settle(see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: float) -> Generator[Steps, None, DockOutcome]:
+    """Push (P_{k-1}) a t_x at a time until the robot stops, then judge where it stopped (:func:`stopped_verdict`)."""
+    tune = opts.tuning
+    for _ in range(tune.settle_frames):
+        before = see().pose.copy()
+        yield [(k - 1, tx)]
+        view = see()
+        if float(np.hypot(*(view.pose[:2] - before[:2]))) < tune.settle_fraction * view.nominal_speed_um_s * tx:
+            return stopped_verdict(view.pose, view.goal, dock_tol_um=opts.dock_tol_um, dock_tol_deg=opts.dock_tol_deg,
+                                   flush_um=tune.flush_um, off_slot_um=tune.off_slot_um)
+    return DockOutcome.GAVE_UP

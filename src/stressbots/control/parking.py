@@ -1,0 +1,145 @@
+"""Waiting robots whose orbits drift into trouble: moving an orbit away before it is trapped.
+
+A robot waiting for its turn orbits in place, but its heading drift moves its turning centre in a random
+walk (tens of um per hundred seconds at the literature's noise). An orbit that drifts into the arena edge,
+the docked structure or another orbit traps the robot: a turning robot pushing into anything is stopped
+and cannot pivot off, and when its turn comes its first straight drive pushes into the same obstacle.
+Every attempt then fails with "stopped during gross motion".
+
+So before each docking phase the controller looks at every waiting orbit (:func:`orbit_gaps`) and moves
+the ones closer than ``Tuning.park_margin_um`` to something. Under the STRING design robot D_j drives
+straight only under P_{j-1}, which also drives every undocked robot above it straight (D_{j+1} .. D_k) and
+keeps those below orbiting. :func:`park_move` therefore plans one manoeuvre for the whole group: wait
+under P_k (all of D_1..D_k orbit) until D_j heads away from the obstacle, then P_{j-1} for as long as
+moves D_j's centre ``Tuning.park_shift_um``; every straight mover's orbit disc, carried along its track,
+must stay clear of the arena edge, the docked bodies, the still orbiting discs and (at the same instants)
+of each other. Pure functions of arrays: the runner supplies the measured poses and identified rates.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..collision import point_rectangle_distance
+from ..robots import TWO_PI, turning_centres
+
+__all__ = ["ParkMove", "orbit_gaps", "park_move"]
+
+
+@dataclass(frozen=True)
+class ParkMove:
+    """Wait ``wait_s`` under P_k, then drive ``straight_s`` under P_{j-1}: D_j's orbit moves away from trouble."""
+
+    robot: int
+    wait_s: float
+    straight_s: float
+    gap_before_um: float
+    gap_after_um: float
+
+
+def orbit_gaps(centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np.ndarray:
+    """Gap (um) of each orbit disc ``(centres (K, 2), rstar (K,))`` to the arena edge, the docked bodies and the
+    other discs; the smallest per disc.
+
+    >>> float(orbit_gaps(np.array([[100.0, 500.0]]), np.array([60.0]), (1000.0, 1000.0), np.zeros((0, 3)), [], [])[0])
+    40.0
+    """
+    c = np.atleast_2d(np.asarray(centres, float))
+    rs = np.asarray(rstar, float).reshape(-1)
+    gap = np.full(len(c), np.inf)
+    if arena_um is not None:
+        w, h = arena_um
+        gap = np.minimum(gap, np.min(np.stack([c[:, 0], w - c[:, 0], c[:, 1], h - c[:, 1]], axis=1), axis=1) - rs)
+    for p, L, W in zip(np.atleast_2d(docked_poses), docked_L, docked_W, strict=False):
+        gap = np.minimum(gap, point_rectangle_distance(c, np.asarray(p)[None, :], float(L), float(W))[0] - rs)
+    if len(c) > 1:
+        d = np.hypot(*(c[:, None, :] - c[None, :, :]).transpose(2, 0, 1)) - rs[:, None] - rs[None, :]
+        np.fill_diagonal(d, np.inf)
+        gap = np.minimum(gap, d.min(axis=1))
+    return gap
+
+
+def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still_c, still_r) -> np.ndarray:
+    """Smallest gap (um) over time of each mover's disc (tracks (M, T, 2)) to everything, movers included."""
+    M, T, _ = tracks.shape
+    gap = np.full(M, np.inf)
+    flat = tracks.reshape(-1, 2)
+    rs = np.repeat(np.asarray(rstar, float), T)
+    if arena_um is not None:
+        w, h = arena_um
+        g = np.min(np.stack([flat[:, 0], w - flat[:, 0], flat[:, 1], h - flat[:, 1]], axis=1), axis=1) - rs
+        gap = np.minimum(gap, g.reshape(M, T).min(axis=1))
+    for p, L, W in zip(np.atleast_2d(docked_poses), docked_L, docked_W, strict=False):
+        g = point_rectangle_distance(flat, np.asarray(p)[None, :], float(L), float(W))[0] - rs
+        gap = np.minimum(gap, g.reshape(M, T).min(axis=1))
+    for c, r in zip(np.atleast_2d(still_c), np.asarray(still_r, float).reshape(-1), strict=False):
+        g = np.hypot(*(flat - c).T) - rs - r
+        gap = np.minimum(gap, g.reshape(M, T).min(axis=1))
+    for a in range(M):
+        for b in range(a + 1, M):
+            g = float((np.hypot(*(tracks[a] - tracks[b]).T) - rstar[a] - rstar[b]).min())
+            gap[a], gap[b] = min(gap[a], g), min(gap[b], g)
+    return gap
+
+
+def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
+              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float) -> ParkMove | None:
+    """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
+
+    ``movers``: the undocked robots that drive straight with ``j`` under P_{j-1} (``j`` included);
+    ``still``: those that keep orbiting. ``poses`` (n, 3), ``radii`` / ``rates`` / ``speeds`` / ``rstar``
+    (n,): measured poses, identified turning radii (um), turn rates (rad/s), speeds (um/s) and orbit-disc
+    radii. Candidate departure headings: away from the obstacle and up to 60 deg either side; each is
+    reached by waiting (every robot of ``movers`` and ``still`` orbits meanwhile). A candidate is taken
+    when D_j's gap grows and every mover keeps ``clearance_um`` (or, if it starts closer, does not get
+    closer). The shortest wait wins.
+    """
+    poses = np.asarray(poses, float)
+    centres = turning_centres(poses, radii)
+    docked_poses = np.atleast_2d(np.asarray(docked_poses, float)).reshape(-1, 3)
+    everyone = movers + still
+    now = orbit_gaps(centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)
+    gap0 = dict(zip(everyone, now, strict=True))
+    away = _away(centres[j], everyone.index(j), centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)
+    straight_s = shift_um / speeds[j]
+    best = None
+    for dev in np.radians([0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0]):
+        th = math.atan2(away[0], away[1]) + dev
+        wait = float(np.mod(th - poses[j, 2], TWO_PI)) / rates[j]
+        # everyone orbits for ``wait`` (heading + rate * wait, same centre)
+        after = poses.copy()
+        after[everyone, 2] = np.mod(poses[everyone, 2] + rates[everyone] * wait, TWO_PI)
+        t = np.linspace(0.0, straight_s, 24)
+        h = np.stack([np.sin(after[movers, 2]), np.cos(after[movers, 2])], axis=1)  # (M, 2)
+        tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
+        gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
+        need = np.array([min(clearance_um, gap0[m] - 1e-6) for m in movers])
+        end = orbit_gaps(tracks[[movers.index(j)], -1], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
+        if (gaps >= need).all() and end > gap0[j] + 0.5 * shift_um and (best is None or wait < best.wait_s):
+            best = ParkMove(j, wait, straight_s, float(gap0[j]), float(gaps[movers.index(j)]))
+    return best
+
+
+def _away(c, idx, centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np.ndarray:
+    """Unit vector from robot ``idx``'s nearest obstacle (arena edge, docked body, other orbit) to its centre."""
+    best, vec = np.inf, np.array([1.0, 0.0])
+    if arena_um is not None:
+        w, h = arena_um
+        for g, v in ((c[0], (1.0, 0.0)), (w - c[0], (-1.0, 0.0)), (c[1], (0.0, 1.0)), (h - c[1], (0.0, -1.0))):
+            if g < best:
+                best, vec = g, np.array(v)
+    for p, L, W in zip(docked_poses, docked_L, docked_W, strict=False):
+        g = float(point_rectangle_distance(c[None, :], p[None, :], float(L), float(W))[0, 0])
+        if g < best:
+            d = c - p[:2]
+            best, vec = g, d / max(float(np.hypot(*d)), 1e-9)
+    for b in range(len(centres)):
+        if b != idx:
+            d = c - centres[b]
+            g = float(np.hypot(*d)) - rstar[b]
+            if g < best:
+                best, vec = g, d / max(float(np.hypot(*d)), 1e-9)
+    return vec

@@ -1,0 +1,117 @@
+"""Moving D_{n-1}'s orbit to its station: a route of straight legs between free orbit centres.
+
+Under P_n and P_{n-1} D_{n-1} orbits in place; under P_{n-2} it drives straight. So its orbit moves in
+straight *legs*: it orbits until it heads along the leg, then drives straight, and its turning centre
+moves by the same vector as its body. The body stays inside its orbit disc (radius ``r*``) carried along
+the leg, so a leg is clear when the *capsule* of radius ``r*`` around the segment between the two centres
+keeps clear of the other orbits and the arena edge. One straight leg to the station is what the
+controller tried first; when another robot's orbit lies across it, every pair frame failed with "the
+straight move to its station orbit is blocked". :func:`orbit_route` finds a few legs instead, through
+free orbit centres on a grid (shortest total length plus a cost per leg, Dijkstra on the visibility
+graph of the grid), a pure function of the measured orbits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+__all__ = ["segment_disc_gaps", "legs_clear", "orbit_route"]
+
+
+def segment_disc_gaps(a, b, centres, radii) -> np.ndarray:
+    """Gaps (E, K): distance from each segment ``a[e]``-``b[e]`` (E, 2) to each disc (K) minus its radius (um).
+
+    >>> g = segment_disc_gaps(np.array([[0.0, 0.0]]), np.array([[100.0, 0.0]]), np.array([[50.0, 30.0]]), np.array([10.0]))
+    >>> float(g[0, 0])
+    20.0
+    """
+    a = np.atleast_2d(np.asarray(a, float))
+    b = np.atleast_2d(np.asarray(b, float))
+    c = np.atleast_2d(np.asarray(centres, float)).reshape(-1, 2)
+    r = np.asarray(radii, float).reshape(-1)
+    d = b - a
+    dd = np.maximum((d * d).sum(axis=1), 1e-12)
+    t = ((c[None, :, :] - a[:, None, :]) * d[:, None, :]).sum(axis=2) / dd[:, None]
+    t = np.clip(t, 0.0, 1.0)
+    p = a[:, None, :] + t[:, :, None] * d[:, None, :]
+    return np.hypot(*(p - c[None, :, :]).transpose(2, 0, 1)) - r[None, :]
+
+
+def _inside(p, arena_um, m: float) -> np.ndarray:
+    w, h = arena_um
+    return (p[:, 0] >= m) & (p[:, 0] <= w - m) & (p[:, 1] >= m) & (p[:, 1] <= h - m)
+
+
+def legs_clear(a, b, rstar: float, centres, radii, arena_um, clearance: float, *, from_start: bool = False) -> np.ndarray:
+    """Mask (E,): the capsule of radius ``rstar`` around each leg ``a[e]``-``b[e]`` keeps ``clearance`` from
+    the discs ``(centres, radii)`` and stays that far inside the arena ``(w, h)`` (None: unbounded).
+
+    With ``from_start`` the ``a`` ends are where the robot orbits now: a leg may start closer than
+    ``clearance`` to a disc or the edge (it is there already) but must not come closer than it starts.
+    """
+    a = np.atleast_2d(np.asarray(a, float))
+    b = np.atleast_2d(np.asarray(b, float))
+    ok = np.ones(len(a), dtype=bool)
+    need = rstar + clearance
+    if len(np.asarray(radii).reshape(-1)):
+        gaps = segment_disc_gaps(a, b, centres, radii)
+        if from_start:
+            now = np.hypot(*(a[:, None, :] - np.atleast_2d(centres)[None]).transpose(2, 0, 1)) - np.asarray(radii)[None, :]
+            ok &= (gaps >= np.minimum(need, now - 1e-6)).all(axis=1)
+        else:
+            ok &= (gaps >= need).all(axis=1)
+    if arena_um is not None:
+        # a segment lies inside the (convex) arena when both ends do
+        ok &= _inside(b, arena_um, need)
+        if not from_start:
+            ok &= _inside(a, arena_um, need)
+    return ok
+
+
+def orbit_route(start, goal, rstar: float, centres, radii, arena_um, *, clearance: float, spacing_um: float = 150.0,
+                leg_cost_um: float = 200.0, max_legs: int = 4) -> list[np.ndarray] | None:
+    """Orbit centres (the last is ``goal``) of the shortest clear route of straight legs from ``start``.
+
+    ``centres`` / ``radii``: the discs to keep clear of (other robots' orbit discs), ``rstar``: the moving
+    robot's orbit-disc radius; legs are checked with :func:`legs_clear`. Nodes are ``start``, ``goal`` and
+    the free centres of a ``spacing_um`` grid over the arena; each leg costs its length plus
+    ``leg_cost_um`` (the orbiting before it, and a chance for error). None when no route of at most
+    ``max_legs`` legs exists (the goal itself not free counts as none). Needs a bounded arena.
+
+    >>> route = orbit_route(np.array([500.0, 1000.0]), np.array([1500.0, 1000.0]), 100.0,
+    ...                     np.array([[1000.0, 1000.0]]), np.array([150.0]), (2000.0, 2000.0), clearance=10.0)
+    >>> len(route) >= 2 and np.allclose(route[-1], [1500.0, 1000.0])
+    True
+    """
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    if arena_um is None:
+        return None
+    if legs_clear(start[None], goal[None], rstar, centres, radii, arena_um, clearance, from_start=True)[0]:
+        return [goal]
+    w, h = arena_um
+    m = rstar + clearance
+    xs, ys = np.arange(m, w - m + 1e-9, spacing_um), np.arange(m, h - m + 1e-9, spacing_um)
+    gx, gy = np.meshgrid(xs, ys)
+    grid = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    if len(np.asarray(radii).reshape(-1)):
+        free = (np.hypot(*(grid[:, None, :] - np.atleast_2d(centres)[None]).transpose(2, 0, 1))
+                >= np.asarray(radii)[None, :] + rstar + clearance).all(axis=1)
+        grid = grid[free]
+    nodes = np.vstack([start, goal, grid])
+    K = len(nodes)
+    i, j = np.triu_indices(K, k=1)
+    ok = np.where(i == 0, legs_clear(nodes[i], nodes[j], rstar, centres, radii, arena_um, clearance, from_start=True),
+                  legs_clear(nodes[i], nodes[j], rstar, centres, radii, arena_um, clearance))
+    i, j = i[ok], j[ok]
+    cost = np.hypot(*(nodes[i] - nodes[j]).T) + leg_cost_um
+    graph = csr_matrix((np.concatenate([cost, cost]), (np.concatenate([i, j]), np.concatenate([j, i]))), shape=(K, K))
+    dist, pred = dijkstra(graph, indices=0, return_predecessors=True)
+    if not np.isfinite(dist[1]):
+        return None
+    path = [1]
+    while path[-1] != 0:
+        path.append(int(pred[path[-1]]))
+    legs = [nodes[p] for p in reversed(path[:-1])]
+    return legs if len(legs) <= max_legs else None

@@ -1,0 +1,158 @@
+"""The docking phase (stressbots.control.docking): pure queries on hand-built poses, and the line-approach
+policy driven against a small kinematic plant written here (a one-way robot with heading drift and a
+face it docks on by compliance), independent of the simulator."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stressbots import se2
+from stressbots.control.docking import (
+    DockOutcome,
+    DockView,
+    LineFix,
+    contact_offset,
+    line_approach,
+    reaim_turn_rad,
+    stopped_verdict,
+)
+from stressbots.control.tuning import ControllerOptions
+
+
+def flush_by_rotation(e: float, psi: float, L: float, W: float) -> float:
+    """Independent truth: in the slot's frame (face y = 0, slot centre (0, -L/2), heading +y), a robot
+    heading ``psi`` whose centre line passes (e, -L/2) drives straight until a front corner touches the
+    face, then turns about that corner until flush (docking compliance). Returns its final centre x."""
+    pose = np.array([e, -0.5 * L, psi])
+    corners = se2.from_frame(pose, np.array([[-0.5 * W, 0.5 * L, 0.0], [0.5 * W, 0.5 * L, 0.0]]))
+    lead = int(np.argmax(corners[:, 1]))
+    shift = -corners[lead, 1] / math.cos(psi)  # along the heading, until the leading corner is on the face
+    pose[:2] += shift * np.array([math.sin(psi), math.cos(psi)])
+    corner = corners[lead, :2] + shift * np.array([math.sin(psi), math.cos(psi)])
+    flush = se2.rotate_about(pose[None, :], corner, -psi)[0]
+    assert abs(float(flush[2]) % (2 * math.pi)) < 1e-9 or abs(float(flush[2]) - 2 * math.pi) < 1e-9
+    return float(flush[0])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-20.0, 20.0), st.floats(-8.0, 8.0).filter(lambda d: abs(d) > 0.05), st.floats(150.0, 350.0), st.floats(40.0, 80.0))
+def test_contact_offset_matches_the_rotation_about_the_leading_corner(e, psi_deg, L, W):
+    psi = math.radians(psi_deg)
+    truth = flush_by_rotation(e, psi, L, W)
+    # the formula leaves out (W/2)(1 - cos psi), below 0.4 um at 8 deg
+    assert abs(contact_offset(0.0, e, psi, L) - truth) <= 0.5 * W * (1.0 - math.cos(psi)) + 1e-6
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(60.0, 400.0), st.floats(-15.0, 5.0), st.floats(-2.0, 1.0), st.floats(150.0, 350.0))
+def test_reaim_turn_brings_a_left_offset_back_to_the_slot(behind, right, psi_deg, L):
+    psi = math.radians(psi_deg)
+    fix = LineFix(behind, right, psi, contact_offset(behind, right, psi, L))
+    d = reaim_turn_rad(fix, L, max_deg=90.0)
+    if fix.offset_um >= 0.0:
+        assert d == 0.0  # never a turn for a robot that would end right of its slot (it cannot turn left)
+        return
+    assert d > 0.0
+    after = contact_offset(behind, right, psi + d, L)
+    assert abs(after) <= 0.05 * abs(fix.offset_um) + 0.05
+
+
+def test_stopped_verdict_tells_docked_off_slot_and_stuck_apart():
+    goal = np.array([500.0, 500.0, math.radians(30.0)])
+    tol = dict(dock_tol_um=30.0, dock_tol_deg=15.0, flush_um=15.0, off_slot_um=90.0)
+
+    def at(behind, right, dpsi_deg):
+        return se2.from_frame(goal, np.array([right, -behind, math.radians(dpsi_deg)]))
+
+    assert stopped_verdict(at(2.0, 10.0, 1.0), goal, **tol) is DockOutcome.DOCKED
+    assert stopped_verdict(at(2.0, -45.0, 1.0), goal, **tol) is DockOutcome.DOCKED_OFF_SLOT  # flush, 45 um along the face
+    assert stopped_verdict(at(40.0, 10.0, 1.0), goal, **tol) is DockOutcome.STUCK  # short of the face
+    assert stopped_verdict(at(2.0, 40.0, 25.0), goal, **tol) is DockOutcome.STUCK  # not flush
+    assert stopped_verdict(at(2.0, 120.0, 0.0), goal, **tol) is DockOutcome.STUCK  # beyond the face's reach
+
+
+class FaceRig:
+    """A one-way robot (arm down under P_2: clockwise about a centre r to its right; P_1: straight) with a
+    heading drift of ``drift_deg_per_mm`` (its heading turns clockwise as it drives), approaching a face at
+    y = 0 (the slot: centre at (0, -L/2), heading +y). Front contact stops it; a leading corner that meets
+    the face turns it flush about that corner (docking compliance). Estimates are the truth."""
+
+    def __init__(self, pose, drift_deg_per_mm: float, L=250.0, W=60.0, v=85.0, r=230.0):
+        self.pose = np.asarray(pose, float)
+        self.drift = math.radians(drift_deg_per_mm) / 1000.0
+        self.L, self.W, self.v, self.r = L, W, v, r
+        self.goal = np.array([0.0, -0.5 * L, 0.0])
+        self.flush = False
+
+    def front_y(self, pose) -> float:
+        corners = se2.from_frame(pose, np.array([[-0.5 * self.W, 0.5 * self.L, 0.0], [0.5 * self.W, 0.5 * self.L, 0.0]]))
+        return float(corners[:, 1].max())
+
+    def apply(self, steps):
+        for k, d in steps:
+            n = max(1, int(math.ceil(d * self.v / 0.5)))
+            ds = d * self.v / n
+            for _ in range(n):
+                if self.flush:
+                    return
+                th = self.pose[2]
+                curv = (1.0 / self.r if k == 2 else 0.0) + self.drift
+                nxt = self.pose + np.array([ds * math.sin(th), ds * math.cos(th), ds * curv])
+                if self.front_y(nxt) >= 0.0:
+                    if k == 2:
+                        return  # a turning robot is blocked by the face
+                    # compliance: turn flush about the leading corner, centre line ends at the face
+                    side = -1.0 if th > 0 else 1.0
+                    corner = se2.from_frame(nxt, np.array([side * 0.5 * self.W, 0.5 * self.L, 0.0]))[:2]
+                    corner[1] = 0.0
+                    self.pose = se2.rotate_about(nxt[None, :], corner, -th)[0]
+                    self.pose[2] = 0.0
+                    self.pose[1] = -0.5 * self.L
+                    self.flush = True
+                    return
+                self.pose = nxt
+
+    def view(self) -> DockView:
+        return DockView(self.pose.copy(), self.v, self.r, self.v / self.r, self.goal, self.L, self.v)
+
+
+def run_policy(rig: FaceRig, opts: ControllerOptions):
+    policy = line_approach(rig.view, 2, opts, 1.0, loop_blocked=lambda: True, log=lambda *_: None)
+    try:
+        steps = next(policy)
+        while True:
+            rig.apply(steps)
+            steps = policy.send(None)
+    except StopIteration as stop:
+        return stop.value
+
+
+def test_line_approach_re_aims_against_a_drift_and_docks_on_the_slot():
+    """A robot drifting left (counter-clockwise, 4 deg/mm) starts on its line 500 um out: left alone it would
+    dock several um left of its slot; the policy's clockwise re-aim bursts bring it to within 3 um."""
+    opts = ControllerOptions()
+    start = np.array([0.0, -0.5 * 250.0 - 500.0, 0.0])
+    drift = -4.0
+    rig = FaceRig(start, drift)
+    outcome = run_policy(rig, opts)
+    assert outcome is DockOutcome.DOCKED
+    assert abs(rig.pose[0]) <= 3.0
+    # the same robot driven straight in without re-aiming ends well off its slot
+    blind = FaceRig(start, drift)
+    blind.apply([(1, 10.0)])
+    assert blind.flush and abs(blind.pose[0]) > 3.0 * max(abs(rig.pose[0]), 1.0)
+
+
+def test_line_approach_merges_from_the_right_and_docks():
+    """From 60 um right of its line, pointing 10 deg left, 600 um out: merge, run in, docked on the slot."""
+    opts = ControllerOptions()
+    start = np.array([60.0, -0.5 * 250.0 - 600.0, math.radians(-10.0) % (2 * math.pi)])
+    rig = FaceRig(start, 0.0)
+    rig.pose[2] = math.radians(-10.0)
+    outcome = run_policy(rig, opts)
+    assert outcome is DockOutcome.DOCKED
+    assert abs(rig.pose[0]) <= 4.0
