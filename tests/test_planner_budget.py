@@ -1,0 +1,75 @@
+"""The planner's search budget (issue 15: fail fast) and the extended G_1 search's parking-track cuts.
+
+Truth: the number of G_1 schedules the planner actually tries (counted by wrapping the method that
+tries one), plans compared field by field with and without a budget, and the independent replay.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from stressbots import planning
+from stressbots.errors import PlanningError
+from stressbots.generate import random_scenario
+from stressbots.planning import PlannerOptions, plan_assembly
+from stressbots.replay import replay
+
+
+def _counting(monkeypatch) -> list[int]:
+    count = [0]
+    orig = planning._Planner._schedule_pair
+
+    def counted(self, *args, **kwargs):
+        count[0] += 1
+        return orig(self, *args, **kwargs)
+
+    monkeypatch.setattr(planning._Planner, "_schedule_pair", counted)
+    return count
+
+
+# A generated ladder whose G_1 cannot be formed: D4 cannot loop back to its parking run.
+_HOPELESS: dict[str, Any] = dict(n=4, seed=1071, shape="ladder", explicit_goals=True, heterogeneous=True)
+
+
+@pytest.mark.parametrize("budget", [10, 30])
+def test_a_hopeless_search_stops_at_its_budget_and_says_what_blocks(monkeypatch, budget):
+    count = _counting(monkeypatch)
+    scn = random_scenario(**_HOPELESS)
+    with pytest.raises(PlanningError) as err:
+        plan_assembly(scn, PlannerOptions(search_budget=budget))
+    assert count[0] == budget  # every schedule up to the budget, none after it
+    msg = err.value.message
+    assert f"search budget of {budget} G_1 schedules spent" in msg
+    assert "cannot form G_1 with D4" in msg and "; to make it plannable: " in msg
+
+
+def test_the_default_budget_bounds_the_search(monkeypatch):
+    count = _counting(monkeypatch)
+    with pytest.raises(PlanningError):
+        plan_assembly(random_scenario(**_HOPELESS))
+    assert 0 < count[0] <= planning.SEARCH_BUDGET_DEFAULT
+
+
+@pytest.mark.parametrize("layout", [dict(n=4, seed=1068, shape="tee", explicit_goals=False, heterogeneous=True),
+                                    dict(n=5, seed=1087, shape="comb", explicit_goals=True, heterogeneous=True)])
+def test_a_budget_the_search_fits_in_leaves_the_plan_unchanged(layout: dict[str, Any]):
+    scn = random_scenario(**layout)
+    unbounded = plan_assembly(scn, PlannerOptions(search_budget=None)).plan.to_dict()
+    bounded = plan_assembly(scn, PlannerOptions()).plan.to_dict()
+    for d in (unbounded, bounded):
+        d.pop("provenance", None)
+    assert json.dumps(bounded, sort_keys=True) == json.dumps(unbounded, sort_keys=True)
+
+
+def test_a_layout_only_the_extended_search_plans_is_planned_within_the_budget_and_replays():
+    # The standard search cannot form G_1 here; the extended one (parking runs that fit in the track left
+    # after D_{n-1}'s wait, runs that stop short of the track's end) can, well within the default budget.
+    scn = random_scenario(3, 1053, shape="comb", explicit_goals=True, heterogeneous=False)
+    with pytest.raises(PlanningError):
+        plan_assembly(scn, PlannerOptions(extended_search=False))
+    res = plan_assembly(scn)
+    rep = replay(res.plan, scn, max_step_um=1.0)
+    assert rep.ok, rep.problems
