@@ -73,3 +73,21 @@ def test_a_layout_only_the_extended_search_plans_is_planned_within_the_budget_an
     res = plan_assembly(scn)
     rep = replay(res.plan, scn, max_step_um=1.0)
     assert rep.ok, rep.problems
+
+
+def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
+    from stressbots.control.targets import PLAN_CLEARANCE_SEARCH_BUDGET, PLAN_CLEARANCE_UM, nominal_plan
+
+    by_clearance: dict[float, int] = {}
+    orig = planning._Planner._schedule_pair
+
+    def counted(self, *args, **kwargs):
+        by_clearance[self.opts.clearance_um] = by_clearance.get(self.opts.clearance_um, 0) + 1
+        return orig(self, *args, **kwargs)
+
+    monkeypatch.setattr(planning._Planner, "_schedule_pair", counted)
+    with pytest.raises(PlanningError) as err:
+        nominal_plan(random_scenario(**_HOPELESS))
+    assert 0 < by_clearance[PLAN_CLEARANCE_UM] <= PLAN_CLEARANCE_SEARCH_BUDGET
+    assert 0 < by_clearance[PlannerOptions().clearance_um] <= planning.SEARCH_BUDGET_DEFAULT
+    assert "; to make it plannable: " in err.value.message
