@@ -46,6 +46,12 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   timed out), 16 8.9 / 86.8 s (4/5); lower bound / duration median 0.58. Failures: tee-10 and tee-13 at
   D1's last docking, gap-10, gap-13 and gap-16 at G_1, tee-14 at D8's route (D1's orbit). 'short' (SHORTEST), n =
   2-8: duration vs full on the 24 both planned median 0.955, total 0.88; it also plans tee-8 and cross-8.
+- search budget, shared G_1 failures, extended parking cuts (issue 15 goal 1 and failing fast), n = 2-8,
+  full, one at a time, 90 s limit, load average 2-5: before (branch start 76d2329) 27/32 planned (comb-8,
+  ladder-8 timed out; tee-8 failed after 28.4 s of CPU, cross-8 after 5.4 s, ladder-4 after 1.7 s); after
+  30/32 (cross-8 3.8 s, comb-8 5.6 s, ladder-8 1.4 s of CPU), no replay failure, planned layouts median
+  0.35 s of CPU (before 0.27 s), max 5.6 s; tee-8 refused after 7.2 s of CPU (96 G_1 schedules), ladder-4
+  after 1.7 s. 26 of the 27 planned before keep their duration; comb-3 180.7 -> 117.8 s (extended search).
 """
 
 from __future__ import annotations

@@ -1586,11 +1586,14 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     t_start = time.perf_counter()
     search = _Search(opts.search_budget)
     best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False, search=search)
+    standard = len(failures)
     if best is None and opts.extended_search and not search.spent:
         best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True, search=search)
     if best is not None:
         return best
-    reason = max(set(failures), key=failures.count) if failures else "no plan found"
+    # the extended search's reasons, when it ran: what still blocks after the wider search
+    last = failures[standard:] or failures
+    reason = max(set(last), key=last.count) if last else "no plan found"
     if search.spent:
         reason += f" (search budget of {opts.search_budget} G_1 schedules spent)"
     raise PlanningError(reason + advice(reason), source=scn.source)
