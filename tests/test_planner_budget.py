@@ -91,3 +91,33 @@ def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
     assert 0 < by_clearance[PLAN_CLEARANCE_UM] <= PLAN_CLEARANCE_SEARCH_BUDGET
     assert 0 < by_clearance[PlannerOptions().clearance_um] <= planning.SEARCH_BUDGET_DEFAULT
     assert "; to make it plannable: " in err.value.message
+
+
+@pytest.mark.parametrize("wait0", [1.0, 2.0, 3.5])
+def test_extended_parking_cuts_fit_in_the_track_left_after_the_wait(wait0):
+    from stressbots import paths
+    from stressbots.electrostatics import analyse_scenario
+    from stressbots.robots import Pose
+    from stressbots.scenario import load
+    from stressbots.structures import target_structures
+
+    from .conftest import EXAMPLES
+
+    scn = load(EXAMPLES / "four-robots.toml")
+    analysis = analyse_scenario(scn)
+    assert analysis.order_index is not None
+    st0 = target_structures([scn.robots[i] for i in analysis.order_index], scn.structure)[0]
+    found = {}
+    for extended in (False, True):
+        p = planning._Planner(scn, analysis, st0, PlannerOptions(), extended=extended)
+        N, M = p.by_rank[scn.n], p.by_rank[scn.n - 1]
+        obst = p.obstacles([p.by_rank[j] for j in range(1, scn.n - 1)], [])
+        full = paths.Path(Pose(*p.tl.poses[M]), p.r[M], (("S", 20.0 * p.v[M]),))
+        park = (p.tl.poses[N].copy(), 900.0)  # a track from D_n's own start: D_n drives the wait along it
+        found[extended] = list(p._park_cuts(N, M, full, 20.0, 600.0, park, obst, 100.0, wait0))
+        left_s = (900.0 - p.v[N] * wait0) / p.v[N]
+    assert set(found[False]) <= set(found[True])  # the standard cuts are still tried
+    new = [c for c in found[True] if c not in found[False]]
+    assert new and found[True][0] in new  # the fitting cuts come first
+    assert all(piece <= left_s + 1e-9 for piece in found[True][0][:-1])  # every run on the track fits in what is left
+    assert all(abs(sum(c) - 20.0) < 1e-6 for c in found[True])  # the pieces make up D_{n-1}'s whole route
