@@ -52,6 +52,9 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   30/32 (cross-8 3.8 s, comb-8 5.6 s, ladder-8 1.4 s of CPU), no replay failure, planned layouts median
   0.35 s of CPU (before 0.27 s), max 5.6 s; tee-8 refused after 7.2 s of CPU (96 G_1 schedules), ladder-4
   after 1.7 s. 26 of the 27 planned before keep their duration; comb-3 180.7 -> 117.8 s (extended search).
+  Same change, n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
+  10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
+  3-15 s of CPU.
 """
 
 from __future__ import annotations
