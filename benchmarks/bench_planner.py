@@ -52,7 +52,12 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   30/32 (cross-8 3.8 s, comb-8 5.6 s, ladder-8 1.4 s of CPU), no replay failure, planned layouts median
   0.35 s of CPU (before 0.27 s), max 5.6 s; tee-8 refused after 7.2 s of CPU (96 G_1 schedules), ladder-4
   after 1.7 s. 26 of the 27 planned before keep their duration; comb-3 180.7 -> 117.8 s (extended search).
-  Same change, n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
+  Final settings (budget 128; the extended search also allows 10 pieces and 64 schedules per G_1 search),
+  n = 2-8, same conditions: 31/32 planned (ladder-4 newly, 2.2 s of CPU; cross-8 2.6 s, comb-8 3.8 s,
+  ladder-8 1.1 s), no replay failure, median 0.34 s, max 3.8 s of CPU; tee-8 refused after 7.1 s (it plans
+  with search_budget=None after 232 schedules, 14 s); comb-3 now 268.6 s (extended search), the other 26
+  planned before unchanged in duration.
+  The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
 """
@@ -69,7 +74,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-SEED_SCHEME = {"max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
+SEED_SCHEME = {"max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
 
 

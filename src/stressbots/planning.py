@@ -61,11 +61,12 @@ from .structures import Structure, target_structures
 __all__ = ["SHORTEST", "PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
 
 
-SEARCH_BUDGET_DEFAULT = 96
-"""Default :attr:`PlannerOptions.search_budget` (G_1 schedules): four full G_1 searches. Of
-``benchmarks/bench_planner.py``'s layouts of 2-8 robots, the ones that plan use at most 70 (comb-8,
-three distinct G_1 searches); hopeless ones used up to 288 before variants with the same G_1 slots shared
-their failure (tee-8: 12 G_1 searches of 24, ~22 s of CPU), 144 after."""
+SEARCH_BUDGET_DEFAULT = 128
+"""Default :attr:`PlannerOptions.search_budget` (G_1 schedules, ~25-70 ms each). Of
+``benchmarks/bench_planner.py``'s layouts of 2-8 robots, the ones that plan use at most 97 (cross-8, by
+the extended search); tee-8 needs 232 (14 s of CPU) and is refused after 128 (~8 s) instead. Before
+variants with the same G_1 slots shared their failure, tee-8 searched 288 (12 G_1 searches of 24, ~22 s
+of CPU) and failed."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +115,10 @@ class PlannerOptions:
     pair_schedules:
         G_1 schedules tried per G_1 search (each plans D_n around one cut of one route of D_{n-1}, the
         expensive step); when they are spent, the search ends: a hopeless pair costs at most this many.
+    extended_max_pieces, extended_pair_schedules:
+        ``max_pieces`` and ``pair_schedules`` of the extended search: more, shorter pieces of D_{n-1}'s
+        route with D_n re-aimed between them (``max_pieces`` = 1, the seed's scheme, stays 1), and more
+        schedules per G_1 search.
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike
@@ -135,6 +140,8 @@ class PlannerOptions:
     orbit_phases: int = 16
     extended_search: bool = True
     pair_schedules: int = 24
+    extended_max_pieces: int = 10
+    extended_pair_schedules: int = 64
     search_budget: int | None = SEARCH_BUDGET_DEFAULT
 
 
@@ -886,7 +893,10 @@ class _Planner:
     def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False,
                  search: _Search | None = None):
         self.search = search or _Search(opts.search_budget)  # shared by every variant of one plan_assembly call
-        self.extended = extended  # the wider G_1 search (leg stretch, orbit first): after all variants failed
+        self.extended = extended  # the wider G_1 search (leg stretch, orbit first, ...): after all variants failed
+        if extended:  # the wider G_1 search: more pieces (the seed's one-piece scheme stays one), more schedules
+            pieces = max(opts.max_pieces, opts.extended_max_pieces) if opts.max_pieces > 1 else opts.max_pieces
+            opts = replace(opts, max_pieces=pieces, pair_schedules=max(opts.pair_schedules, opts.extended_pair_schedules))
         self.scn = scn
         self.analysis = analysis
         self.struct = struct
@@ -1595,7 +1605,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     last = failures[standard:] or failures
     reason = max(set(last), key=last.count) if last else "no plan found"
     if search.spent:
-        reason += f" (search budget of {opts.search_budget} G_1 schedules spent)"
+        reason += f" (search budget of {opts.search_budget} G_1 schedules spent: a larger PlannerOptions.search_budget searches longer)"
     raise PlanningError(reason + advice(reason), source=scn.source)
 
 
