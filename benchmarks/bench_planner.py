@@ -57,6 +57,9 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   ladder-8 1.1 s), no replay failure, median 0.34 s, max 3.8 s of CPU; tee-8 refused after 7.1 s (it plans
   with search_budget=None after 232 schedules, 14 s); comb-3 now 268.6 s (extended search), the other 26
   planned before unchanged in duration.
+  Final settings, n = 9-16, two at once, 120 s limit, load ~6: 27/30 planned (comb-14, gap-10/13/16
+  newly; gap-16 29 s of CPU, comb-16 8.6 s), median 2.4 s of CPU, no replay failure; refused tee-10
+  (G_1, 8.6 s), tee-13 and tee-14 (D1's last docking, 3.9 and 11.3 s).
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
