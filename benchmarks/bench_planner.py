@@ -46,6 +46,23 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   timed out), 16 8.9 / 86.8 s (4/5); lower bound / duration median 0.58. Failures: tee-10 and tee-13 at
   D1's last docking, gap-10, gap-13 and gap-16 at G_1, tee-14 at D8's route (D1's orbit). 'short' (SHORTEST), n =
   2-8: duration vs full on the 24 both planned median 0.955, total 0.88; it also plans tee-8 and cross-8.
+- search budget, shared G_1 failures, extended parking cuts (issue 15 goal 1 and failing fast), n = 2-8,
+  full, one at a time, 90 s limit, load average 2-5: before (branch start 76d2329) 27/32 planned (comb-8,
+  ladder-8 timed out; tee-8 failed after 28.4 s of CPU, cross-8 after 5.4 s, ladder-4 after 1.7 s); after
+  30/32 (cross-8 3.8 s, comb-8 5.6 s, ladder-8 1.4 s of CPU), no replay failure, planned layouts median
+  0.35 s of CPU (before 0.27 s), max 5.6 s; tee-8 refused after 7.2 s of CPU (96 G_1 schedules), ladder-4
+  after 1.7 s. 26 of the 27 planned before keep their duration; comb-3 180.7 -> 117.8 s (extended search).
+  Final settings (budget 128; the extended search also allows 10 pieces and 64 schedules per G_1 search),
+  n = 2-8, same conditions: 31/32 planned (ladder-4 newly, 2.2 s of CPU; cross-8 2.6 s, comb-8 3.8 s,
+  ladder-8 1.1 s), no replay failure, median 0.34 s, max 3.8 s of CPU; tee-8 refused after 7.1 s (it plans
+  with search_budget=None after 232 schedules, 14 s); comb-3 now 268.6 s (extended search), the other 26
+  planned before unchanged in duration.
+  Final settings, n = 9-16, two at once, 120 s limit, load ~6: 27/30 planned (comb-14, gap-10/13/16
+  newly; gap-16 29 s of CPU, comb-16 8.6 s), median 2.4 s of CPU, no replay failure; refused tee-10
+  (G_1, 8.6 s), tee-13 and tee-14 (D1's last docking, 3.9 and 11.3 s).
+  The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
+  10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
+  3-15 s of CPU.
 """
 
 from __future__ import annotations
@@ -60,7 +77,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-SEED_SCHEME = {"max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
+SEED_SCHEME = {"max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
 
 

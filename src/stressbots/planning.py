@@ -61,6 +61,14 @@ from .structures import Structure, target_structures
 __all__ = ["SHORTEST", "PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
 
 
+SEARCH_BUDGET_DEFAULT = 128
+"""Default :attr:`PlannerOptions.search_budget` (G_1 schedules, ~25-70 ms each). Of
+``benchmarks/bench_planner.py``'s layouts of 2-8 robots, the ones that plan use at most 97 (cross-8, by
+the extended search); tee-8 needs 232 (14 s of CPU) and is refused after 128 (~8 s) instead. Before
+variants with the same G_1 slots shared their failure, tee-8 searched 288 (12 G_1 searches of 24, ~22 s
+of CPU) and failed."""
+
+
 @dataclass(frozen=True)
 class PlannerOptions:
     """Planner settings (um, s).
@@ -102,7 +110,20 @@ class PlannerOptions:
         orbit it may first orbit to before leaving (0: never, as in the seed's scheme).
     extended_search:
         When no variant is plannable, search again with the wider G_1 search: routed whole-period paths
-        stretched in one leg, and ``orbit_phases`` (False: the standard search only).
+        stretched in one leg, ``orbit_phases``, and parking-track runs that stop short of the track's end
+        or fit after D_{n-1}'s wait (False: the standard search only).
+    pair_schedules:
+        G_1 schedules tried per G_1 search (each plans D_n around one cut of one route of D_{n-1}, the
+        expensive step); when they are spent, the search ends: a hopeless pair costs at most this many.
+    extended_max_pieces, extended_pair_schedules:
+        ``max_pieces`` and ``pair_schedules`` of the extended search: more, shorter pieces of D_{n-1}'s
+        route with D_n re-aimed between them (``max_pieces`` = 1, the seed's scheme, stays 1), and more
+        schedules per G_1 search.
+    search_budget:
+        G_1 schedules tried over the whole search (every structure variant, standard and extended): a
+        deterministic bound on the time spent on a layout that cannot be planned (unlike
+        ``time_budget_s``, the same on a loaded machine). When it is spent no further variant is tried and
+        the failure names the most common obstacle. None: no bound.
     """
 
     clearance_um: float = 10.0
@@ -118,6 +139,10 @@ class PlannerOptions:
     variants_compared: int = 1
     orbit_phases: int = 16
     extended_search: bool = True
+    pair_schedules: int = 24
+    extended_max_pieces: int = 10
+    extended_pair_schedules: int = 64
+    search_budget: int | None = SEARCH_BUDGET_DEFAULT
 
 
 SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
@@ -343,6 +368,21 @@ class NoRoute(Exception):
         self.reason = reason
 
 
+class SearchSpent(NoRoute):
+    """Raised by an ``extra_check`` to end a route search whose search budget is spent.
+
+    Every route the search could still find would be vetoed, so searching on only costs time (the bulk
+    of a hopeless G_1 search). :func:`route` draws the random numbers the rest of its roadmaps would
+    have drawn before passing it on, so the random stream, and with it every later plan, is unchanged.
+    """
+
+
+def _skip_roadmaps(rng: np.random.Generator, counts: Sequence[int], discs: int) -> None:
+    """Draw what :func:`_sample_nodes` draws for roadmaps of ``counts`` nodes around ``discs`` discs."""
+    for count in counts:
+        rng.random(discs + 3 * count)
+
+
 def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float,
                    keep: np.ndarray | None = None, part: tuple[int, int] = (0, 1)):
     """Sample many 3-segment paths at once: poses ``(P, 3)``, the path and segment index of every sample.
@@ -562,7 +602,11 @@ def route(
         p = pathlib.shortest_path(sources[s], target, radius)
         hit = _path_hit(obst, p, length, width, opts)
         if hit is None and extra_check is not None:
-            hit = extra_check(int(index_of[s]), p)
+            try:
+                hit = extra_check(int(index_of[s]), p)
+            except SearchSpent:
+                _skip_roadmaps(rng, opts.roadmap_nodes, len(obst.disc_radii))
+                raise
             if hit is not None:
                 vetoes.append(hit)
         if hit is None:
@@ -570,11 +614,15 @@ def route(
         reasons.append(hit)
     # 2. roadmaps of growing size: k-nearest edges, checked lazily along the shortest candidates
     region = _roadmap_region(sources, target, obst, radius, length)
-    for count in opts.roadmap_nodes:
+    for q, count in enumerate(opts.roadmap_nodes):
         way = _sample_nodes(rng, count, region, obst, length, width, opts)
         nodes = np.vstack([sources, target[None, :], way])
-        found = _roadmap_search(nodes, len(sources), source_costs, radius, length, width, obst, opts,
-                                None if extra_check is None else (lambda s, p: extra_check(int(index_of[s]), p)), reasons, vetoes)
+        try:
+            found = _roadmap_search(nodes, len(sources), source_costs, radius, length, width, obst, opts,
+                                    None if extra_check is None else (lambda s, p: extra_check(int(index_of[s]), p)), reasons, vetoes)
+        except SearchSpent:
+            _skip_roadmaps(rng, opts.roadmap_nodes[q + 1:], len(obst.disc_radii))
+            raise
         if found is not None:
             s, path, way_nodes = found
             return int(index_of[s]), path, way_nodes
@@ -686,6 +734,28 @@ def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, 
 
 # ----------------------------------------------------------------------------------------------------
 # The planner
+
+
+class _Search:
+    """Work shared by the structure variants of one ``plan_assembly`` call.
+
+    ``used`` counts the G_1 schedules tried against :attr:`PlannerOptions.search_budget`.
+    ``pair_failures`` maps what a G_1 search depends on (see :meth:`_Planner.form_pair`) to why it
+    failed: variants that differ only in later slots (which side stems grow on, which tooth is first)
+    would repeat the same failing search exactly, so they fail at once with the same reason.
+    """
+
+    def __init__(self, budget: int | None):
+        self.budget = budget
+        self.used = 0
+        self.pair_failures: dict = {}
+
+    @property
+    def spent(self) -> bool:
+        return self.budget is not None and self.used >= self.budget
+
+    def take(self) -> None:
+        self.used += 1
 
 
 class _Timeline:
@@ -820,8 +890,13 @@ def _pre_approach(goal: np.ndarray, a: float) -> np.ndarray:
 
 
 class _Planner:
-    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False):
-        self.extended = extended  # the wider G_1 search (leg stretch, orbit first): after all variants failed
+    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False,
+                 search: _Search | None = None):
+        self.search = search or _Search(opts.search_budget)  # shared by every variant of one plan_assembly call
+        self.extended = extended  # the wider G_1 search (leg stretch, orbit first, ...): after all variants failed
+        if extended:  # the wider G_1 search: more pieces (the seed's one-piece scheme stays one), more schedules
+            pieces = max(opts.max_pieces, opts.extended_max_pieces) if opts.max_pieces > 1 else opts.max_pieces
+            opts = replace(opts, max_pieces=pieces, pair_schedules=max(opts.pair_schedules, opts.extended_pair_schedules))
         self.scn = scn
         self.analysis = analysis
         self.struct = struct
@@ -947,11 +1022,27 @@ class _Planner:
         First without D_n orbiting before its whole-period paths (those schedules are shorter); when
         that finds no schedule, again with it (:meth:`_orbit_first`): more layouts are plannable.
         """
+        # Everything the G_1 search depends on besides the scenario, which all variants share: the
+        # pair's slots and approach lengths, the options and the pass (each planner starts from the
+        # same start poses and the same random stream), so an equal key fails the same way.
+        n = self.n
+        N, M = self.by_rank[n], self.by_rank[n - 1]
+        key = (tuple(np.round(self.goals[[N, M]], 9).ravel()), _approach(self.struct, self.scn.names[N], self.opts),
+               _approach(self.struct, self.scn.names[M], self.opts), self.extended, self.opts)
+        if key in self.search.pair_failures:
+            raise NoRoute(self.search.pair_failures[key])
+        try:
+            self._form_pair_search()
+        except NoRoute as exc:
+            self.search.pair_failures[key] = exc.reason
+            raise
+
+    def _form_pair_search(self) -> None:
         self._orbit_first_on = False
         try:
             self._form_pair_once()
         except NoRoute:
-            if self.opts.orbit_phases <= 0 or not self.extended:
+            if self.opts.orbit_phases <= 0 or not self.extended or self.search.spent:
                 raise
             self._orbit_first_on = True
             self._timed_cache.clear()
@@ -993,7 +1084,7 @@ class _Planner:
         tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
         parks.extend(tracks[:2] if opts.max_pieces > 1 else [])
         attempts: list[str] = []
-        budget = [24]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
+        budget = [opts.pair_schedules]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
         one_piece = [False]  # schedule only the seed's one-piece scheme
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
@@ -1001,12 +1092,13 @@ class _Planner:
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
             for park in parks[:1] if one_piece[0] else parks:
-                for durs in self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM):
+                for durs in self._park_cuts(N, M, fullM, T, d_free, park, obst_low, aM, float(waits[sidx])):
                     if one_piece[0] and len(durs) > 1:
                         break
-                    if budget[0] <= 0:
-                        return attempts[-1] if attempts else "no schedule"
+                    if budget[0] <= 0 or self.search.spent:  # every further route would be vetoed: end the search
+                        raise SearchSpent(attempts[-1] if attempts else "no schedule")
                     budget[0] -= 1
+                    self.search.take()
                     why = self._schedule_pair(N, M, fullM, float(waits[sidx]), durs, park, lower)
                     if why is None:
                         return None
@@ -1018,7 +1110,7 @@ class _Planner:
         best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route) if opts.pair_candidates > 1 else None
         if opts.pair_candidates > 1 and (best is None or len(best[4]) > 1):
             # A detour of D_{n-1} that D_n's corridor covers in one piece is often faster than pieces.
-            one_piece[0], budget[0] = True, 24
+            one_piece[0], budget[0] = True, opts.pair_schedules
             light = replace(opts, roadmap_nodes=opts.roadmap_nodes[:2])
             try:
                 route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, light, self.rng, whoM, extra_check=try_route)
@@ -1031,7 +1123,7 @@ class _Planner:
             self._pair_schedule = best
             self._run_pair_schedule()
             return
-        budget[0] = 24
+        budget[0] = opts.pair_schedules
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
@@ -1056,10 +1148,36 @@ class _Planner:
             if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
                 continue
             self._pair_schedule = None
-            if try_route(int(s), p) is None and self._pair_schedule is not None:
+            try:
+                ok = try_route(int(s), p) is None
+            except SearchSpent:
+                break
+            if ok and self._pair_schedule is not None:
                 found.append((self._pair_duration(self._pair_schedule), len(found), self._pair_schedule))
         self._pair_schedule = None
         return min(found)[2] if found else None
+
+    def _park_cuts(self, N: int, M: int, fullM: pathlib.Path, T: float, d_free: float, park, obst_low: Obstacles,
+                   aM: float, wait0: float):
+        """The cut options (:meth:`_cut_options`) for parking track ``park`` after a wait of ``wait0`` s.
+
+        A track that starts at D_n's own start is where D_n passes D_{n-1}'s wait, driving straight
+        (:meth:`_schedule_pair`), so its runs start ``v_n wait0`` um further on. Pieces cut to the whole
+        track run off its end when the track ends at the arena edge (where it ends at D_{n-1}'s orbit
+        they can still pass). The extended search first tries the pieces that fit in the part left.
+        """
+        cuts = self._cut_options(N, M, fullM, T, d_free, park, obst_low, aM)
+        if not self.extended or park is None or wait0 <= 0 or not np.allclose(np.asarray(park[0]), self.tl.poses[N]):
+            yield from cuts
+            return
+        ahead = self.v[N] * wait0
+        h = np.array([math.sin(park[0][2]), math.cos(park[0][2]), 0.0])
+        left = (np.asarray(park[0], float) + ahead * h, max(park[1] - ahead, 0.0))
+        seen: set = set()
+        for durs in self._cut_options(N, M, fullM, T, d_free, left, obst_low, aM):
+            seen.add(durs)
+            yield durs
+        yield from (durs for durs in cuts if durs not in seen)
 
     def _pair_duration(self, schedule) -> float:
         """Duration (s) of a G_1 schedule: D_n's timed paths plus D_{n-1}'s pieces."""
@@ -1115,7 +1233,8 @@ class _Planner:
         if park is None:
             variants = [(f, 0.0) for f in (1.0, 0.8, 0.62, 0.48, 0.36)] + [(f, short) for f in (1.0, 0.8, 0.62, 0.48)]
         else:
-            variants = [(f, 0.0) for f in (1.0, 0.7, 0.45, 0.3)]
+            # runs that stop short of the track's end leave D_n room to loop back (the end is an obstacle)
+            variants = [(f, 0.0) for f in (1.0, 0.7, 0.45, 0.3)] + ([(f, short) for f in (1.0, 0.7, 0.45)] if self.extended else [])
         for frac, margin in variants:
             tm = min(t_last_max * frac, T)
             if tm < aM / vM or tm >= T - 1e-9:
@@ -1124,7 +1243,7 @@ class _Planner:
                 t_piece = tm - margin
                 keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm)]
             else:
-                t_piece = park[1] / vN
+                t_piece = park[1] / vN - margin
                 keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm), (_pre_approach(np.asarray(park[0]), -0.5 * park[1]), park[1])]
             if t_piece <= 0.2 * tm or (T - tm) / t_piece > opts.max_pieces:
                 continue
@@ -1393,10 +1512,10 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
 
 
 def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say,
-                    extended: bool = False) -> PlanResult | str:
+                    extended: bool = False, search: _Search | None = None) -> PlanResult | str:
     """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
     t0 = time.perf_counter()
-    planner = _Planner(scn, analysis, st, opts, extended=extended)
+    planner = _Planner(scn, analysis, st, opts, extended=extended, search=search)
     try:
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
         planner.form_pair()
@@ -1475,17 +1594,23 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
     t_start = time.perf_counter()
-    best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False)
-    if best is None and opts.extended_search:
-        best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True)
+    search = _Search(opts.search_budget)
+    best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False, search=search)
+    standard = len(failures)
+    if best is None and opts.extended_search and not search.spent:
+        best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True, search=search)
     if best is not None:
         return best
-    reason = max(set(failures), key=failures.count) if failures else "no plan found"
+    # the extended search's reasons, when it ran: what still blocks after the wider search
+    last = failures[standard:] or failures
+    reason = max(set(last), key=last.count) if last else "no plan found"
+    if search.spent:
+        reason += f" (search budget of {opts.search_budget} G_1 schedules spent: a larger PlannerOptions.search_budget searches longer)"
     raise PlanningError(reason + advice(reason), source=scn.source)
 
 
 def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *,
-                  extended: bool) -> PlanResult | None:
+                  extended: bool, search: _Search) -> PlanResult | None:
     """The shortest plan over up to ``variants_compared`` plannable variants (cheapest bound first).
 
     ``extended`` turns on the wider G_1 search (one-leg stretch, orbit first); plan_assembly uses it
@@ -1499,6 +1624,8 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
             break
         if best is not None and (tried + 1 >= opts.variants_compared or lb >= best.summary["duration_s"]):
             break
+        if best is None and search.spent:
+            break
         if best is None and failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
@@ -1506,7 +1633,7 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
         # Variants compared after a plan exists get a lighter search (no largest roadmap, no second G_1
         # pass): they only replace the plan when they are easy, and hard ones would dominate the time.
         light = opts if best is None else replace(opts, roadmap_nodes=opts.roadmap_nodes[:2], orbit_phases=0)
-        result = _plan_structure(scn, analysis, st, lb, candidates, light, say, extended)
+        result = _plan_structure(scn, analysis, st, lb, candidates, light, say, extended, search)
         if isinstance(result, str):
             failures.append(result)
             continue
