@@ -14,7 +14,8 @@ replan adds the missing clockwise turn), and the last seconds of a timed path ru
 than being re-planned into a loop.
 
 **G_1 (App. 3.3), as an orbit rendezvous** (:mod:`stressbots.control.pair`, handed this loop). Under P_n
-and P_{n-1} D_{n-1} orbits in place while D_n is a free one-way robot (P_n turns it, P_{n-1} drives it straight); under P_{n-2} both drive straight.
+and P_{n-1} D_{n-1} orbits in place while D_n is a free one-way robot (P_n turns it, P_{n-1} drives it
+straight); under P_{n-2} both drive straight.
 
 1. *Transfer*: D_{n-1} moves its orbit to a station orbit, in straight legs: it orbits until it heads
    along the leg, then P_{n-2} drives it (and D_n) straight; clockwise bearing corrections (P_{n-1}
