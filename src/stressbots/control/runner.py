@@ -50,15 +50,13 @@ placement error is reported beside it.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 
 from .. import paths as pathlib
 from ..collision import (
-    arena_gap,
-    bodies_hit_discs,
     outside_arena,
     penetration_depth,
     point_rectangle_distance,
@@ -68,6 +66,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
 from . import docking
 from .docking import DockOutcome, DockView
+from .gross import GrossMotion, path_steps
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import orbit_gaps, park_move
@@ -77,7 +76,6 @@ from .queries import (
     line_coords,
     line_pose,
     merge,
-    trim_steps,
     turn_fraction,
 )
 from .result import AssemblyResult, judge_run
@@ -136,7 +134,9 @@ class _Runner(PlantLoop):
         self._warned: set = set()
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
-        # G_1 (App. 3.3), driven through this loop (:mod:`stressbots.control.pair`)
+        # gross motion sigma_1 (:mod:`stressbots.control.gross`) and G_1 (:mod:`stressbots.control.pair`), driven through
+        # this loop
+        self.gross = GrossMotion(self)
         self.pair = PairPhase(self)
 
     # -- plant I/O ------------------------------------------------------------------------------------
@@ -192,39 +192,9 @@ class _Runner(PlantLoop):
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
                       target=None) -> bool:
-        """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge.
-
-        With ``target`` (a gross-motion goal pose), docked bodies are kept ``Tuning.gross_docked_clearance_um``
-        away except within one body length of the target: a robot that touches the structure on the way
-        is turned flush against the wrong edge by docking compliance and cannot pivot off again.
-        """
-        c = self.opts.clearance_um if clearance is None else clearance
-        samples = np.asarray(samples, dtype=np.float64)
-        orbiting = [j for j in orbiting if j != i]
-        if orbiting or extra_discs:
-            centres = [*turning_centres(self.est[orbiting], self.r_hat[orbiting])] if orbiting else []
-            radii = list(self.rstar[orbiting]) if orbiting else []
-            for cc, rr in extra_discs:
-                centres.append(cc)
-                radii.append(rr)
-            if bodies_hit_discs(samples, self.L[i], self.W[i], np.array(centres), np.array(radii) + c).any():
-                return True
-        docked = np.flatnonzero(self.docked)
-        if len(docked):
-            need = np.full(len(samples), c)
-            if target is not None:
-                far = np.hypot(*(samples[:, :2] - np.asarray(target, float)[:2]).T) > self.L[i]
-                need[far] = max(c, self.tune.gross_docked_clearance_um)
-            hd = 0.5 * math.hypot(self.L[i], self.W[i])
-            for j in docked:
-                # only samples within reach of body j (bounding circles) need the exact rectangle test
-                near = np.hypot(*(samples[:, :2] - self.est[j, :2]).T) < hd + 0.5 * math.hypot(self.L[j], self.W[j]) + need
-                if near.any() and (penetration_depth(samples[near], self.L[i], self.W[i], self.est[j], self.L[j],
-                                                     self.W[j]) > -need[near]).any():
-                    return True
-        if self.scn.arena_um is not None and (arena_gap(samples, self.L[i], self.W[i], self.scn.arena_um) < c).any():
-            return True
-        return False
+        """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge
+        (:meth:`stressbots.control.gross.GrossMotion.obstacles_hit`)."""
+        return self.gross.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target)
 
     def park_orbits(self, k: int) -> None:
         """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
@@ -257,149 +227,14 @@ class _Runner(PlantLoop):
     # -- motion primitives ------------------------------------------------------------------------------
 
     def path_steps(self, path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None):
-        """The first ``limit_s`` seconds of ``path`` as primitive steps (all of it when None)."""
-        out: list[tuple[int, float]] = []
-        left = math.inf if limit_s is None else limit_s
-        for kind, ell in path.segments:
-            d = min(ell / v, left)
-            out.append((turn_k if kind == "R" else straight_k, d))
-            left -= d
-            if left <= 1e-12:
-                break
-        return out
-
-    def _route_or_detour(self, i: int, target: np.ndarray, orbiting: Sequence[int], extra_discs, routed, path):
-        """The roadmap route itself when there is one (it was checked at a wider clearance), else a detour at
-        the controller's clearance, else ``path`` unchanged."""
-        if routed is not None:
-            return routed
-        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.opts.clearance_um)[1]
-        return path if detour is None else detour
+        """The first ``limit_s`` seconds of ``path`` as primitive steps (:func:`stressbots.control.gross.path_steps`)."""
+        return path_steps(path, v, turn_k, straight_k, limit_s)
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready=None, via: bool = True, clearance: float | None = None) -> bool:
-        """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
-
-        ``ready()`` True ends the gross motion early (the robot is already in the region from which the
-        next step works: the seed's regions A_i instead of a point).
-
-        Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
-        points a little left of where it must. Clockwise is the only correction a one-way robot makes
-        cheaply: a turn overdone (speed or radius misidentified, drift) would cost a full loop at the
-        next replan, a turn cut short costs a slight turn.
-        """
-        stalls = 0
-        quiet = 0  # cycles left before the roadmap is asked again after it found no way around
-        self.stuck = False
-        for _ in range(max_cycles):
-            v, r = self.v_hat[i], self.r_hat[i]
-            p = self.est[i]
-            if (ready is None and self.arrived(p, target)) or (ready is not None and ready()):
-                return True
-            path = pathlib.shortest_path(p, target, r)
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via and quiet > 0:
-                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
-                elif via:
-                    # commit to one roadmap route: steer through its waypoints (replanning every t_x
-                    # between them), instead of a new random route every t_x
-                    c_eff = self.opts.clearance_um if clearance is None else clearance
-                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0))
-                    t_before = self.t
-                    if len(points) > 1:
-                        for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
-                                       clearance=clearance)
-                            if ready is not None and ready():
-                                return True
-                        if self.t > t_before:
-                            continue
-                    found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
-                    if found is None:
-                        quiet = self.tune.no_route_quiet_cycles
-                        self.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
-                    path = path if found is None else found
-                else:
-                    return False  # a waypoint of a committed route is out of reach: the caller re-plans
-            self.replans += 1
-            # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
-            whole = path.length / v <= self.tune.whole_leg_factor * self.tx
-            limit = None if whole else self.tx
-            steps = self.path_steps(path, v, turn_k, straight_k, limit)
-            if not whole:
-                steps = self._left_biased(i, path, steps, straight_k, orbiting, extra_discs, clearance, target)
-            before = self.est[i].copy()
-            self.drive(steps)
-            if float(np.hypot(*(self.est[i, :2] - before[:2]))) < self.tune.stall_fraction * v * sum(d for _, d in steps):
-                stalls += 1
-                if stalls >= self.tune.stall_count:
-                    self.log("stuck", i, "stopped during gross motion (failure region H)")
-                    self.stuck = True
-                    return False
-            else:
-                stalls = 0
-            if whole:
-                return True
-        return False
-
-    def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
-        """``steps`` with the turn into a long straight cut short by ``Tuning.left_bias_deg`` when that path is clear
-        (see :meth:`steer`)."""
-        v, r = self.v_hat[i], self.r_hat[i]
-        segs = path.segments
-        if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.tx):
-            return steps
-        cut_um = min(r * math.radians(self.tune.left_bias_deg), 0.5 * segs[0][1])
-        biased = pathlib.Path(self.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-        if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
-                                                               clearance=clearance, target=target):
-            steps = [(steps[0][0], steps[0][1] - cut_um / v), (straight_k, cut_um / v), *steps[1:]]
-            steps = trim_steps(steps, self.tx)
-        return steps
-
-    def arrived(self, pose: np.ndarray, target: np.ndarray) -> bool:
-        """Inside the target region (the seed's regions instead of points): 25 um and 6 deg."""
-        return bool(np.hypot(*(pose[:2] - target[:2])) <= self.tune.arrive_um
-                    and abs(angle_difference(pose[2], target[2])) <= math.radians(self.tune.arrive_deg))
-
-    def _obstacles(self, i: int, orbiting, extra_discs, box_margin: float = 0.0):
-        from ..planning import Obstacles
-
-        orbiting = [j for j in orbiting if j != i]
-        centres = list(turning_centres(self.est[orbiting], self.r_hat[orbiting])) if orbiting else []
-        radii = list(self.rstar[orbiting]) if orbiting else []
-        for c, rr in extra_discs:
-            centres.append(c)
-            radii.append(rr)
-        docked = np.flatnonzero(self.docked)
-        return Obstacles(
-            np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
-            self.est[docked], self.L[docked] + 2.0 * box_margin, self.W[docked] + 2.0 * box_margin,
-            tuple("a docked robot" for _ in docked), self.scn.arena_um,
-        )
-
-    def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
-        """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
-        structure and the arena edge to ``target`` (waypoints end with it), at ``clearance``; ``([], None)``
-        when there is none. Logged as a detour."""
-        from ..planning import NoRoute, PlannerOptions, route
-
-        rng = self.routes_rng
-        opts = PlannerOptions(clearance_um=clearance, roadmap_nodes=(60, 200))
-        # around the structure with the gross-motion clearance first (see obstacles_hit), else the plain one
-        margins = (max(self.tune.gross_docked_clearance_um - clearance, 0.0), 0.0) if self.docked.any() else (0.0,)
-        for margin in margins:
-            obst = self._obstacles(i, orbiting, extra_discs, margin)
-            try:
-                _, routed, points = route(self.est[i][None, :], np.zeros(1), np.asarray(target, float), self.r_hat[i], self.L[i],
-                                          self.W[i], obst, opts, rng, "")
-                break
-            except NoRoute:
-                continue
-        else:
-            return [], None
-        self.log("detour", i, f"route around obstacles ({routed.length:.0f} um, {len(points)} waypoints)")
-        return [np.asarray(w, float) for w in points], routed
+              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
+        """Gross motion of robot ``i`` to ``target``; True when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
+        return self.gross.steer(i, target, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=max_cycles, ready=ready,
+                                via=via, clearance=clearance)
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
         """S_2f for ``duration`` s (:func:`~stressbots.control.queries.interpolated_steps`)."""
@@ -688,4 +523,3 @@ def assemble(scenario, plant, *, seed: int | None = None, plan=None, time_budget
     return judge_run(scenario, plant, seed=seed, failure=failure, estimates=run.est, goals=run.goals,
                      nominal_goals=run.nominal_goals, docked=run.docked, shape_tol_um=opts.shape_tol_um, duration_s=run.t,
                      replans=run.replans, events=run.events, trace_t=run.trace_t, trace_poses=run.trace_p)
-
