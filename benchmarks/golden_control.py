@@ -7,9 +7,12 @@ observed) and event list. This script runs a fixed set of closed-loop assemblies
 file (``--check FILE``: exit status 1 and the first differing field per run on a mismatch).
 
 The runs: the example ``examples/four-robots.toml`` with the literature's noise
-(:data:`stressbots.generate.LITERATURE_NOISE`), plant seeds 0-3; and two generated layouts of
-``benchmarks/bench_generality.py``'s tuning set (a 5- and a 6-robot one), plant seeds 0-1, built the
-same way as there (:func:`stressbots.generate.random_scenario` with the layout seed, shape and noise).
+(:data:`stressbots.generate.LITERATURE_NOISE`), plant seeds 0-3; generated layouts of
+``benchmarks/bench_generality.py``'s tuning set (:data:`TUNING_LAYOUTS`: 4 to 6 robots, all four shapes
+but ladder, chosen so that between them the runs hold, loop, retry, detour, park, transfer in several
+legs, stall and fail), built the same way as there (:func:`stressbots.generate.random_scenario` with the
+layout seed, shape and noise); and two runs whose first rendezvous is made to fail (as in
+``tests/test_control_recovery.py``), so that G_1 is re-planned in another pair frame.
 
 Run (a few minutes; use ``nice``)::
 
@@ -23,29 +26,58 @@ import argparse
 import json
 import sys
 import time
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-TUNING_LAYOUTS = ((3, 5, "tee"), (4, 6, "tee"))
-"""``(index j, robots, shape)`` of the tuning-set layouts used (layout seed 1000 + j, as bench_generality)."""
+TUNING_LAYOUTS = ((3, 5, "tee", (0, 1)), (4, 6, "tee", (0, 1)), (2, 4, "tee", (0, 2)), (9, 4, "cross", (0,)),
+                  (17, 5, "comb", (0,)))
+"""``(index j, robots, shape, plant seeds)`` of the tuning-set layouts used (layout seed 1000 + j, as in
+bench_generality)."""
+
+INJECTED = (("four-robots", 1), ("tuning3-n5-tee", 0))
+"""``(scenario name, plant seed)`` of the runs whose first rendezvous fails (injected)."""
 
 
 def runs():
-    """``(name, scenario, plant seed, plan)`` of every golden run."""
+    """``(name, scenario, plant seed, plan, injected)`` of every golden run."""
     from stressbots.control import nominal_plan
     from stressbots.generate import LITERATURE_NOISE, random_scenario
     from stressbots.scenario import load
 
     ex = load(ROOT / "examples" / "four-robots.toml").with_noise(LITERATURE_NOISE)
-    plan = nominal_plan(ex)
-    for s in range(4):
-        yield f"four-robots/seed{s}", ex, s, plan
-    for j, n, shape in TUNING_LAYOUTS:
+    scenarios = {"four-robots": (ex, nominal_plan(ex), range(4))}
+    for j, n, shape, seeds in TUNING_LAYOUTS:
         scn = random_scenario(n, 1000 + j, shape=shape, noise=LITERATURE_NOISE)
-        plan = nominal_plan(scn)
-        for s in range(2):
-            yield f"tuning{j}-n{n}-{shape}/seed{s}", scn, s, plan
+        scenarios[f"tuning{j}-n{n}-{shape}"] = (scn, nominal_plan(scn), seeds)
+    for name, (scn, plan, seeds) in scenarios.items():
+        for s in seeds:
+            yield f"{name}/seed{s}", scn, s, plan, False
+    for name, s in INJECTED:
+        scn, plan, _ = scenarios[name]
+        yield f"{name}/seed{s}/first-rendezvous-fails", scn, s, plan, True
+
+
+@contextmanager
+def first_rendezvous_fails():
+    """The controller's first rendezvous raises its re-plan error (the seam tests/test_control_recovery.py uses)."""
+    from stressbots.control import runner
+
+    original = runner._Runner.rendezvous
+    calls = {"n": 0}
+
+    def first_fails(self, N, M, D, lower):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise runner._Replan(f"{self.scn.names[N]} found no timed path to its approach line (injected)")
+        return original(self, N, M, D, lower)
+
+    runner._Runner.rendezvous = first_fails  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        runner._Runner.rendezvous = original  # type: ignore[method-assign]
 
 
 def fingerprint(result) -> dict[str, str]:
@@ -68,11 +100,12 @@ def collect() -> dict[str, dict[str, str]]:
     from stressbots.sim import SimulatedPlant
 
     out = {}
-    for name, scn, s, plan in runs():
+    for name, scn, s, plan, injected in runs():
         t0 = time.perf_counter()
-        r = assemble(scn, SimulatedPlant(scn, seed=s), seed=s, plan=plan)
+        with first_rendezvous_fails() if injected else nullcontext():
+            r = assemble(scn, SimulatedPlant(scn, seed=s), seed=s, plan=plan)
         out[name] = fingerprint(r)
-        print(f"{name:<28} success={r.success!s:<5} {time.perf_counter() - t0:6.1f} s wall", file=sys.stderr)
+        print(f"{name:<44} success={r.success!s:<5} {time.perf_counter() - t0:6.1f} s wall", file=sys.stderr)
     return out
 
 
