@@ -41,7 +41,8 @@ from .queries import best_departure, pose_on_orbit
 from .station import orbit_route
 from .tuning import ControllerOptions, Tuning
 
-__all__ = ["PairLoop", "PairPhase", "Rendezvous", "Replan", "StationTransfer", "frames_apart"]
+__all__ = ["PairLoop", "PairPhase", "Rendezvous", "Replan", "StationTransfer", "approach_pose", "framed_goals", "frames_apart",
+           "meet_distance", "station_centre", "tight_discs"]
 
 Steps = list[tuple[int, float]]
 
@@ -118,6 +119,54 @@ def frames_apart(a, b) -> bool:
     return abs(angle_difference(a[0], b[0])) > math.radians(10.0) or math.hypot(a[1] - b[1], a[2] - b[2]) > 150.0
 
 
+def meet_distance(rstar_M: float, r_M: float, L_N: float, W_N: float) -> float:
+    """Centre distance (um) of D_n from D_{n-1}'s tangent point at departure: D_n clear of the orbit disc
+    (radius ``rstar_M`` plus 30 um; D_{n-1}'s turning radius ``r_M``, D_n's body ``L_N`` x ``W_N``), plus 80 um."""
+    rs = rstar_M + 30.0
+    lateral = r_M - 0.5 * W_N
+    return 0.5 * L_N + math.sqrt(max(rs * rs - lateral * lateral, 0.0)) + 80.0
+
+
+def station_centre(goal_M: np.ndarray, D: float, L_M: float, L_N: float, v_M: float, v_N: float, r_M: float) -> np.ndarray:
+    """Centre (um) of the orbit D_{n-1} leaves from so that, meeting D_n from ``D`` away, it ends in its slot
+    ``goal_M``: the pair closes the gap at speeds ``v_M`` + ``v_N``, D_{n-1} covering its share from the
+    tangent point (turning radius ``r_M``, clockwise orbit to the slot's right)."""
+    g = goal_M
+    th = float(g[2])
+    h = np.array([math.sin(th), math.cos(th)])
+    right = np.array([math.cos(th), -math.sin(th)])
+    vM, vN = v_M, v_N
+    s_M = max(D - 0.5 * (L_M + L_N), 0.0) * vM / (vM + vN)
+    tangent = g[:2] - s_M * h
+    return tangent + r_M * right
+
+
+def approach_pose(centre: np.ndarray, th_dep: float, r_M: float, D: float, v_N: float, early: float) -> np.ndarray:
+    """Where D_n aims: on the tangent of D_{n-1}'s orbit (about ``centre``, radius ``r_M``) at heading
+    ``th_dep`` (rad, leading to D_{n-1}'s slot), facing it, ``D`` plus ``early`` seconds of driving at
+    ``v_N`` (um/s) from the tangent point."""
+    tangent = pose_on_orbit(centre, r_M, th_dep)
+    h = np.array([math.sin(th_dep), math.cos(th_dep)])
+    return np.array([*(tangent[:2] + (D + v_N * early) * h), np.mod(th_dep + math.pi, TWO_PI)])
+
+
+def framed_goals(nominal_goals: np.ndarray, L: np.ndarray, N: int, M: int, phi: float, dx: float, dy: float) -> np.ndarray:
+    """The slots ``nominal_goals`` (n, 3) turned clockwise by ``phi`` (rad) about the G_1 junction (midpoint of
+    D_n's and D_{n-1}'s front edges) and shifted by ``(dx, dy)`` um: a *pair frame* (a rigid motion of the
+    whole structure, so its shape is unchanged)."""
+    g = nominal_goals
+    junction = 0.5 * (front_midpoints(g[[N]], L[[N]])[0] + front_midpoints(g[[M]], L[[M]])[0])
+    out = se2.rotate_about(g, junction, phi)
+    out[:, :2] += np.array([dx, dy])
+    return out
+
+
+def tight_discs(disc, wall_clearance_um: float, clearance_um: float) -> list:
+    """Discs ``(centre, radius)`` shrunk so that obstacle checks at ``wall_clearance_um`` keep ``clearance_um``
+    from them."""
+    return [(c, r - wall_clearance_um + clearance_um) for c, r in disc]
+
+
 class PairPhase:
     """G_1 for a closed loop ``loop``: pair frames, station geometry, and the slots' retargeting once it formed.
 
@@ -135,21 +184,14 @@ class PairPhase:
         return turning_centres(self.loop.est[i], self.loop.r_hat[i])[0]
 
     def meet_distance(self, N: int, M: int) -> float:
-        """Centre distance of D_n from D_{n-1}'s tangent point at departure: D_n clear of the orbit disc, plus 80 um."""
-        rs = self.loop.rstar[M] + 30.0
-        lateral = self.loop.r[M] - 0.5 * self.loop.W[N]
-        return 0.5 * self.loop.L[N] + math.sqrt(max(rs * rs - lateral * lateral, 0.0)) + 80.0
+        """D_n's centre distance from D_{n-1}'s tangent point at departure (:func:`meet_distance`)."""
+        return meet_distance(self.loop.rstar[M], self.loop.r[M], self.loop.L[N], self.loop.W[N])
 
     def station(self, N: int, M: int, D: float) -> np.ndarray:
-        """Centre of the orbit D_{n-1} leaves from so that, meeting D_n from ``D`` away, it ends in its slot."""
-        g = self.loop.goals[M]
-        th = float(g[2])
-        h = np.array([math.sin(th), math.cos(th)])
-        right = np.array([math.cos(th), -math.sin(th)])
-        vM, vN = self.loop.v_hat[M], self.loop.v_hat[N]
-        s_M = max(D - 0.5 * (self.loop.L[M] + self.loop.L[N]), 0.0) * vM / (vM + vN)
-        tangent = g[:2] - s_M * h
-        return tangent + self.loop.r_hat[M] * right
+        """Centre of the orbit D_{n-1} leaves from so that, meeting D_n from ``D`` away, it ends in its slot
+        (:func:`station_centre` with the current goals and the identified speeds and radius)."""
+        return station_centre(self.loop.goals[M], D, self.loop.L[M], self.loop.L[N], self.loop.v_hat[M], self.loop.v_hat[N],
+                              self.loop.r_hat[M])
 
     def form(self) -> None:
         """G_1 (App. 3.3), re-planned from the measured poses whenever a stage has no solution.
@@ -199,12 +241,9 @@ class PairPhase:
         self.loop.goals = self.framed_goals(phi, dx, dy)
 
     def framed_goals(self, phi: float, dx: float, dy: float) -> np.ndarray:
+        """The nominal slots in the pair frame ``(phi, dx, dy)`` (:func:`framed_goals`)."""
         N, M = self.loop.by_rank[self.loop.n], self.loop.by_rank[self.loop.n - 1]
-        g = self.loop.nominal_goals
-        junction = 0.5 * (front_midpoints(g[[N]], self.loop.L[[N]])[0] + front_midpoints(g[[M]], self.loop.L[[M]])[0])
-        out = se2.rotate_about(g, junction, phi)
-        out[:, :2] += np.array([dx, dy])
-        return out
+        return framed_goals(self.loop.nominal_goals, self.loop.L, N, M, phi, dx, dy)
 
     def pair_frames(self, N: int, M: int, D: float, lower) -> list[tuple[float, float, float]]:
         """Candidate pair frames ``(phi_rad, dx_um, dy_um)`` that look feasible from the measured poses, best first.
@@ -263,10 +302,7 @@ class PairPhase:
         """Where D_n aims: on the tangent of D_{n-1}'s orbit (about ``centre``) leading to D_{n-1}'s slot,
         facing it, ``D`` plus ``early`` seconds (default ``Tuning.early_s``) of driving from the tangent point."""
         early = self.loop.tune.early_s if early is None else early
-        th_dep = float(self.loop.goals[M, 2])
-        tangent = pose_on_orbit(centre, self.loop.r_hat[M], th_dep)
-        h = np.array([math.sin(th_dep), math.cos(th_dep)])
-        return np.array([*(tangent[:2] + (D + self.loop.v_hat[N] * early) * h), np.mod(th_dep + math.pi, TWO_PI)])
+        return approach_pose(centre, float(self.loop.goals[M, 2]), self.loop.r_hat[M], D, self.loop.v_hat[N], early)
 
     def orbits_free(self, i: int, centres, discs, lower, clearance: float) -> np.ndarray:
         """Mask (K,): robot ``i`` could orbit about each of ``centres`` (K, 2) without meeting the arena edge,
@@ -705,7 +741,7 @@ class Rendezvous:
         """D_{n-1}'s orbit disc(s) shrunk so that checks at ``Tuning.wall_clearance_um`` keep ``clearance``
         (default ``Tuning.g1_clearance_um``) from them."""
         clearance = self.loop.tune.g1_clearance_um if clearance is None else clearance
-        return [(c, r - self.loop.tune.wall_clearance_um + clearance) for c, r in disc]
+        return tight_discs(disc, self.loop.tune.wall_clearance_um, clearance)
 
     def continued(self, N: int, arrivals: Sequence[float], lower, disc) -> pathlib.Path | None:
         """The last plan's goal, re-planned from the measured pose, if its timing still holds (plans persist).
