@@ -392,7 +392,7 @@ class StationTransfer:
                 break
 
     def run(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
-        """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`form_pair`).
+        """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`PairPhase.form`).
 
         Each leg: D_{n-1} orbits until it heads along the leg, then drives straight (P_{n-2}), which drives
         D_n straight too. D_n's track is either what it does anyway (it turns with D_{n-1} for a chosen
@@ -419,7 +419,7 @@ class StationTransfer:
         return route if route else [np.asarray(c_star, float)]
 
     def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
-        """Move D_{n-1}'s orbit to ``c_star`` (one stage of :meth:`transfer`); an intermediate orbit of a
+        """Move D_{n-1}'s orbit to ``c_star`` (one stage of :meth:`run`); an intermediate orbit of a
         route (``final`` False) counts as reached within ``Tuning.station_tol_um``."""
         failed_runs = 0
         for attempt in range(8):
@@ -643,7 +643,7 @@ class StationTransfer:
         return None if best is None else (best, best_len)
 
     def _blocked(self, samples: np.ndarray, i: int, lower, clearance: float, discs=()) -> bool:
-        """Like :meth:`obstacles_hit`, but ``discs`` are kept clear of by their own radius, without ``clearance``."""
+        """Like the loop's ``obstacles_hit``, but ``discs`` are kept clear of by their own radius, without ``clearance``."""
         return self.loop.obstacles_hit(samples, i, lower, extra_discs=[(c, r - clearance) for c, r in discs], clearance=clearance)
 
     def track_clear(self, N: int, length: float, lower) -> bool:
