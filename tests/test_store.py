@@ -187,7 +187,7 @@ def _strip(summary: dict) -> dict:
 
 def test_kill_9_then_resume_gives_every_trial_once_with_the_same_outcomes(tmp_path, reference, run_cli):
     out = tmp_path / "mc"
-    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=0.4)
+    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=1.0)
     _wait_for_trials(out / STORE_NAME, 4, proc)
     proc.kill()  # SIGKILL: no handler runs
     proc.communicate(timeout=10)  # returns at once: the workers died with their parent
@@ -208,7 +208,7 @@ def test_kill_9_then_resume_gives_every_trial_once_with_the_same_outcomes(tmp_pa
 
 def test_ctrl_c_keeps_the_finished_trials(tmp_path, reference, run_cli):
     out = tmp_path / "mc"
-    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=0.4)
+    proc = _spawn(_cli_args(out, 40, 2, "--workers", "2"), trial_s=1.0)
     _wait_for_trials(out / STORE_NAME, 3, proc)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=20)
