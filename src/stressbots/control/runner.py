@@ -29,13 +29,13 @@ straight); under P_{n-2} both drive straight.
 3. *Meeting*: both drive straight into each other; self-aligning compliance (|alpha| < 60 deg,
    |w_y| < 80 um) forms G_1 wherever they meet. The remaining slots follow the pair (``retarget``).
 
-**Docking of single robots (sigma_1, sigma_2).** Gross motion steers D_i (P_i turns, P_{i-1} straight,
-lower robots orbiting) into the approach funnel behind its slot, outside the proximity region C_O: the
-region from which it can merge onto the slot's approach line without a loop (to the line's right,
-pointing left of it). Fine motion merges with an interpolated clockwise arc of radius r' >= r (P_i for
-a fraction rho_a, P_{i-1} for rho_b, SPEC 8's ``r' = r (1 + rho_b / rho_a)``), drives straight in and
-pushes; docking compliance absorbs the last angle error. Tight gaps use the seed's S_2f arc through the
-docking point instead.
+**Docking of single robots (sigma_1, sigma_2)** (:mod:`stressbots.control.single`, handed this loop).
+Gross motion steers D_i (P_i turns, P_{i-1} straight, lower robots orbiting) into the approach funnel
+behind its slot, outside the proximity region C_O: the region from which it can merge onto the slot's
+approach line without a loop (to the line's right, pointing left of it). Fine motion merges with an
+interpolated clockwise arc of radius r' >= r (P_i for a fraction rho_a, P_{i-1} for rho_b, SPEC 8's
+``r' = r (1 + rho_b / rho_a)``), drives straight in and pushes; docking compliance absorbs the last
+angle error. Tight gaps use the seed's S_2f arc through the docking point instead.
 
 **Failure detection and recovery.** A robot that stops while it should move is in H (stuck): it backs
 off by turning and tries again; a robot that misses its approach line loops back through the funnel; a
@@ -49,36 +49,21 @@ placement error is reported beside it.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
-from typing import Any
 
 import numpy as np
 
 from .. import paths as pathlib
-from ..collision import (
-    outside_arena,
-    penetration_depth,
-    point_rectangle_distance,
-)
+from ..collision import point_rectangle_distance
 from ..errors import PlanningError
-from ..kinematics import move
-from ..robots import TWO_PI, angle_difference, turning_centres
-from . import docking
-from .docking import DockOutcome, DockView
+from ..robots import turning_centres
 from .gross import GrossMotion, path_steps
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import orbit_gaps, park_move
-from .queries import (
-    in_funnel,
-    interpolated_steps,
-    line_coords,
-    line_pose,
-    merge,
-    turn_fraction,
-)
+from .queries import interpolated_steps
 from .result import AssemblyResult, judge_run
+from .single import SingleDocking
 from .targets import Targets, nominal_plan, structure_targets
 from .tuning import ControllerOptions
 
@@ -134,10 +119,11 @@ class _Runner(PlantLoop):
         self._warned: set = set()
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
-        # gross motion sigma_1 (:mod:`stressbots.control.gross`) and G_1 (:mod:`stressbots.control.pair`), driven through
-        # this loop
+        # gross motion sigma_1 (:mod:`stressbots.control.gross`), G_1 (:mod:`stressbots.control.pair`) and the single
+        # robots' docking (:mod:`stressbots.control.single`), driven through this loop
         self.gross = GrossMotion(self)
         self.pair = PairPhase(self)
+        self.single = SingleDocking(self)
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
@@ -240,231 +226,6 @@ class _Runner(PlantLoop):
         """S_2f for ``duration`` s (:func:`~stressbots.control.queries.interpolated_steps`)."""
         return interpolated_steps(rho_turn, duration, turn_k, straight_k, self.opts.switch_period_s)
 
-    def fine_start(self, i: int, goal: np.ndarray) -> np.ndarray:
-        """The intermediate pose a_i: back along a clockwise arc that ends exactly in the slot.
-
-        Only positions to a robot's right are reachable by one clockwise arc (seed Fig. 4), so a_i lies
-        on a nominal arc of radius ``s_f / phi`` (arrival heading = the slot's): measured errors either
-        way are then absorbed by a larger or smaller r'. ``phi`` is the largest of 25, 15, 8, 4 deg whose
-        swept bodies clear the docked structure (tight gaps need an almost straight entry).
-        """
-        s_f = min(2.5 * self.r[i], 3.0 * self.opts.fine_distance_um)
-        docked = np.flatnonzero(self.docked)
-        for phi_deg in (25.0, 15.0, 8.0, 4.0):
-            R = s_f / math.radians(phi_deg)
-            back = move(goal, -np.linspace(0.0, s_f, 40), 1.0 / R)  # poses along the arc, slot first
-            ok = True
-            for j in docked:
-                depth = penetration_depth(back[1:], self.L[i], self.W[i], self.est[j], self.L[j], self.W[j])
-                if (depth > 0.5).any():
-                    ok = False
-                    break
-            if ok and not (self.scn.arena_um is not None and (outside_arena(back, self.L[i], self.W[i], self.scn.arena_um) > 0).any()):
-                return back[-1]
-        h = np.array([math.sin(goal[2]), math.cos(goal[2])])
-        return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
-
-    def fine_start_on(self, ph, i: int) -> np.ndarray:
-        """The intermediate pose a_i on the nominal path: where its final approach arc begins.
-
-        The planner ends every route with an interpolated clockwise arc into the slot, so from a_i the
-        slot lies ahead and to the right, within reach of one arc of adjustable radius r', and the gross
-        motion to a_i follows the nominal route instead of looping to a pose off it.
-        """
-        if not ph.path or ph.path_start is None:
-            return self.fine_start(i, self.goals[i])
-        path = pathlib.Path(ph.path_start, self.r[i], ph.path)
-        s_f = ph.approach_um if ph.approach_um > 0 else min(self.opts.fine_distance_um, 0.8 * path.length)
-        return np.asarray(path.pose_at(path.length - s_f), dtype=np.float64)
-
-    # -- docking of single robots -------------------------------------------------------------------
-
-    def dock_single(self, k: int, route_phase) -> None:
-        """Dock D_k (k < n-1): gross motion into the approach funnel behind its slot, then the line approach.
-
-        The approach line runs back from the slot along its heading. The funnel is the region from which a
-        one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
-        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (20 um right,
-        6 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
-        is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
-        corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
-        """
-        i = self.by_rank[k]
-        self.park_orbits(k)
-        orbiting = self.orbiting_below(k)
-        if self.motion is not None and (abs(self.motion[0]) > math.radians(5.0) or np.hypot(*(self.motion[2] - self.motion[1])) > 60.0):
-            route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
-        waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
-        misses = 0
-        for attempt in range(self.tune.dock_attempts):
-            goal = self.goals[i]
-            back = self.approach_length(i)
-            if back is None:
-                a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
-                a_pose = self.retargeted(a_pose)
-                ready = None
-            else:
-                a_pose = self.line_pose(goal, back, 20.0, -math.radians(6.0))
-                ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
-            targets = [w for w in waypoints[:-1] if self._before(w, a_pose, route_phase, i)] + [a_pose]
-            for tgt in targets:
-                self.steer(i, tgt, k, k - 1, orbiting, ready=ready)
-                if self.stuck:
-                    break
-            waypoints = []
-            if self.stuck:
-                self.back_off(i, k)
-                continue
-            if back is not None and not self.in_funnel(i, back):
-                self.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
-                continue
-            if back is not None:
-                outcome = self.line_approach(i, k, misses)
-            else:
-                outcome = DockOutcome.DOCKED if self.fine_dock(i, k) else DockOutcome.STUCK
-            if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
-                return
-            if outcome is DockOutcome.MISSED:
-                # no contact: the gross motion (obstacle-checked) loops back into the funnel
-                misses += 1
-                self.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
-                continue
-            self.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
-            self.back_off(i, k)
-        raise _Abort(f"{self.scn.names[i]} did not dock in {self.tune.dock_attempts} attempts (last: "
-                     f"{self.events[-1]['detail'] if self.events else ''})")
-
-    line_pose = staticmethod(line_pose)
-
-    def line_coords(self, i: int) -> tuple[float, float, float]:
-        """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""
-        return line_coords(self.goals[i], self.est[i])
-
-    def approach_length(self, i: int) -> float | None:
-        """How far behind the slot the approach line is clear of the structure (450 down to 150 um), or None."""
-        goal = self.goals[i]
-        docked = np.flatnonzero(self.docked)
-        for back in self.tune.approach_lengths_um:
-            ok = True
-            for right in (0.0, 60.0):
-                line = np.stack([self.line_pose(goal, b, right * b / back, 0.0) for b in np.linspace(8.0, back, 24)])
-                for j in docked:
-                    if (penetration_depth(line, self.L[i], self.W[i], self.est[j], self.L[j], self.W[j]) > -3.0).any():
-                        ok = False
-                if self.scn.arena_um is not None and (outside_arena(line, self.L[i], self.W[i], self.scn.arena_um) > 0).any():
-                    ok = False
-            if ok:
-                return back
-        return None
-
-    def merge(self, i: int, behind: float, right: float, psi: float):
-        """The merge of robot ``i`` onto its approach line (:func:`~stressbots.control.queries.merge`)."""
-        return merge(behind, right, psi, float(self.r_hat[i]))
-
-    def in_funnel(self, i: int, back: float) -> bool:
-        """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
-        return in_funnel(*self.line_coords(i), back, float(self.r_hat[i]), self.tune)
-
-    def dock_view(self, i: int) -> DockView:
-        """A frozen view of robot ``i`` for the docking policy (estimates as of the last frame)."""
-        return DockView(self.est[i].copy(), float(self.v_hat[i]), float(self.r_hat[i]), float(self.omega_hat[i]),
-                        self.goals[i].copy(), float(self.L[i]), float(self.v[i]), float(self.straight_drift.kappa[i]))
-
-    def play(self, policy) -> Any:
-        """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""
-        try:
-            steps = next(policy)
-            while True:
-                self.drive(steps)
-                steps = policy.send(None)
-        except StopIteration as stop:
-            return stop.value
-
-    def line_approach(self, i: int, k: int, attempt: int = 0) -> DockOutcome:
-        """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
-        outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, self.opts, self.tx,
-                                                  loop_blocked=lambda: self.loop_blocked(i, k),
-                                                  log=lambda kind, detail: self.log(kind, i, f"{self.scn.names[i]} {detail}"),
-                                                  attempt=attempt))
-        return self.dock_verdict(i, outcome)
-
-    def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
-        """Record a docking outcome: docked robots join the structure; the others are logged."""
-        pose, goal = self.est[i], self.goals[i]
-        dpos = float(np.hypot(*(pose[:2] - goal[:2])))
-        dth = math.degrees(abs(angle_difference(pose[2], goal[2])))
-        if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
-            self.docked[i] = True
-            off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
-            self.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
-        elif outcome is DockOutcome.STUCK:
-            self.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
-        return outcome
-
-    def loop_blocked(self, i: int, k: int) -> bool:
-        """Whether a full clockwise loop of robot ``i`` from where it is would meet the structure, a lower
-        orbit or the arena edge (measured; no clearance: contact is what traps a turning robot)."""
-        r = float(self.r_hat[i])
-        loop = move(self.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
-        return self.obstacles_hit(loop, i, self.orbiting_below(k), clearance=0.0)
-
-    def _before(self, w, a_pose, route_phase, i) -> bool:
-        """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route."""
-        if route_phase is None or not route_phase.path:
-            return True
-        path = pathlib.Path(route_phase.path_start, self.r[i], route_phase.path)
-        s = path.sample(5.0)
-        kw = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(w)[:2]).T)))
-        ka = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(a_pose)[:2]).T)))
-        return kw < ka
-
-    def retargeted(self, pose: np.ndarray) -> np.ndarray:
-        """A nominal pose moved by the rigid motion the structure took when G_1 formed."""
-        if self.motion is None:
-            return np.asarray(pose, float)
-        phi, c_nom, c_meas = self.motion
-        d = np.asarray(pose[:2]) - c_nom
-        cph, sph = math.cos(phi), math.sin(phi)
-        rot = np.array([d[0] * cph + d[1] * sph, -d[0] * sph + d[1] * cph])
-        return np.array([c_meas[0] + rot[0], c_meas[1] + rot[1], float(np.mod(pose[2] + phi, TWO_PI))])
-
-    def fine_dock(self, i: int, k: int) -> bool:
-        """Fine motion (S_2f) into the slot, then push; True when docked."""
-        for _ in range(60):
-            v, r = self.v_hat[i], self.r_hat[i]
-            goal = self.goals[i]
-            if self.near_slot(i):
-                # already at the structure (e.g. it met it while turning): push, and let compliance act
-                self.drive([(k - 1, self.opts.push_s)])
-                return self.check_docked(i, k)
-            fr = turn_fraction(self.est[i], goal, r)
-            if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
-                return False  # not reachable on one interpolated arc: gross motion again
-            rho, length, _ = fr
-            t_arc = length / v
-            if t_arc <= self.tx:
-                self.drive(self.interpolated_steps(rho, t_arc, k, k - 1) + [(k - 1, self.opts.push_s)])
-                return self.check_docked(i, k)
-            self.drive(self.interpolated_steps(rho, self.tx, k, k - 1))
-        return False
-
-    def near_slot(self, i: int) -> bool:
-        """Whether robot ``i`` (measured) is at its slot within the docking tolerances."""
-        goal = self.goals[i]
-        return bool(
-            np.hypot(*(self.est[i, :2] - goal[:2])) <= self.opts.dock_tol_um
-            and abs(angle_difference(self.est[i, 2], goal[2])) <= math.radians(self.opts.dock_tol_deg)
-        )
-
-    def check_docked(self, i: int, k: int) -> bool:
-        """Push until the robot stops; docked if it stopped at its slot (or flush off it), stuck (H) if elsewhere."""
-        outcome = self.dock_verdict(i, self.play(docking.settle(lambda: self.dock_view(i), k, self.opts, self.tx)))
-        return outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT)
-
-    def back_off(self, i: int, k: int) -> None:
-        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
-        self.drive([(k, 0.5 * math.pi * self.r[i] / self.v[i]), (k - 1, 150.0 / self.v[i])])
-
     # -- the whole assembly ---------------------------------------------------------------------------
 
     def run(self) -> str | None:
@@ -474,7 +235,7 @@ class _Runner(PlantLoop):
             for k in range(self.n - 2, 0, -1):
                 i = self.by_rank[k]
                 route = next((p for p in phases if p.kind == "route" and p.mover == i), None)
-                self.dock_single(k, route)
+                self.single.dock(k, route)
         except (_Abort, Replan) as exc:
             return exc.reason
         return None

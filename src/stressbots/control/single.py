@@ -1,0 +1,371 @@
+"""Docking of single robots (sigma_1, sigma_2 for D_k, k < n-1): the single-robot phase of the closed loop.
+
+Gross motion steers D_k (P_k turns, P_{k-1} straight, lower robots orbiting) into the approach funnel
+behind its slot, outside the proximity region C_O: the region from which it can merge onto the slot's
+approach line without a loop (to the line's right, pointing left of it). Fine motion
+(:func:`stressbots.control.docking.line_approach`) merges with an interpolated clockwise arc, drives
+straight in and pushes; docking compliance absorbs the last angle error. Where the line's corridor is
+blocked by the structure (a tight gap), the seed's S_2f arc through the docking point is used instead
+(:meth:`SingleDocking.fine_dock`). A robot that stalls (failure region H) backs off by turning; one that
+misses its line loops back through the funnel.
+
+:class:`SingleDocking` is handed the closed loop (:class:`SingleLoop`: ``drive``, estimates, the event
+log, gross motion and obstacle checks) and drives only through it; :func:`fine_start`,
+:func:`approach_start_on_route`, :func:`approach_length`, :func:`retarget` and :func:`before_on_route`
+are pure geometry.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+import numpy as np
+
+from .. import paths as pathlib
+from ..collision import outside_arena, penetration_depth
+from ..kinematics import move
+from ..robots import TWO_PI, angle_difference
+from . import docking
+from .docking import DockOutcome, DockView
+from .queries import in_funnel, line_coords, line_pose, merge, turn_fraction
+from .tuning import ControllerOptions, Tuning
+
+__all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget"]
+
+Steps = list[tuple[int, float]]
+
+Bodies = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""Docked bodies as ``(poses (m, 3), lengths (m,), widths (m,))`` (um, rad)."""
+
+
+class SingleLoop(Protocol):
+    """What single-robot docking uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
+
+    scn: Any
+    by_rank: dict[int, int]
+    L: np.ndarray
+    W: np.ndarray
+    v: np.ndarray
+    r: np.ndarray
+    docked: np.ndarray
+    tx: float
+    tune: Tuning
+    opts: ControllerOptions
+    goals: np.ndarray
+    motion: tuple[float, np.ndarray, np.ndarray] | None
+    stuck: bool
+    events: list[dict]
+    straight_drift: Any
+
+    @property
+    def est(self) -> np.ndarray: ...
+
+    @property
+    def v_hat(self) -> np.ndarray: ...
+
+    @property
+    def omega_hat(self) -> np.ndarray: ...
+
+    @property
+    def r_hat(self) -> np.ndarray: ...
+
+    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None: ...
+
+    def drive(self, steps: Sequence[tuple[int, float]]) -> None: ...
+
+    def abort(self, reason: str) -> Exception: ...
+
+    def park_orbits(self, k: int) -> None: ...
+
+    def orbiting_below(self, k: int) -> list[int]: ...
+
+    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
+                      target=None) -> bool: ...
+
+    def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int) -> Steps: ...
+
+    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
+              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool: ...
+
+
+# -- pure geometry ------------------------------------------------------------------------------------
+
+def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_distance_um: float, bodies: Bodies,
+               arena_um: tuple[float, float] | None) -> np.ndarray:
+    """The intermediate pose a_i: back along a clockwise arc that ends exactly in the slot ``goal``.
+
+    Only positions to a robot's right are reachable by one clockwise arc (seed Fig. 4), so a_i lies
+    on a nominal arc of radius ``s_f / phi`` (arrival heading = the slot's): measured errors either
+    way are then absorbed by a larger or smaller r'. ``s_f = min(2.5 r, 3 fine_distance_um)`` (um);
+    ``phi`` is the largest of 25, 15, 8, 4 deg whose swept bodies (``length`` x ``width`` um) clear the
+    docked ``bodies`` by 0.5 um and stay inside the arena (tight gaps need an almost straight entry);
+    when none does, a_i is ``s_f`` straight behind the slot.
+    """
+    s_f = min(2.5 * r, 3.0 * fine_distance_um)
+    for phi_deg in (25.0, 15.0, 8.0, 4.0):
+        R = s_f / math.radians(phi_deg)
+        back = move(goal, -np.linspace(0.0, s_f, 40), 1.0 / R)  # poses along the arc, slot first
+        ok = True
+        for pj, lj, wj in zip(*bodies, strict=True):
+            depth = penetration_depth(back[1:], length, width, pj, lj, wj)
+            if (depth > 0.5).any():
+                ok = False
+                break
+        if ok and not (arena_um is not None and (outside_arena(back, length, width, arena_um) > 0).any()):
+            return back[-1]
+    h = np.array([math.sin(goal[2]), math.cos(goal[2])])
+    return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
+
+
+def approach_start_on_route(ph, r: float, fine_distance_um: float) -> np.ndarray | None:
+    """The intermediate pose a_i on the nominal route phase ``ph``: where its final approach arc begins.
+
+    The planner ends every route with an interpolated clockwise arc into the slot, so from a_i the slot
+    lies ahead and to the right, within reach of one arc of adjustable radius r', and the gross motion
+    to a_i follows the nominal route instead of looping to a pose off it. ``s_f`` (um) back from the end
+    is the route's own approach length, else ``min(fine_distance_um, 0.8 length)``. None when the phase
+    has no path (``r``: the robot's nominal turn radius, um).
+    """
+    if not ph.path or ph.path_start is None:
+        return None
+    path = pathlib.Path(ph.path_start, r, ph.path)
+    s_f = ph.approach_um if ph.approach_um > 0 else min(fine_distance_um, 0.8 * path.length)
+    return np.asarray(path.pose_at(path.length - s_f), dtype=np.float64)
+
+
+def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: Sequence[float], bodies: Bodies,
+                    arena_um: tuple[float, float] | None) -> float | None:
+    """How far behind the slot ``goal`` its approach line is clear, or None.
+
+    The first of ``lengths_um`` (longest first, e.g. 450 down to 150 um) for which a ``length`` x
+    ``width`` body along the line, and along a line fanning out to 60 um right at its far end, keeps
+    over 3 um from every docked body and stays in the arena: the corridor the funnel merge and the
+    straight run need.
+    """
+    for back in lengths_um:
+        ok = True
+        for right in (0.0, 60.0):
+            line = np.stack([line_pose(goal, b, right * b / back, 0.0) for b in np.linspace(8.0, back, 24)])
+            for pj, lj, wj in zip(*bodies, strict=True):
+                if (penetration_depth(line, length, width, pj, lj, wj) > -3.0).any():
+                    ok = False
+            if arena_um is not None and (outside_arena(line, length, width, arena_um) > 0).any():
+                ok = False
+        if ok:
+            return back
+    return None
+
+
+def retarget(pose: np.ndarray, motion: tuple[float, np.ndarray, np.ndarray] | None) -> np.ndarray:
+    """A nominal pose moved by the rigid ``motion`` ``(phi_rad, c_nom, c_meas)`` the structure took when G_1
+    formed (rotation by ``phi`` about ``c_nom``, then ``c_nom`` to ``c_meas``, um); unchanged when None."""
+    if motion is None:
+        return np.asarray(pose, float)
+    phi, c_nom, c_meas = motion
+    d = np.asarray(pose[:2]) - c_nom
+    cph, sph = math.cos(phi), math.sin(phi)
+    rot = np.array([d[0] * cph + d[1] * sph, -d[0] * sph + d[1] * cph])
+    return np.array([c_meas[0] + rot[0], c_meas[1] + rot[1], float(np.mod(pose[2] + phi, TWO_PI))])
+
+
+def before_on_route(w, a_pose, route_phase, r: float) -> bool:
+    """Whether waypoint ``w`` comes before ``a_pose`` along the nominal route of ``route_phase`` (nearest
+    samples 5 um apart; True without a route). ``r``: the robot's nominal turn radius (um)."""
+    if route_phase is None or not route_phase.path:
+        return True
+    path = pathlib.Path(route_phase.path_start, r, route_phase.path)
+    s = path.sample(5.0)
+    kw = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(w)[:2]).T)))
+    ka = int(np.argmin(np.hypot(*(s[:, :2] - np.asarray(a_pose)[:2]).T)))
+    return kw < ka
+
+
+# -- the phase ----------------------------------------------------------------------------------------
+
+class SingleDocking:
+    """Docking of the single robots D_k (k < n-1) for a closed loop ``loop``, one robot at a time."""
+
+    def __init__(self, loop: SingleLoop):
+        self.loop = loop
+
+    def _bodies(self) -> Bodies:
+        lp = self.loop
+        docked = np.flatnonzero(lp.docked)
+        return lp.est[docked], lp.L[docked], lp.W[docked]
+
+    def dock(self, k: int, route_phase) -> None:
+        """Dock D_k (k < n-1): gross motion into the approach funnel behind its slot, then the line approach.
+
+        The approach line runs back from the slot along its heading. The funnel is the region from which a
+        one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
+        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (20 um right,
+        6 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
+        is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
+        corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
+        """
+        lp = self.loop
+        i = lp.by_rank[k]
+        lp.park_orbits(k)
+        orbiting = lp.orbiting_below(k)
+        if lp.motion is not None and (abs(lp.motion[0]) > math.radians(5.0) or np.hypot(*(lp.motion[2] - lp.motion[1])) > 60.0):
+            route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
+        waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
+        misses = 0
+        for attempt in range(lp.tune.dock_attempts):
+            goal = lp.goals[i]
+            back = self.approach_length(i)
+            if back is None:
+                a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
+                a_pose = retarget(a_pose, lp.motion)
+                ready = None
+            else:
+                a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
+                ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
+            targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
+            for tgt in targets:
+                lp.steer(i, tgt, k, k - 1, orbiting, ready=ready)
+                if lp.stuck:
+                    break
+            waypoints = []
+            if lp.stuck:
+                self.back_off(i, k)
+                continue
+            if back is not None and not self.in_funnel(i, back):
+                lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
+                continue
+            if back is not None:
+                outcome = self.line_approach(i, k, misses)
+            else:
+                outcome = DockOutcome.DOCKED if self.fine_dock(i, k) else DockOutcome.STUCK
+            if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
+                return
+            if outcome is DockOutcome.MISSED:
+                # no contact: the gross motion (obstacle-checked) loops back into the funnel
+                misses += 1
+                lp.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
+                continue
+            lp.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
+            self.back_off(i, k)
+        raise lp.abort(f"{lp.scn.names[i]} did not dock in {lp.tune.dock_attempts} attempts (last: "
+                       f"{lp.events[-1]['detail'] if lp.events else ''})")
+
+    # -- where to aim ---------------------------------------------------------------------------------
+
+    def fine_start(self, i: int, goal: np.ndarray) -> np.ndarray:
+        """The intermediate pose a_i of robot ``i`` for slot ``goal`` (:func:`fine_start`, docked bodies as measured)."""
+        lp = self.loop
+        return fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um)
+
+    def fine_start_on(self, ph, i: int) -> np.ndarray:
+        """a_i on the nominal route phase ``ph`` (:func:`approach_start_on_route`), else :meth:`fine_start`."""
+        lp = self.loop
+        pose = approach_start_on_route(ph, lp.r[i], lp.opts.fine_distance_um)
+        return self.fine_start(i, lp.goals[i]) if pose is None else pose
+
+    def approach_length(self, i: int) -> float | None:
+        """How far behind robot ``i``'s slot the approach line is clear of the structure (:func:`approach_length`)."""
+        lp = self.loop
+        return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self._bodies(), lp.scn.arena_um)
+
+    def line_coords(self, i: int) -> tuple[float, float, float]:
+        """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""
+        return line_coords(self.loop.goals[i], self.loop.est[i])
+
+    def merge(self, i: int, behind: float, right: float, psi: float):
+        """The merge of robot ``i`` onto its approach line (:func:`~stressbots.control.queries.merge`)."""
+        return merge(behind, right, psi, float(self.loop.r_hat[i]))
+
+    def in_funnel(self, i: int, back: float) -> bool:
+        """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
+        return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
+
+    # -- fine motion ----------------------------------------------------------------------------------
+
+    def dock_view(self, i: int) -> DockView:
+        """A frozen view of robot ``i`` for the docking policy (estimates as of the last frame)."""
+        lp = self.loop
+        return DockView(lp.est[i].copy(), float(lp.v_hat[i]), float(lp.r_hat[i]), float(lp.omega_hat[i]),
+                        lp.goals[i].copy(), float(lp.L[i]), float(lp.v[i]), float(lp.straight_drift.kappa[i]))
+
+    def play(self, policy) -> Any:
+        """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""
+        try:
+            steps = next(policy)
+            while True:
+                self.loop.drive(steps)
+                steps = policy.send(None)
+        except StopIteration as stop:
+            return stop.value
+
+    def line_approach(self, i: int, k: int, attempt: int = 0) -> DockOutcome:
+        """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
+        lp = self.loop
+        outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, lp.opts, lp.tx,
+                                                  loop_blocked=lambda: self.loop_blocked(i, k),
+                                                  log=lambda kind, detail: lp.log(kind, i, f"{lp.scn.names[i]} {detail}"),
+                                                  attempt=attempt))
+        return self.dock_verdict(i, outcome)
+
+    def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
+        """Record a docking outcome: docked robots join the structure; the others are logged."""
+        lp = self.loop
+        pose, goal = lp.est[i], lp.goals[i]
+        dpos = float(np.hypot(*(pose[:2] - goal[:2])))
+        dth = math.degrees(abs(angle_difference(pose[2], goal[2])))
+        if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
+            lp.docked[i] = True
+            off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
+            lp.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
+        elif outcome is DockOutcome.STUCK:
+            lp.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
+        return outcome
+
+    def loop_blocked(self, i: int, k: int) -> bool:
+        """Whether a full clockwise loop of robot ``i`` from where it is would meet the structure, a lower
+        orbit or the arena edge (measured; no clearance: contact is what traps a turning robot)."""
+        lp = self.loop
+        r = float(lp.r_hat[i])
+        loop = move(lp.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
+        return lp.obstacles_hit(loop, i, lp.orbiting_below(k), clearance=0.0)
+
+    def fine_dock(self, i: int, k: int) -> bool:
+        """Fine motion (S_2f) into the slot, then push; True when docked."""
+        lp = self.loop
+        for _ in range(60):
+            v, r = lp.v_hat[i], lp.r_hat[i]
+            goal = lp.goals[i]
+            if self.near_slot(i):
+                # already at the structure (e.g. it met it while turning): push, and let compliance act
+                lp.drive([(k - 1, lp.opts.push_s)])
+                return self.check_docked(i, k)
+            fr = turn_fraction(lp.est[i], goal, r)
+            if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
+                return False  # not reachable on one interpolated arc: gross motion again
+            rho, length, _ = fr
+            t_arc = length / v
+            if t_arc <= lp.tx:
+                lp.drive(lp.interpolated_steps(rho, t_arc, k, k - 1) + [(k - 1, lp.opts.push_s)])
+                return self.check_docked(i, k)
+            lp.drive(lp.interpolated_steps(rho, lp.tx, k, k - 1))
+        return False
+
+    def near_slot(self, i: int) -> bool:
+        """Whether robot ``i`` (measured) is at its slot within the docking tolerances."""
+        lp = self.loop
+        goal = lp.goals[i]
+        return bool(
+            np.hypot(*(lp.est[i, :2] - goal[:2])) <= lp.opts.dock_tol_um
+            and abs(angle_difference(lp.est[i, 2], goal[2])) <= math.radians(lp.opts.dock_tol_deg)
+        )
+
+    def check_docked(self, i: int, k: int) -> bool:
+        """Push until the robot stops; docked if it stopped at its slot (or flush off it), stuck (H) if elsewhere."""
+        outcome = self.dock_verdict(i, self.play(docking.settle(lambda: self.dock_view(i), k, self.loop.opts, self.loop.tx)))
+        return outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT)
+
+    def back_off(self, i: int, k: int) -> None:
+        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
+        lp = self.loop
+        lp.drive([(k, 0.5 * math.pi * lp.r[i] / lp.v[i]), (k - 1, 150.0 / lp.v[i])])
