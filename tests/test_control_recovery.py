@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from stressbots.control import Targets, assemble, check_determinism, structure_targets
+from stressbots.control import pair as pair_mod
 from stressbots.control import runner as runner_mod
 from stressbots.errors import PlanningError
 from stressbots.generate import LITERATURE_NOISE, random_scenario
@@ -62,15 +63,15 @@ def test_g1_is_replanned_in_another_frame_when_the_nominal_one_fails(pair, monke
     """A rendezvous that finds no timed path does not end the run: sigma_1 is re-planned toward another
     pair frame (the structure turned or shifted), and the pair still forms."""
     calls = {"n": 0}
-    original = runner_mod._Runner.rendezvous
+    original = pair_mod.Rendezvous.rendezvous
 
     def first_fails(self, N, M, D, lower):
         calls["n"] += 1
         if calls["n"] == 1:
-            raise runner_mod._Replan(f"{self.scn.names[N]} found no timed path to its approach line (injected)")
+            raise pair_mod.Replan(f"{self.loop.scn.names[N]} found no timed path to its approach line (injected)")
         return original(self, N, M, D, lower)
 
-    monkeypatch.setattr(runner_mod._Runner, "rendezvous", first_fails)
+    monkeypatch.setattr(pair_mod.Rendezvous, "rendezvous", first_fails)
     scn = pair.with_noise(Noise())
     sim = SimulatedPlant(scn, seed=1)
     result = assemble(scn, ProtocolOnly(sim), seed=1, plan=structure_targets(scn))
