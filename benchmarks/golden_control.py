@@ -62,22 +62,22 @@ def runs():
 @contextmanager
 def first_rendezvous_fails():
     """The controller's first rendezvous raises its re-plan error (the seam tests/test_control_recovery.py uses)."""
-    from stressbots.control import runner
+    from stressbots.control import pair
 
-    original = runner._Runner.rendezvous
+    original = pair.Rendezvous.rendezvous
     calls = {"n": 0}
 
     def first_fails(self, N, M, D, lower):
         calls["n"] += 1
         if calls["n"] == 1:
-            raise runner._Replan(f"{self.scn.names[N]} found no timed path to its approach line (injected)")
+            raise pair.Replan(f"{self.loop.scn.names[N]} found no timed path to its approach line (injected)")
         return original(self, N, M, D, lower)
 
-    runner._Runner.rendezvous = first_fails  # type: ignore[method-assign]
+    pair.Rendezvous.rendezvous = first_fails  # type: ignore[method-assign]
     try:
         yield
     finally:
-        runner._Runner.rendezvous = original  # type: ignore[method-assign]
+        pair.Rendezvous.rendezvous = original  # type: ignore[method-assign]
 
 
 def fingerprint(result) -> dict[str, str]:

@@ -98,8 +98,6 @@ class PairLoop(Protocol):
 
     def abort(self, reason: str) -> Exception: ...
 
-    def rendezvous(self, N: int, M: int, D: float, lower) -> bool: ...
-
     def orbiting_below(self, k: int) -> list[int]: ...
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
@@ -226,7 +224,7 @@ class PairPhase:
                 c_star = self.station(N, M, D)
                 self.transfer.run(N, M, c_star, D, lower)
                 for attempt in range(self.loop.tune.rendezvous_attempts):
-                    if self.loop.rendezvous(N, M, D, lower):  # the loop's seam for fault injection
+                    if self.meeting.rendezvous(N, M, D, lower):
                         return
                     self.loop.log("retry", N, f"rendezvous attempt {attempt + 1} missed; {self.loop.scn.names[N]} re-plans its approach")
                 raise Replan(f"G_1 of {self.loop.scn.names[N]} and {self.loop.scn.names[M]} did not form in "

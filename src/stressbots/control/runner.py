@@ -91,8 +91,6 @@ class _Abort(Exception):
         self.reason = reason
 
 
-_Replan = Replan
-"""A stage of G_1 has no solution from here (:class:`stressbots.control.pair.Replan`; the old name, kept for tests)."""
 
 
 class _Budget(_Abort):
@@ -129,11 +127,6 @@ class _Runner(PlantLoop):
 
     def over_budget(self) -> Exception:
         return _Budget(self.budget_s)
-
-    def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
-        """G_1's stages 2 and 3 (:meth:`stressbots.control.pair.Rendezvous.rendezvous`), called through the loop
-        so that tests can inject a failed rendezvous here."""
-        return self.pair.meeting.rendezvous(N, M, D, lower)
 
     def abort(self, reason: str) -> Exception:
         """The error a phase raises when the run cannot go on (the result's ``failure`` is ``reason``)."""
