@@ -10,6 +10,7 @@ error, never another exception.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -22,7 +23,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots.errors import ScenarioError, StressbotsError
-from stressbots.scenario import LIMITS, MAX_MOVING_ROBOTS, from_dict, loads
+from stressbots.scenario import LIMITS, MAX_MOVING_ROBOTS, MAX_PLANNED_ROBOTS, from_dict, loads
 
 from .conftest import EXAMPLES, assert_user_error
 
@@ -107,7 +108,12 @@ SLOW_LAYOUTS = [
 @pytest.mark.parametrize("command", ["plan", "simulate", "run", "bounds", "montecarlo"])
 @pytest.mark.parametrize("text, words", SLOW_LAYOUTS, ids=[f"slow{k}" for k in range(len(SLOW_LAYOUTS))])
 def test_layouts_too_slow_to_run_are_refused_before_computing(run_cli, tmp_path, command, text, words):
-    """Boundary values that load but would make a run take minutes: refused by the moving commands."""
+    """Boundary values that load but would make a run take minutes: refused by the moving commands
+    (``plan`` simulates nothing in closed loop: it has its own, longer crossing limit and no camera rate)."""
+    if command == "plan":
+        if "measurements per crossing" in words:
+            pytest.skip("plan takes no measurements")
+        words = [w.replace("at most 100 s", "at most 400 s") for w in words]
     p = write(tmp_path, text)
     t0 = time.perf_counter()
     r = run_cli(command, p, "--out", tmp_path / "o")
@@ -126,14 +132,30 @@ def _movable_limit_scenario(n: int) -> str:
     return head + "".join(rows)
 
 
-@pytest.mark.parametrize("n", [MAX_MOVING_ROBOTS + 1, 40])
+@pytest.mark.parametrize("extra", [1, 40])
 @pytest.mark.parametrize("command", ["plan", "simulate", "run", "bounds", "montecarlo"])
-def test_too_many_robots_to_move_are_refused_before_computing(run_cli, tmp_path, command, n):
-    p = write(tmp_path, _movable_limit_scenario(n))
+def test_too_many_robots_to_move_are_refused_before_computing(run_cli, tmp_path, command, extra):
+    most = MAX_PLANNED_ROBOTS if command == "plan" else MAX_MOVING_ROBOTS
+    p = write(tmp_path, _movable_limit_scenario(most + extra))
     t0 = time.perf_counter()
     r = run_cli(command, p, "--out", tmp_path / "o")
     assert time.perf_counter() - t0 < 10.0
-    assert_user_error(r, "adv.toml", "robots", f"at most {MAX_MOVING_ROBOTS} robots")
+    assert_user_error(r, "adv.toml", "robots", f"at most {most} robots")
+
+
+def test_plan_takes_more_robots_and_a_longer_crossing_than_the_simulating_commands():
+    from stressbots.errors import StressbotsError
+    from stressbots.scenario import MAX_CROSSING_S, MAX_PLANNED_CROSSING_S, check_movable, crossing_s
+
+    scn = loads(_movable_limit_scenario(MAX_PLANNED_ROBOTS))
+    assert check_movable(scn, planning_only=True) is scn
+    with pytest.raises(StressbotsError, match=f"at most {MAX_MOVING_ROBOTS} robots"):
+        check_movable(scn)
+    few = dataclasses.replace(scn, robots=tuple(dataclasses.replace(r, speed_um_s=25.0) for r in scn.robots[:4]))
+    assert MAX_CROSSING_S < crossing_s(few) <= MAX_PLANNED_CROSSING_S  # slow robots: too long to simulate, not to plan
+    assert check_movable(few, planning_only=True) is few
+    with pytest.raises(StressbotsError, match="too slow"):
+        check_movable(few)
 
 
 def test_too_many_robots_for_a_file(run_cli, tmp_path):

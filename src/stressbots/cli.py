@@ -77,16 +77,19 @@ class NoiseChoice(StrEnum):
     literature = "literature"
 
 
-def scenario_arg(path: Path, *, moving: bool = False):
+def scenario_arg(path: Path, *, moving: bool = False, planning: bool = False):
     """Load a scenario given on the command line (errors name the file and field).
 
-    ``moving``: the command plans or simulates the robots, so the scenario must also be small enough
-    for that (:func:`stressbots.scenario.check_movable`), checked before any computation.
+    ``moving``: the command simulates the robots, so the scenario must also be small enough for that
+    (:func:`stressbots.scenario.check_movable`), checked before any computation; ``planning``: the
+    command only plans (the planner's larger limits).
     """
     from .scenario import check_movable, load
 
     scn = load(path)
-    return check_movable(scn, source=str(path)) if moving else scn
+    if moving or planning:
+        return check_movable(scn, source=str(path), planning_only=not moving)
+    return scn
 
 
 def _show_version(value: bool) -> None:
@@ -474,7 +477,7 @@ def plan(
     from .viz import plot_plan
 
     t0 = time.perf_counter()
-    scn = scenario_arg(scenario, moving=True)
+    scn = scenario_arg(scenario, planning=True)
     folder = prepare_dir(out_dir, inputs=[scenario])
     for name in ("plan.json", "plan.png", "summary.json"):
         check_not_input(folder / name, [scenario])

@@ -228,9 +228,15 @@ MAX_NAME_CHARS = 64
 #: Most robots a scenario file may hold (voltage analysis and design; the accessible-state search of a
 #: non-STRING design is capped separately).
 MAX_ROBOTS = 100
-#: Most robots the commands that plan and move them (plan, simulate, run, bounds, montecarlo) accept:
-#: planning, the controller and the simulator grow quickly with N (checked by :func:`check_movable`).
+#: Most robots the commands that move them (simulate, run, bounds, montecarlo) accept: the controller's
+#: and the simulator's work grows quickly with N (checked by :func:`check_movable`).
 MAX_MOVING_ROBOTS = 8
+#: Most robots ``stressbots plan`` accepts (:func:`check_movable` with ``planning_only``): the planner
+#: plans 4 of the 5 generated 16-robot layouts of benchmarks/bench_planner.py in 4-30 s of CPU.
+MAX_PLANNED_ROBOTS = 16
+#: Longest crossing (s, :func:`crossing_s`) ``stressbots plan`` accepts: a plan is not simulated in
+#: closed loop, so only the replay's length grows with it (generated 16-robot layouts cross in ~150 s).
+MAX_PLANNED_CROSSING_S = 400.0
 #: Largest scenario file read (bytes): a scenario of MAX_ROBOTS robots is a few kB.
 MAX_FILE_BYTES = 1_000_000
 #: Longest crossing of the layout at the slowest robot's speed (s, :func:`crossing_s`) that the commands
@@ -600,34 +606,38 @@ def crossing_s(scenario: Scenario) -> float:
     return extent / min(r.speed_um_s for r in scenario.robots)
 
 
-def check_movable(scenario: Scenario, *, source: str | None = None) -> Scenario:
+def check_movable(scenario: Scenario, *, source: str | None = None, planning_only: bool = False) -> Scenario:
     """Refuse, before any computation, a scenario too large to plan and simulate in reasonable time.
 
     Checks :data:`MAX_MOVING_ROBOTS`, the crossing time at the slowest speed (:func:`crossing_s`,
     at most :data:`MAX_CROSSING_S`) and the measurements per crossing (crossing / replan_interval_s,
-    at most :data:`MAX_MEASUREMENTS_PER_CROSSING`), and says which limit is exceeded.
+    at most :data:`MAX_MEASUREMENTS_PER_CROSSING`), and says which limit is exceeded. With
+    ``planning_only`` (``stressbots plan``: nothing runs in closed loop) the limits are
+    :data:`MAX_PLANNED_ROBOTS` and :data:`MAX_PLANNED_CROSSING_S`, and the camera's rate is not checked.
     """
     where = source or scenario.source
-    if scenario.n > MAX_MOVING_ROBOTS:
+    most = MAX_PLANNED_ROBOTS if planning_only else MAX_MOVING_ROBOTS
+    if scenario.n > most:
+        what, others = ("planning", "") if planning_only else ("simulating", f"`stressbots plan` plans up to {MAX_PLANNED_ROBOTS}, ")
         raise ScenarioError(
-            f"{scenario.n} robots: planning and simulating take at most {MAX_MOVING_ROBOTS} robots "
-            f"(`stressbots states` analyses up to {MAX_ROBOTS})",
+            f"{scenario.n} robots: {what} takes at most {most} robots ({others}`stressbots states` analyses up to {MAX_ROBOTS})",
             source=where,
             field="robots",
         )
     cross = crossing_s(scenario)
-    if cross > MAX_CROSSING_S:
+    longest = MAX_PLANNED_CROSSING_S if planning_only else MAX_CROSSING_S
+    if cross > longest:
         i = min(range(scenario.n), key=lambda k: scenario.robots[k].speed_um_s)
         r = scenario.robots[i]
         what = "the arena's diagonal" if scenario.arena_um is not None else "the spread of the start and goal poses"
         raise ScenarioError(
-            f"{r.speed_um_s:g} um/s is too slow for {what}: crossing it takes {cross:.0f} s, at most {MAX_CROSSING_S:g} s "
-            f"are accepted (a faster robot, at least {r.speed_um_s * cross / MAX_CROSSING_S:.0f} um/s, or a smaller layout)",
+            f"{r.speed_um_s:g} um/s is too slow for {what}: crossing it takes {cross:.0f} s, at most {longest:g} s "
+            f"are accepted (a faster robot, at least {r.speed_um_s * cross / longest:.0f} um/s, or a smaller layout)",
             source=where,
             field=f"robots[{i}] ({r.name}).speed_um_s",
         )
     t_x = scenario.control.replan_interval_s
-    if cross / t_x > MAX_MEASUREMENTS_PER_CROSSING:
+    if not planning_only and cross / t_x > MAX_MEASUREMENTS_PER_CROSSING:
         raise ScenarioError(
             f"{t_x:g} s is too short for this layout: {cross / t_x:.0f} measurements per crossing of {cross:.0f} s, at most "
             f"{MAX_MEASUREMENTS_PER_CROSSING} (use at least {cross / MAX_MEASUREMENTS_PER_CROSSING:.2g} s)",
