@@ -56,6 +56,9 @@ def test_reaim_turn_brings_a_left_offset_back_to_the_slot(behind, right, psi_deg
     if fix.offset_um >= 0.0:
         assert d == 0.0  # never a turn for a robot that would end right of its slot (it cannot turn left)
         return
+    if fix.offset_um > -1e-9:  # a left offset below a nanometre (Hypothesis finds -5e-324): no turn is needed
+        assert 0.0 <= d < 1e-6
+        return
     assert d > 0.0
     after = contact_offset(behind, right, psi + d, L)
     assert abs(after) <= 0.05 * abs(fix.offset_um) + 0.05

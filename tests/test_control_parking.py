@@ -85,8 +85,10 @@ def test_no_move_when_every_way_out_is_blocked():
 @given(st.floats(-1.2e-4, 1.2e-4), st.integers(0, 2**31 - 1))
 def test_straight_drift_identifies_a_constant_curvature(kappa, seed):
     """Synthetic frames of a robot with curvature ``kappa`` (rad/um) and camera noise 1 deg: after 20 runs of 680 um of
-    straight runs (broken by turns) the estimate is within 3 sigma (sigma = sqrt(2) 1 deg / 680 um / sqrt(20 runs),
-    0.46 deg/mm) plus the prior's shrinkage (under 2 %)."""
+    straight runs (broken by turns) the estimate is within 5 sigma (sigma = sqrt(2) 1 deg / 680 um / sqrt(20 runs),
+    0.46 deg/mm) plus the prior's shrinkage (under 2 %). Five, not three: the camera noise is drawn from any seed
+    Hypothesis picks, and at 3 sigma some seeds fail by chance (seed 980: 3.1 sigma); unidentified, the error
+    would be |kappa|, up to 6.9 deg/mm."""
     rng = np.random.default_rng(seed)
     d = StraightDrift(1)
     p = np.array([1000.0, 1000.0, 0.3])
@@ -97,4 +99,4 @@ def test_straight_drift_identifies_a_constant_curvature(kappa, seed):
                     np.array([85.0]))
         p[2] += 1.0  # a turn between runs
         d.frame((p + np.array([0.0, 0.0, rng.normal(0, math.radians(1.0))]))[None], np.array([False]), np.array([0.0]))
-    assert abs(float(d.kappa[0]) - kappa) < math.radians(1.4) / 1000.0 + 0.02 * abs(kappa)
+    assert abs(float(d.kappa[0]) - kappa) < math.radians(2.3) / 1000.0 + 0.02 * abs(kappa)
