@@ -17,6 +17,7 @@ import shapely
 from . import paths
 from .bounds import ErrorModel, cylinder
 from .collision import arena_gap, bodies_hit_discs, penetration_depth
+from .control.gross import path_steps
 from .control.loop import PlantLoop
 from .robots import TWO_PI, angle_difference, turning_centres
 from .seed_fine_motion import arc_back, s2f_duty, s2f_steps
@@ -207,15 +208,9 @@ class SeedLoop(PlantLoop):
         return SeedStop(f"not assembled within the time budget of {self.budget_s:g} s (simulated)")
 
     def path_steps(self, path: paths.Path, i: int, turn_k: int, straight_k: int, limit_s: float | None = None):
-        """The first ``limit_s`` seconds of robot ``i``'s ``path`` as primitive steps (all when None)."""
-        out, left, v = [], math.inf if limit_s is None else limit_s, float(self.v_hat[i])
-        for kind, ell in path.segments:
-            d = min(ell / v, left)
-            out.append((turn_k if kind == "R" else straight_k, d))
-            left -= d
-            if left <= 1e-12:
-                break
-        return out
+        """The first ``limit_s`` seconds of robot ``i``'s ``path`` as primitive steps (all when None), at its
+        estimated speed (:func:`stressbots.control.gross.path_steps`)."""
+        return path_steps(path, float(self.v_hat[i]), turn_k, straight_k, limit_s)
 
     def hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, discs=(), clearance: float | None = None) -> str | None:
         """What robot ``i``'s body along ``samples`` would hit (an orbit, a docked robot, the arena edge), or None."""

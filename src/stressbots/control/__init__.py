@@ -3,6 +3,7 @@
 Modules: :mod:`~stressbots.control.runner` (the closed loop, :func:`assemble`), :mod:`~stressbots.control.pair`
 (G_1, handed the loop), :mod:`~stressbots.control.gross` (gross motion sigma_1, handed the loop),
 :mod:`~stressbots.control.single` (docking of the single robots D_k, k < n-1, handed the loop),
+:mod:`~stressbots.control.loopview` (the protocols naming what each phase may use of the loop),
 :mod:`~stressbots.control.queries` (pure geometric queries), :mod:`~stressbots.control.tuning`
 (:class:`ControllerOptions` and the named thresholds :class:`Tuning`), :mod:`~stressbots.control.targets`
 (slots from a nominal plan or the structure alone), :mod:`~stressbots.control.result`

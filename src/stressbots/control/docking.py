@@ -34,13 +34,13 @@ from enum import Enum
 import numpy as np
 
 from ..robots import angle_difference
+from .loopview import Steps
 from .queries import interpolated_steps, line_coords, merge
 from .tuning import ControllerOptions
 
 __all__ = ["DockOutcome", "DockView", "LineFix", "contact_offset", "lead_um", "reaim_turn_rad", "stopped_verdict", "line_approach",
            "settle"]
 
-Steps = list[tuple[int, float]]
 
 
 class DockOutcome(Enum):

@@ -14,51 +14,30 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
 from ..robots import angle_difference, turning_centres
+from .loopview import LoopView, Steps
 from .queries import trim_steps
-from .tuning import ControllerOptions, Tuning
+from .tuning import Tuning
 
 __all__ = ["GrossLoop", "GrossMotion", "arrived", "path_steps"]
 
-Steps = list[tuple[int, float]]
 
 
-class GrossLoop(Protocol):
+class GrossLoop(LoopView, Protocol):
     """What gross motion uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
 
-    scn: Any
-    L: np.ndarray
-    W: np.ndarray
-    docked: np.ndarray
     t: float
     replans: int
-    tx: float
-    tune: Tuning
-    opts: ControllerOptions
-    stuck: bool
     routes_rng: np.random.Generator
 
     @property
-    def est(self) -> np.ndarray: ...
-
-    @property
-    def v_hat(self) -> np.ndarray: ...
-
-    @property
-    def r_hat(self) -> np.ndarray: ...
-
-    @property
     def rstar(self) -> np.ndarray: ...
-
-    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None: ...
-
-    def drive(self, steps: Sequence[tuple[int, float]]) -> None: ...
 
 
 def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None) -> Steps:

@@ -27,7 +27,7 @@ controller's ``drive``, estimates, obstacle checks and gross motion); it keeps n
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -37,14 +37,14 @@ from .. import se2
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth, point_rectangle_distance
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints, turning_centres
+from .gross import path_steps
+from .loopview import DockingLoop
 from .queries import best_departure, pose_on_orbit
 from .station import orbit_route
-from .tuning import ControllerOptions, Tuning
 
 __all__ = ["PairLoop", "PairPhase", "Rendezvous", "Replan", "StationTransfer", "approach_pose", "framed_goals", "frames_apart",
            "meet_distance", "station_centre", "tight_discs"]
 
-Steps = list[tuple[int, float]]
 
 
 class Replan(Exception):
@@ -55,60 +55,17 @@ class Replan(Exception):
         self.reason = reason
 
 
-class PairLoop(Protocol):
+class PairLoop(DockingLoop, Protocol):
     """What the pair phase uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
 
-    scn: Any
     n: int
     rank: np.ndarray
-    by_rank: dict[int, int]
-    L: np.ndarray
-    W: np.ndarray
-    v: np.ndarray
-    r: np.ndarray
-    docked: np.ndarray
     t: float
     replans: int
-    tx: float
-    tune: Tuning
-    opts: ControllerOptions
-    goals: np.ndarray
     nominal_goals: np.ndarray
-    motion: tuple[float, np.ndarray, np.ndarray] | None
-    stuck: bool
-
-    @property
-    def est(self) -> np.ndarray: ...
-
-    @property
-    def v_hat(self) -> np.ndarray: ...
-
-    @property
-    def omega_hat(self) -> np.ndarray: ...
-
-    @property
-    def r_hat(self) -> np.ndarray: ...
 
     @property
     def rstar(self) -> np.ndarray: ...
-
-    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None: ...
-
-    def drive(self, steps: Sequence[tuple[int, float]]) -> None: ...
-
-    def abort(self, reason: str) -> Exception: ...
-
-    def orbiting_below(self, k: int) -> list[int]: ...
-
-    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
-                      target=None) -> bool: ...
-
-    def path_steps(self, path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None) -> Steps: ...
-
-    def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int) -> Steps: ...
-
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool: ...
 
 
 def frames_apart(a, b) -> bool:
@@ -792,7 +749,7 @@ class Rendezvous:
                 # the rest of the plan, driven open loop, misses by a few um at most
                 rest = pathlib.sub_path(prev, min(vN * self.loop.tx, prev.length), prev.length)
                 self.loop.log("final", N, f"{self.loop.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
-                self.loop.drive(self.loop.path_steps(rest, vN, n, n - 1, None))
+                self.loop.drive(path_steps(rest, vN, n, n - 1, None))
                 return True
             loop = None
             for tol in (0.3, 0.7):
@@ -822,7 +779,7 @@ class Rendezvous:
                 continue
             self.loop.replans += 1
             whole = path.length / vN <= 1.6 * self.loop.tx
-            self.loop.drive(self.loop.path_steps(path, vN, n, n - 1, None if whole else self.loop.tx))
+            self.loop.drive(path_steps(path, vN, n, n - 1, None if whole else self.loop.tx))
             if whole:
                 return True
         return False

@@ -53,11 +53,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .. import paths as pathlib
 from ..collision import point_rectangle_distance
 from ..errors import PlanningError
 from ..robots import turning_centres
-from .gross import GrossMotion, path_steps
+from .gross import GrossMotion
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import orbit_gaps, park_move
@@ -204,10 +203,6 @@ class _Runner(PlantLoop):
         return [self.by_rank[j] for j in range(1, k)]
 
     # -- motion primitives ------------------------------------------------------------------------------
-
-    def path_steps(self, path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None):
-        """The first ``limit_s`` seconds of ``path`` as primitive steps (:func:`stressbots.control.gross.path_steps`)."""
-        return path_steps(path, v, turn_k, straight_k, limit_s)
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:

@@ -18,7 +18,7 @@ are pure geometry.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -29,65 +29,23 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
 from . import docking
 from .docking import DockOutcome, DockView
+from .loopview import DockingLoop
 from .queries import in_funnel, line_coords, line_pose, merge, turn_fraction
-from .tuning import ControllerOptions, Tuning
 
 __all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget"]
 
-Steps = list[tuple[int, float]]
 
 Bodies = tuple[np.ndarray, np.ndarray, np.ndarray]
 """Docked bodies as ``(poses (m, 3), lengths (m,), widths (m,))`` (um, rad)."""
 
 
-class SingleLoop(Protocol):
+class SingleLoop(DockingLoop, Protocol):
     """What single-robot docking uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
 
-    scn: Any
-    by_rank: dict[int, int]
-    L: np.ndarray
-    W: np.ndarray
-    v: np.ndarray
-    r: np.ndarray
-    docked: np.ndarray
-    tx: float
-    tune: Tuning
-    opts: ControllerOptions
-    goals: np.ndarray
-    motion: tuple[float, np.ndarray, np.ndarray] | None
-    stuck: bool
     events: list[dict]
     straight_drift: Any
 
-    @property
-    def est(self) -> np.ndarray: ...
-
-    @property
-    def v_hat(self) -> np.ndarray: ...
-
-    @property
-    def omega_hat(self) -> np.ndarray: ...
-
-    @property
-    def r_hat(self) -> np.ndarray: ...
-
-    def log(self, kind: str, robot: int | None = None, detail: str = "") -> None: ...
-
-    def drive(self, steps: Sequence[tuple[int, float]]) -> None: ...
-
-    def abort(self, reason: str) -> Exception: ...
-
     def park_orbits(self, k: int) -> None: ...
-
-    def orbiting_below(self, k: int) -> list[int]: ...
-
-    def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
-                      target=None) -> bool: ...
-
-    def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int) -> Steps: ...
-
-    def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool: ...
 
 
 # -- pure geometry ------------------------------------------------------------------------------------
