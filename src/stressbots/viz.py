@@ -53,10 +53,21 @@ def _frame(ax, scenario, pts: np.ndarray, pad: float = 150.0):
         ax.add_patch(_plt().Rectangle((0, 0), w, h, fill=False, lw=1.2, ec="0.3", zorder=1))
         ax.set_xlim(-pad, w + pad)
         ax.set_ylim(-pad, h + pad)
+        _plane_axes(ax)
     else:
-        lo, hi = pts.min(axis=0) - pad, pts.max(axis=0) + pad
-        ax.set_xlim(lo[0], hi[0])
-        ax.set_ylim(lo[1], hi[1])
+        _zoom(ax, pts, pad)
+
+
+def _zoom(ax, pts: np.ndarray, pad: float) -> None:
+    """Axes around the points ``pts`` (um) with ``pad`` (um) on every side, in the arena plane."""
+    lo, hi = pts.min(axis=0) - pad, pts.max(axis=0) + pad
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    _plane_axes(ax)
+
+
+def _plane_axes(ax) -> None:
+    """Equal scales, um labels and a light grid: every picture of the arena plane."""
     ax.set_aspect("equal")
     ax.set_xlabel("x (um)")
     ax.set_ylabel("y (um)")
@@ -522,13 +533,7 @@ def _coverage_structure(ax, scenario, cov, capture) -> None:
         ax.plot(*s.xy, "o" if s.inside else "x", ms=3.5 if s.inside else 5, color=cols[i], alpha=0.8, zorder=4,
                 mfc=cols[i] if s.scale <= 1.0 else "none")
     pts = np.concatenate([goals[:, :2], np.array([s.xy for s in cov.samples]).reshape(-1, 2)])
-    lo, hi = pts.min(axis=0) - 200.0, pts.max(axis=0) + 200.0
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (um)")
-    ax.set_ylabel("y (um)")
-    ax.grid(True, lw=0.3, alpha=0.5)
+    _zoom(ax, pts, 200.0)
     ax.set_title("true positions at the moments over the slots\n(bands: capture corridors; D_n at departure)", fontsize=8)
 
 
