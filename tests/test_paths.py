@@ -22,7 +22,7 @@ import os
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
@@ -141,6 +141,11 @@ def test_length_scales_with_radius(pair, k):
 @given(pairs(), st.floats(-10, 10), st.floats(-5000, 5000), st.floats(-5000, 5000))
 def test_invariant_under_rigid_motion(pair, alpha, tx, ty):
     start, goal, r = pair
+    # A goal a rounding error from the start (Hypothesis found 6.5e-12 um behind it) is a real discontinuity
+    # of one-way paths: exactly there costs 0, a hair behind costs a full loop; moving the plane rounds
+    # such a goal onto either side, so the property is only asked of goals clear of the start.
+    gap = math.hypot(goal[0] - start[0], goal[1] - start[1])
+    assume(gap == 0.0 or gap > 1e-6)
 
     def moved(p):
         # rotate the plane clockwise by alpha: headings (clockwise from +y) increase by alpha
