@@ -15,27 +15,46 @@ import stressbots
 PACKAGE = Path(stressbots.__file__).parent
 
 
-def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
-    """Module -> package modules it imports anywhere in its source (top level or inside functions)."""
-    modules = {p.stem for p in package.glob("*.py")}
+def _targets(node: ast.AST, here: tuple[str, ...]) -> list[tuple[str, ...]]:
+    """Dotted paths (inside the package) that one import statement names, from a file in subpackage ``here``."""
+    if isinstance(node, ast.ImportFrom):
+        if node.level:
+            base = here[: len(here) - (node.level - 1)] if node.level - 1 <= len(here) else ()
+            head = base + tuple(node.module.split(".")) if node.module else base
+            return [head] if node.module else [base + (a.name,) for a in node.names]
+        if node.module and node.module.split(".")[0] == "stressbots":
+            parts = tuple(node.module.split(".")[1:])
+            return [parts] if parts else [(a.name,) for a in node.names]
+    elif isinstance(node, ast.Import):
+        return [tuple(a.name.split(".")[1:]) for a in node.names if a.name.split(".")[0] == "stressbots"]
+    return []
+
+
+def import_graph(package: Path = PACKAGE, *, inside: str | None = None) -> dict[str, set[str]]:
+    """Module -> package modules it imports anywhere in its source (top level or inside functions).
+
+    By default the nodes are the package's top-level modules and its subpackages (``control``, ``sim``,
+    ``lab``), each subpackage one node standing for all its files. With ``inside="sim"`` the nodes are that
+    subpackage's own modules (``__init__`` included) and only imports among them count.
+    """
     graph: dict[str, set[str]] = {}
-    for path in package.glob("*.py"):
-        deps: set[str] = set()
+    if inside is None:
+        nodes = {p.stem for p in package.glob("*.py")} | {p.parent.name for p in package.glob("*/__init__.py")}
+        files = [(p, ()) for p in package.glob("*.py")] + [(p, (p.parent.name,)) for p in package.glob("*/*.py")]
+    else:
+        nodes = {p.stem for p in (package / inside).glob("*.py")}
+        files = [(p, (inside,)) for p in (package / inside).glob("*.py")]
+    for path, here in files:
+        me = (here[0] if here else path.stem) if inside is None else path.stem
+        deps = graph.setdefault(me, set())
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.ImportFrom):
-                if node.level == 1 and node.module:
-                    deps.add(node.module.split(".")[0])
-                elif node.level == 1:
-                    deps.update(a.name for a in node.names)
-                elif node.level == 0 and node.module and node.module.split(".")[0] == "stressbots":
-                    parts = node.module.split(".")
-                    deps.update([parts[1]] if len(parts) > 1 else [a.name for a in node.names])
-            elif isinstance(node, ast.Import):
-                for a in node.names:
-                    parts = a.name.split(".")
-                    if parts[0] == "stressbots" and len(parts) > 1:
-                        deps.add(parts[1])
-        graph[path.stem] = {d for d in deps if d in modules and d != path.stem}
+            for target in _targets(node, here):
+                if inside is None and target:
+                    deps.add(target[0])
+                elif inside is not None and len(target) > 1 and target[0] == inside:
+                    deps.add(target[1])
+        deps &= nodes
+        deps.discard(me)
     return graph
 
 
@@ -81,12 +100,25 @@ def test_the_cycle_finder_finds_cycles():
     src = "def f():\n    from .cli import main\n"
     tree = ast.parse(src)
     assert any(isinstance(n, ast.ImportFrom) and n.module == "cli" for n in ast.walk(tree))
+    # the import resolver: from a file in subpackage "sim", ".x" is sim.x and "..x" the top-level x
+    rel = ast.parse("from .bodies import a\nfrom ..kinematics import b\nfrom . import contact\n").body
+    assert [_targets(n, ("sim",)) for n in rel] == [[("sim", "bodies")], [("kinematics",)], [("sim", "contact")]]
 
 
 def test_no_import_cycles_among_the_package_modules():
     graph = import_graph()
-    assert "cli" in graph and "pipeline" in graph  # the graph is the package's
+    assert "cli" in graph and "pipeline" in graph and "control" in graph  # the graph is the package's
+    assert "planning" in graph["control"]  # a subpackage's imports of top-level modules count
     assert cycles(graph) == []
+
+
+def test_no_import_cycles_inside_the_subpackages():
+    subpackages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
+    assert {"control", "sim"} <= set(subpackages)
+    for sub in subpackages:
+        graph = import_graph(inside=sub)
+        assert cycles(graph) == [], sub
+    assert "bodies" in import_graph(inside="sim")["contact"]  # relative imports inside a subpackage count
 
 
 def test_library_modules_do_not_import_the_cli_or_the_console():

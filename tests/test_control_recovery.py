@@ -105,11 +105,11 @@ class Shove(ProtocolOnly):
             a, b = p[self.mover, :2], self.goal[:2]
             centre = a + 0.5 * (b - a)  # the victim's new orbit centre: mid-way along the mover's line
             old = turning_centres(p[v], R[v])[0]
-            sim._pose[v, :2] = p[v, :2] + (centre - old)
+            sim._bodies.pose[v, :2] = p[v, :2] + (centre - old)
             if np.hypot(*(b - a)) > 2.0 * rs + L[self.mover]:
                 self.done = True
             else:  # too close: undo and try again later
-                sim._pose[v, :2] = p[v, :2]
+                sim._bodies.pose[v, :2] = p[v, :2]
         super().apply(waveform)
 
 
@@ -150,7 +150,7 @@ class SideShove(ProtocolOnly):
         sim = self._inner
         p = sim.true_poses()[self.robot]
         if not self.done and np.hypot(*(p[:2] - self.goal[:2])) < self.near_um:
-            sim._pose[self.robot, :2] += self.shift_um * np.array([np.cos(p[2]), -np.sin(p[2])])
+            sim._bodies.pose[self.robot, :2] += self.shift_um * np.array([np.cos(p[2]), -np.sin(p[2])])
             self.done = True
         super().apply(waveform)
 

@@ -1,0 +1,263 @@
+"""The seed's compliance (App. 3.5): what a straight robot does against a static body, and head-on meetings.
+
+Each rule reads the bodies where they touch and acts at once (compliance moves are instantaneous):
+docking compliance turns a robot flush about its contact point (:func:`dock_rule`, checked by
+:func:`sweep`), a front corner outside the sticking cone slides along the face, a corner on a long side
+grazes past, and two straight robots meeting head-on within the seed's limits form G_1
+(:func:`self_align`). Outcomes are ``(kind, detail)`` pairs of :class:`~.bodies.SimEvent` vocabulary;
+``docked`` / ``stuck`` are set on the shared :class:`~.bodies.Bodies`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+from ..collision import point_rectangle_distance
+from ..kinematics import wrap
+from ..robots import angle_difference, body_corners
+from .bodies import (
+    ARENA,
+    BISECT_UM,
+    CONTACT_TOL_UM,
+    FACE_TIE_UM,
+    FLUSH_TOL_RAD,
+    GRAZE_TOL_UM,
+    PROBE_UM,
+    PUSH_EPS_UM,
+    SELF_ALIGN_MAX_INCIDENCE_RAD,
+    SELF_ALIGN_MAX_OFFSET_UM,
+    SLIDE_OVERSHOOT_UM,
+    STICKING_CONE_RAD,
+    SWEEP_UM,
+    TOUCH_UM,
+    Bodies,
+    depth,
+    faces_touched,
+    heading_of,
+    local,
+    rotate_about,
+    wall_gap,
+)
+
+
+def contact_points(b: Bodies, i: int, j: int):
+    """Touching corners: ``(points (k, 2), is_corner_of_i (k,))`` of bodies i and j."""
+    P = b.pose
+    ci = body_corners(P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
+    cj = body_corners(P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
+    eps = max(TOUCH_UM, 2.0 * b.pair_depth(i, j)) + 1e-9
+    di = point_rectangle_distance(ci, P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
+    dj = point_rectangle_distance(cj, P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
+    pts = np.vstack([ci[di <= eps], cj[dj <= eps]])
+    own = np.concatenate([np.ones(int((di <= eps).sum()), bool), np.zeros(int((dj <= eps).sum()), bool)])
+    if pts.shape[0] == 0:  # degenerate crossing: fall back to the nearest corners
+        pts = np.vstack([ci[[int(np.argmin(di))]], cj[[int(np.argmin(dj))]]])
+        own = np.array([True, False])
+    return pts, own
+
+
+def front_face(b: Bodies, i: int, j: int, pts):
+    """For robot i pressing its front on body j: ``(contact point, outward normal of j's face, alpha)``,
+    or ``None`` when the contact is not on i's front edge."""
+    P = b.pose
+    u, v = local(pts, P[i])
+    tol = 1e-3 + max(0.0, b.pair_depth(i, j))
+    if not np.all((np.abs(u - b.hl[i]) <= tol) & (np.abs(v) <= b.hw[i] + tol)):
+        return None
+    c = pts.mean(axis=0)
+    h = np.array([math.sin(P[i, 2]), math.cos(P[i, 2])])
+    # The face of j that i's front meets. A contact at a corner of j lies on two faces: keep those
+    # it is not behind (e.g. a corner sliding along one face onto a collinear one is already past
+    # the other), then take the one most opposed to i's heading.
+    faces = faces_touched(pts, P[j], b.hl[j], b.hw[j], tol)
+    best = max(out for _, out in faces)
+    nrm = max((m for m, out in faces if out >= best - FACE_TIE_UM), key=lambda m: float(-(m @ h)))
+    alpha = angle_difference(P[i, 2], heading_of(-nrm))
+    return c, nrm, float(alpha)
+
+
+def flush(b: Bodies, i: int, j: int) -> bool:
+    """Whether robot i's front edge lies flush (within :data:`~.bodies.FLUSH_TOL_RAD`) on a face of j."""
+    pts, _ = contact_points(b, i, j)
+    ff = front_face(b, i, j, pts)
+    return ff is not None and abs(ff[2]) <= FLUSH_TOL_RAD
+
+
+def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray, touching: Iterable[int]):
+    """Straight robot i pushing into static body j: docking compliance, slide or stuck.
+
+    Returns ``(kind, detail, slide)`` with ``slide = (velocity (2,), duration_s)`` for a slide.
+    """
+    P = b.pose
+    pts, own = contact_points(b, i, j)
+    ff = front_face(b, i, j, pts)
+    name_j = b.names[j]
+    if ff is None:
+        u, v = local(pts, P[i])
+        if np.all(np.abs(np.abs(v) - b.hw[i]) <= 1e-3) and not own.any():
+            # j's corner on i's long side: i slides past it, straight on.
+            h = np.array([math.sin(P[i, 2]), math.cos(P[i, 2])])
+            dist = float(np.max(u) + b.hl[i]) + SLIDE_OVERSHOOT_UM
+            return "graze", f"slides past a corner of {name_j}", (speed[i] * h, dist / speed[i])
+        b.stuck[i] = False
+        return "contact", "stopped (contact not on its front)", None
+    c, nrm, alpha = ff
+    deg = math.degrees(alpha)
+    if abs(alpha) <= STICKING_CONE_RAD:
+        return _docking_compliance(b, i, c, alpha)
+    if own.any():
+        return _slide_along(b, i, j, speed, touching, c, nrm, deg)
+    b.stuck[i] = True
+    return "stuck", f"incidence {deg:.1f} deg outside the sticking cone on a corner of {name_j} (H)", None
+
+
+def _docking_compliance(b: Bodies, i: int, c, alpha: float):
+    """Inside the sticking cone: turn about the contact point ``c`` until flush (docked), or until the
+    turn sweeps into another body (stuck)."""
+    deg = math.degrees(alpha)
+    phi, blocker = sweep(b, i, c, -alpha)
+    b.pose[i] = rotate_about(b.pose[i], c, phi)
+    if blocker is None:
+        b.docked[i] = True
+        b.stuck[i] = False
+        return "dock", f"docking compliance: incidence {deg:.2f} deg inside the sticking cone, now flush", None
+    b.stuck[i] = True
+    b.docked[i] = False
+    return "stuck", f"docking compliance ({deg:.2f} deg) obstructed by {b.label(blocker)}", None
+
+
+def _slide_along(b: Bodies, i: int, j: int, speed, touching, c, nrm, deg: float):
+    """Outside the sticking cone with i's front corner on j's face (normal ``nrm``): slide along the face
+    at the tangential part of the velocity, past its end; stuck when the slide is blocked."""
+    P = b.pose
+    h = np.array([math.sin(P[i, 2]), math.cos(P[i, 2])])
+    t = h - float(h @ nrm) * nrm
+    t /= np.linalg.norm(t)
+    vel = speed[i] * float(h @ t) * t
+    # The face of j with normal nrm: its corners; the slide ends past the one ahead.
+    cj = body_corners(P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
+    on_face = cj[np.argsort(-(cj - P[j, :2]) @ nrm)[:2]]
+    dist = float(np.max((on_face - c) @ t)) + SLIDE_OVERSHOOT_UM
+    if dist > 0.0 and not slide_blocked(b, i, vel, [k for k in touching if k != j]):
+        b.stuck[i] = False
+        return ("slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {b.names[j]} (H)",
+                (vel, dist / float(np.linalg.norm(vel))))
+    b.stuck[i] = True
+    return "stuck", f"incidence {deg:.1f} deg outside the sticking cone and cannot slide (H)", None
+
+
+def slide_blocked(b: Bodies, i: int, vel, others: list[int]) -> bool:
+    """Whether sliding with ``vel`` pushes robot i into another body it touches (or the arena)."""
+    P = b.pose
+    step = PROBE_UM / max(float(np.linalg.norm(vel)), 1e-300)
+    q = P[i].copy()
+    q[:2] += vel * step
+    for k in others:
+        d0 = depth(P[i], P[k], b.hl[i], b.hw[i], b.hl[k], b.hw[k])
+        d1 = depth(q, P[k], b.hl[i], b.hw[i], b.hl[k], b.hw[k])
+        if d1 - d0 > PUSH_EPS_UM:
+            return True
+    if b.arena is not None:
+        g0 = wall_gap(P[i], b.hl[i], b.hw[i], b.arena)
+        if g0 < TOUCH_UM and g0 - wall_gap(q, b.hl[i], b.hw[i], b.arena) > PUSH_EPS_UM:
+            return True
+    return False
+
+
+def sweep(b: Bodies, i: int, c, phi: float):
+    """Rotate robot i about ``c`` by up to ``phi`` (rad); stop at first touch of another body.
+
+    Returns ``(phi_reached, blocker)``; ``blocker`` is a robot index, ``ARENA`` or ``None``.
+    """
+    if abs(phi) < 1e-12:
+        return phi, None
+    P = b.pose
+    corners = body_corners(P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
+    reach = float(np.max(np.hypot(*(corners - c).T)))
+    m = int(min(max(2, math.ceil(abs(phi) * reach / SWEEP_UM)), 4000))
+    others = np.array([k for k in range(b.n) if k != i], dtype=int)
+    ci = np.full(others.size, i)
+    cj = others
+    if b.arena is not None:
+        ci = np.append(ci, i)
+        cj = np.append(cj, ARENA)
+    if ci.size == 0:
+        return phi, None
+
+    def gaps(phis):
+        poses = np.repeat(P[None], np.size(phis), axis=0)
+        poses[:, i] = rotate_about(P[i], c, phis)
+        return b.gaps(poses, ci, cj)
+
+    g0 = gaps(np.zeros(1))[0]
+    thr = np.minimum(-GRAZE_TOL_UM, g0 - CONTACT_TOL_UM)
+    phis = phi * np.arange(1, m + 1) / m
+    bad = gaps(phis) < thr
+    rows = bad.any(axis=1)
+    if not rows.any():
+        return phi, None
+    k = int(np.argmax(rows))
+    lo, hi = (phis[k - 1] if k else 0.0), phis[k]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if (gaps(np.array([mid]))[0] < thr).any():
+            hi = mid
+        else:
+            lo = mid
+        if abs(hi - lo) * reach < BISECT_UM:
+            break
+    col = int(np.argmax(bad[k]))
+    return lo, int(cj[col])
+
+
+def self_align(b: Bodies, i: int, j: int) -> tuple[str, str]:
+    """Two straight robots meeting head-on: form G_1 within the seed's limits, else stuck."""
+    P = b.pose
+    alpha = float(angle_difference(P[i, 2], P[j, 2] + math.pi))
+    hi_ = np.array([math.sin(P[i, 2]), math.cos(P[i, 2])])
+    hj_ = np.array([math.sin(P[j, 2]), math.cos(P[j, 2])])
+    axis = hi_ - hj_
+    axis /= np.linalg.norm(axis)
+    th = heading_of(axis)
+    mi = P[i, :2] + b.hl[i] * hi_
+    mj = P[j, :2] + b.hl[j] * hj_
+    across = np.array([math.cos(th), -math.sin(th)])
+    w_y = float((mj - mi) @ across)
+    nums = f"alpha {math.degrees(alpha):.1f} deg, w_y {w_y:.1f} um"
+    if abs(alpha) >= SELF_ALIGN_MAX_INCIDENCE_RAD or abs(w_y) >= SELF_ALIGN_MAX_OFFSET_UM:
+        b.stuck[[i, j]] = True
+        b.docked[[i, j]] = False
+        return "stuck", f"head-on outside the self-alignment limits ({nums}) (H)"
+    junction = 0.5 * (mi + mj)
+    new_i = np.array([*(junction - b.hl[i] * axis), wrap(th)])
+    new_j = np.array([*(junction + b.hl[j] * axis), wrap(th + math.pi)])
+    if _obstructed(b, i, j, new_i, new_j):
+        b.stuck[[i, j]] = True
+        b.docked[[i, j]] = False
+        return "stuck", f"self-alignment ({nums}) obstructed by a third body (H)"
+    b.pose[i], b.pose[j] = new_i, new_j
+    b.docked[[i, j]] = True
+    b.stuck[[i, j]] = False
+    return "self_align", f"G_1 formed ({nums})"
+
+
+def _obstructed(b: Bodies, i: int, j: int, new_i, new_j) -> bool:
+    """Whether moving i and j to ``new_i`` / ``new_j`` (the aligned pair) overlaps a third body or leaves
+    the arena (beyond what already touched)."""
+    others = np.array([k for k in range(b.n) if k not in (i, j)], dtype=int)
+    if not (others.size or b.arena is not None):
+        return False
+    P = b.pose
+    ci = np.concatenate([np.full(others.size, i), np.full(others.size, j)])
+    cj = np.concatenate([others, others])
+    if b.arena is not None:
+        ci = np.append(ci, [i, j])
+        cj = np.append(cj, [ARENA, ARENA])
+    before = b.gaps(P[None], ci, cj)[0]
+    moved = P.copy()
+    moved[i], moved[j] = new_i, new_j
+    after = b.gaps(moved[None], ci, cj)[0]
+    return bool((after < np.minimum(-GRAZE_TOL_UM, before - CONTACT_TOL_UM)).any())
