@@ -58,6 +58,29 @@ def _strategy_option():
 
     return typer.Option(StrategyChoice.rendezvous, "--strategy", help=STRATEGY_HELP)
 
+
+# Options of the campaign commands (montecarlo, study: SPEC 10), declared once so both read the same.
+
+
+def _workers_option():
+    return typer.Option(None, "--workers", min=1, max=256, help="Worker processes (default: every core; 1 = in this process).",
+                        show_default=False)
+
+
+def _resume_option():
+    return typer.Option(False, "--resume", help="Continue the campaign in DIR/trials.sqlite: run only its missing trials "
+                                                "(refused if it was made with other settings).")
+
+
+def _overwrite_option():
+    return typer.Option(False, "--overwrite", help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted).")
+
+
+def _dask_option():
+    return typer.Option(None, "--dask", metavar="ADDRESS", show_default=False,
+                        help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), a scheduler "
+                             "address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.")
+
 class CameraChoice(StrEnum):
     """The --camera choices of simulate and run: what the controller sees."""
 
@@ -284,27 +307,15 @@ def design(
     from .electrostatics import Electrodes
     from .outputs import prepare_file, to_json, write_text
 
-    e = Electrodes(
-        max_V=max_v,
-        margin_V=margin_v,
-        drive_low_V=drive_low_v,
-        drive_high_V=drive_high_v,
-        drive_frequency_hz=drive_frequency_hz,
-        hold_s=hold_s,
-    )
+    e = Electrodes(max_V=max_v, margin_V=margin_v, drive_low_V=drive_low_v, drive_high_V=drive_high_v,
+                   drive_frequency_hz=drive_frequency_hz, hold_s=hold_s)
     if out_file is not None:
         prepare_file(out_file)
     d = design_string(robots, e, ties=ties)
     if resolution_v > 0:
         d = round_design(d, resolution_v)
-    if sd_v is not None and not (0 <= sd_v <= 100):
-        raise StressbotsError(f"must be a number in [0, 100] V, got {sd_v:g}", source="--sd-V")
-    if sd_v is not None and trials * d.n > MAX_YIELD_DRAWS:
-        raise StressbotsError(
-            f"{trials} trials of {d.n} robots draw {trials * d.n:,} threshold pairs; at most {MAX_YIELD_DRAWS:,} "
-            f"(at most {MAX_YIELD_DRAWS // d.n:,} trials for {d.n} robots)",
-            source="--trials",
-        )
+    if sd_v is not None:
+        _check_yield_request(sd_v, trials, d.n)
     y = estimate_yield(d, sd_v, trials=trials, seed=seed) if sd_v is not None else None
     use_json = as_json or (out_file is not None and out_file.suffix.lower() == ".json")
     text = to_json(d.to_json_dict(y)) if use_json else d.to_toml(y)
@@ -315,6 +326,18 @@ def design(
     err.print(f"wrote {out_file}: STRING design for {d.n} robots, smallest gap {d.min_gap_V:g} V", highlight=False, soft_wrap=True)
     if y is not None:
         err.print(f"yield (sd {y.sd_V:g} V): {y.fraction:.4f}, 95% CI {y.ci_low:.4f}-{y.ci_high:.4f}", highlight=False, soft_wrap=True)
+
+
+def _check_yield_request(sd_v: float, trials: int, n: int) -> None:
+    """``design --sd-V``: a scatter in [0, 100] V and at most :data:`MAX_YIELD_DRAWS` threshold pairs drawn."""
+    if not (0 <= sd_v <= 100):
+        raise StressbotsError(f"must be a number in [0, 100] V, got {sd_v:g}", source="--sd-V")
+    if trials * n > MAX_YIELD_DRAWS:
+        raise StressbotsError(
+            f"{trials} trials of {n} robots draw {trials * n:,} threshold pairs; at most {MAX_YIELD_DRAWS:,} "
+            f"(at most {MAX_YIELD_DRAWS // n:,} trials for {n} robots)",
+            source="--trials",
+        )
 
 
 #: Sampled waveform outputs (.npy/.csv) above this many samples need --large: about 32 MB as .npy and
@@ -472,15 +495,13 @@ def plan(
     import time
 
     from . import plans as plans_mod
-    from .outputs import check_not_input, prepare_dir, save_figure, write_json
+    from .outputs import prepare_dir, save_figure, write_json
     from .pipeline import plan_for
     from .viz import plot_plan
 
     t0 = time.perf_counter()
     scn = scenario_arg(scenario, planning=True)
-    folder = prepare_dir(out_dir, inputs=[scenario])
-    for name in ("plan.json", "plan.png", "summary.json"):
-        check_not_input(folder / name, [scenario])
+    folder = prepare_dir(out_dir, inputs=[scenario], files=("plan.json", "plan.png", "summary.json"))
     options = _planner_options(seed, clearance_um, approach_um)
     with err.status("planning...", spinner="dots") if not quiet and err.is_terminal else _nullcontext():
         result = plan_for(scn, str(scenario), seed=seed, options=options)
@@ -599,88 +620,51 @@ def simulate(
     Examples: `stressbots simulate examples/four-robots.toml --seed 1 --out out/sim`;
     `stressbots simulate examples/four-robots.toml --plan out/plan/plan.json --noise none --out out/open`
     """
-    import time
-
-    from .assessment import assess
-    from .generate import LITERATURE_NOISE
-    from .outputs import check_not_input, prepare_dir, provenance, save_figure, write_json
-    from .plans import check_against
-    from .plans import load as load_plan
-    from .scenario import Noise
-    from .sim import SimulatedPlant, plan_waveform
-    from .viz import plot_run
-
     if plan is None:
         _simulate_closed_loop(scenario, out_dir, seed, noise, time_budget_s, quiet, strategy.value, camera.value)
         return
     if camera is CameraChoice.images:
         raise StressbotsError("a plan played open loop observes nothing; use --camera images without --plan", source="--camera")
+    _simulate_open_loop(scenario, plan, out_dir, seed, noise, quiet)
+
+
+def _simulate_open_loop(scenario: Path, plan: Path, out_dir: Path, seed: int, noise: NoiseChoice, quiet: bool) -> None:
+    """``simulate --plan``: the plan's waveform open loop (:mod:`stressbots.openloop`), result.json and a picture."""
+    import time
+
+    from .openloop import result_document, run_open_loop
+    from .outputs import prepare_dir, save_figure, write_json
+    from .plans import check_against
+    from .plans import load as load_plan
     from .scenario import check_starts
+    from .viz import plot_run
 
     t_command = time.perf_counter()
     scn = scenario_arg(scenario, moving=True)
-    folder = prepare_dir(out_dir, inputs=[scenario, plan])
-    for name in ("result.json", "trajectory.png"):
-        check_not_input(folder / name, [scenario, plan])
+    folder = prepare_dir(out_dir, inputs=[scenario, plan], files=("result.json", "trajectory.png"))
     check_starts(scn, source=str(scenario))
     the_plan = load_plan(plan)
     check_against(the_plan, scn, source=str(plan))
-    goals = np.full((scn.n, 3), np.nan)
-    for i, r in enumerate(scn.robots):
-        g = the_plan.goals.get(r.name, r.goal)
-        if g is None:
-            raise StressbotsError(
-                f"no goal for robot {r.name!r}: the plan has no 'goals' and the scenario gives none, so the run cannot be assessed",
-                source=str(plan),
-                field="goals",
-            )
-        goals[i] = tuple(g)
-    if noise is NoiseChoice.none:
-        scn = scn.with_noise(Noise())
-    elif noise is NoiseChoice.literature:
-        scn = scn.with_noise(LITERATURE_NOISE)
-    wf = plan_waveform(scn, the_plan, source=str(plan))
-    t0 = time.perf_counter()
-    plant = SimulatedPlant(scn, seed=seed, record=True)
-    plant.apply(wf)
-    wall = time.perf_counter() - t0
-    observed = plant.observe()
-    a = assess(scn.names, plant.true_poses(), goals, plant.docked, scn.lengths_um, scn.widths_um)
-    summary = a.summary()
-    result = {
-        "success": a.success,
-        "seed": plant.seed,
-        "mode": "open-loop",
-        "scenario": str(scenario),
-        "plan": str(plan),
-        "noise": _noise_dict(scn.noise),
-        "duration_s": plant.time_s,
-        "robots": [
-            {**row, "stuck": bool(plant.stuck[k]), "left_arena": bool(plant.arena_hits[k])}
-            for k, row in enumerate(a.robot_rows(observed))
-        ],
-        **{k: v for k, v in summary.items() if k != "success"},
-        "events": [e.as_dict() for e in plant.events],
-        "plant": {
-            "speed_factors": dict(zip(scn.names, plant.speed_factors.tolist(), strict=True)),
-            "radius_factors": dict(zip(scn.names, plant.radius_factors.tolist(), strict=True)),
-        },
-        "wall_time_s": wall,
-        "provenance": provenance(plant.seed),
-    }
-    write_json(folder / "result.json", result)
+    scn = _with_noise_choice(scn, noise)
+    run = run_open_loop(scn, the_plan, seed=seed, source=str(plan))
+    write_json(folder / "result.json", result_document(run, scenario_source=str(scenario), plan_source=str(plan)))
+    plant, a = run.plant, run.assessment
     times, poses = plant.trace()
     title = (
         f"{scn.name}: open loop, noise {noise.value}, seed {plant.seed} - "
         f"{'success' if a.success else 'failure'}, shape error {a.shape.rms_um:.3g} um RMS"
     )
-    save_figure(plot_run(scn, times, poses, goals, plant.events, title=title), folder / "trajectory.png")
-    if quiet:
-        return
+    save_figure(plot_run(scn, times, poses, run.goals, plant.events, title=title), folder / "trajectory.png")
+    if not quiet:
+        _print_open_loop(run, plan, folder, time.perf_counter() - t_command)
+
+
+def _print_open_loop(run, plan: Path, folder: Path, command_s: float) -> None:
+    """The open-loop run's table (docked, position and heading error per robot) and verdict."""
     from rich.table import Table
 
-    t = Table(title=f"{scn.name}: plan {plan} open loop, {plant.time_s:.1f} s simulated; the command took "
-                    f"{time.perf_counter() - t_command:.1f} s")
+    scn, plant, a = run.scenario, run.plant, run.assessment
+    t = Table(title=f"{scn.name}: plan {plan} open loop, {plant.time_s:.1f} s simulated; the command took {command_s:.1f} s")
     for col, just in (("robot", "left"), ("docked", "left"), ("position error (um)", "right"), ("heading error (deg)", "right")):
         t.add_column(col, justify=just)  # type: ignore[arg-type]
     for k, name in enumerate(scn.names):
@@ -694,19 +678,17 @@ def simulate(
     )
     out.print(f"wrote {folder / 'result.json'}, {folder / 'trajectory.png'}", highlight=False, soft_wrap=True)
 
-
 def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: NoiseChoice, time_budget_s, quiet: bool,
                           strategy: str = "rendezvous", camera: str = "poses") -> None:
     """``simulate`` without ``--plan``: the closed-loop controller on the simulated plant."""
     import time
 
-    from .console import robot_table, verdict_text
-    from .outputs import check_not_input, prepare_dir, write_bytes, write_json, write_text
+    from .console import verdict_text
+    from .outputs import prepare_dir, write_bytes, write_json, write_text
     from .pipeline import (
         closed_loop,
         finite_budget,
         layout_time_budget_s,
-        merged_events,
         plan_for,
         result_document,
         run_pictures,
@@ -717,10 +699,8 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
     t_command = time.perf_counter()
     budget = finite_budget(time_budget_s)
     scn = _with_noise_choice(scenario_arg(scenario, moving=True), noise)
-    folder = prepare_dir(out_dir, inputs=[scenario])
     names: tuple[str, ...] = ("result.json", "trajectory.png", "structure.png", "animation.html")
-    for name in names:
-        check_not_input(folder / name, [scenario])
+    folder = prepare_dir(out_dir, inputs=[scenario], files=names)
     if not scn.has_starts:
         raise StressbotsError("every robot needs a start pose to be simulated (robots[].start)", source=str(scenario), field="robots")
     check_starts(scn, source=str(scenario))
@@ -745,12 +725,20 @@ def _simulate_closed_loop(scenario: Path, out_dir: Path, seed: int, noise: Noise
             write_bytes(folder / "frames.png", figs["frames"])
             names = names + ("frames.png",)
         write_text(folder / "animation.html", animation_page(anim, title=anim["title"], subtitle=f"{verdict_text(doc)}"))
-    if quiet:
-        return
+    if not quiet:
+        _print_closed_loop(scn, run, doc, f"noise {noise.value}, camera {camera}", folder, names, time.perf_counter() - t_command)
+
+
+def _print_closed_loop(scn, run, doc: dict, conditions: str, folder: Path, names: tuple[str, ...], command_s: float) -> None:
+    """``simulate`` (closed loop) on the terminal: the run's headline, the per-robot table, the verdict and
+    the files written."""
+    from .console import robot_table, verdict_text
+    from .pipeline import merged_events
+
     res = run.result
-    out.print(f"[bold]{scn.name}[/bold]: closed loop ({strategy}), noise {noise.value}, camera {camera}, seed {res.seed}: "
+    out.print(f"[bold]{scn.name}[/bold]: closed loop ({run.strategy}), {conditions}, seed {res.seed}: "
               f"{res.duration_s:.1f} s simulated, "
-              f"{res.replans} re-plans; the command took {time.perf_counter() - t_command:.1f} s (wall time)",
+              f"{res.replans} re-plans; the command took {command_s:.1f} s (wall time)",
               highlight=False, soft_wrap=True)
     out.print(robot_table(scn.names, res))
     style = "bold green" if res.success else "bold red"
@@ -854,39 +842,23 @@ def bounds(
     `stressbots bounds SCENARIO --k 2 --critical --coverage-trials 200 --json`;
     `stressbots bounds SCENARIO --trials 50 --scales 1,2 --out out/bounds`.
     """
-    import math
-
-    from .bounds import analyse_bounds, critical_noise_scales, empirical_coverage
-    from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
+    from .montecarlo import parse_sweep
+    from .outputs import prepare_dir, save_figure, to_json, write_json
     from .viz import plot_bounds
 
     k = _finite_nonneg(k, "--k")
     if k > MAX_K:
         raise StressbotsError(f"must be in [0, {MAX_K:g}] standard deviations, got {k:g}", source="--k")
-    from .montecarlo import parse_sweep
-
     noise_scales = parse_sweep(scales_text, option="--scales")
     scn = scenario_arg(scenario, moving=True)
     _check_structure_in_arena(scn, str(scenario))
     folder = None
     if out_dir is not None:
-        folder = prepare_dir(out_dir, inputs=[scenario])
-        for name in ("bounds.json", "bounds.png", "coverage.png", "coverage.html"):
-            check_not_input(folder / name, [scenario])
+        folder = prepare_dir(out_dir, inputs=[scenario], files=("bounds.json", "bounds.png", "coverage.png", "coverage.html"))
     show = not (quiet or as_json)
-    with err.status("computing bounds...", spinner="dots") if show else _nullcontext() as status:
-        say = (lambda m: status.update(f"{m}...")) if show else None
-        plan = _shared_plan(scn) if trials else None  # the bounds and the trials share one nominal plan
-        report = analyse_bounds(scn, k=k, progress=say, structure=None if plan is None else plan.structure)
-        scales = critical_noise_scales(scn, k=k, structure=report.structure, progress=say) if critical else None
+    report, scales, plan = _analyse_bounds(scn, k, critical, trials, show)
     if coverage_trials:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-        with Progress(TextColumn("coverage"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
-                      disable=not show, transient=True) as bar:
-            task = bar.add_task("coverage", total=coverage_trials * scn.n)
-            cov = empirical_coverage(scn, trials=coverage_trials, seed=seed, k=k, progress=lambda d, _total: bar.update(task, completed=d))
-        report = report.with_coverage(cov)
+        report = report.with_coverage(_open_loop_coverage(scn, coverage_trials, seed, k, show))
     ctl = _controller_coverage(scn, report, plan, trials, seed, noise_scales, show) if trials else None
     doc = report.to_dict()
     if scales is not None:
@@ -899,9 +871,43 @@ def bounds(
         _write_coverage_files(scn, ctl, folder)
     if as_json:
         sys.stdout.write(to_json(doc))
-        return
-    if quiet:
-        return
+    elif not quiet:
+        _print_bounds(scn, report, scales, ctl, folder)
+
+
+def _analyse_bounds(scn, k: float, critical: bool, trials: int, show: bool):
+    """``(report, critical scales or None, nominal plan or None)`` of ``bounds``, with a spinner on the terminal.
+
+    With closed-loop ``trials`` the nominal plan they will follow is made first, and the bounds are computed
+    on its structure, so that both describe the same assembly.
+    """
+    from .bounds import analyse_bounds, critical_noise_scales
+
+    with err.status("computing bounds...", spinner="dots") if show else _nullcontext() as status:
+        say = (lambda m: status.update(f"{m}...")) if show else None
+        plan = _shared_plan(scn) if trials else None
+        report = analyse_bounds(scn, k=k, progress=say, structure=None if plan is None else plan.structure)
+        scales = critical_noise_scales(scn, k=k, structure=report.structure, progress=say) if critical else None
+    return report, scales, plan
+
+
+def _open_loop_coverage(scn, trials: int, seed: int, k: float, show: bool):
+    """``bounds --coverage-trials``: open-loop runs per robot checked against delta(t), with a progress bar."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from .bounds import empirical_coverage
+
+    with Progress(TextColumn("coverage"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=err,
+                  disable=not show, transient=True) as bar:
+        task = bar.add_task("coverage", total=trials * scn.n)
+        return empirical_coverage(scn, trials=trials, seed=seed, k=k, progress=lambda d, _total: bar.update(task, completed=d))
+
+
+def _print_bounds(scn, report, scales, ctl, folder: Path | None) -> None:
+    """``bounds`` on the terminal: the error box, the per-robot table and verdicts, D_n's projection, the
+    growth between measurements, the coverages and the files written."""
+    import math
+
     m = report.model
     out.print(
         f"[bold]{scn.name}[/bold]: {m.k:g}-sigma error box: speed +-{100 * m.speed_rel:.1f} %, radius +-{100 * m.radius_rel:.1f} %, "
@@ -946,7 +952,6 @@ def bounds(
     if folder is not None:
         more = f", {folder / 'coverage.png'}, {folder / 'coverage.html'}" if ctl is not None else ""
         out.print(f"wrote {folder / 'bounds.json'}, {folder / 'bounds.png'}{more}", highlight=False, soft_wrap=True)
-
 
 def _shared_plan(scn):
     """The nominal plan the closed-loop trials follow, when the bounds would resolve their structure from it
@@ -1035,25 +1040,16 @@ def montecarlo(
     trials: int = typer.Option(100, "--trials", min=1, max=10_000, help="Closed-loop trials (at each noise scale)."),
     seed: int = typer.Option(0, "--seed", min=0, max=MAX_SEED, help="Study seed: trial i uses SeedSequence(seed).spawn(trials)[i]."),
     out_dir: Path = typer.Option(..., "--out", help="Folder for summary.json, montecarlo.png (and sweep.png).", show_default=False),
-    workers: int | None = typer.Option(None, "--workers", min=1, max=256,
-                                       help="Worker processes (default: every core; 1 = in this process).", show_default=False),
-    sweep: str | None = typer.Option(
-        None, "--sweep", help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'.", show_default=False
-    ),
-    time_budget_s: float | None = typer.Option(
-        None, "--time-budget-s", help="Simulated time budget per trial (s); default the controller's.", show_default=False
-    ),
+    workers: int | None = _workers_option(),
+    sweep: str | None = typer.Option(None, "--sweep", show_default=False,
+                                     help="Also run at these multiples of the scenario's [noise], e.g. '0,0.5,1,1.5,2'."),
+    time_budget_s: float | None = typer.Option(None, "--time-budget-s", show_default=False,
+                                               help="Simulated time budget per trial (s); default the controller's."),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
-    resume: bool = typer.Option(False, "--resume",
-                                help="Continue the campaign in DIR/trials.sqlite: run only its missing trials (refused if it was made "
-                                     "with other settings)."),
-    overwrite: bool = typer.Option(False, "--overwrite",
-                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: str | None = typer.Option(
-        None, "--dask", metavar="ADDRESS", help="Run the trials on a Dask cluster: 'local' (a LocalCluster of --workers processes), "
-        "a scheduler address tcp://host:8786 or a scheduler file *.json. Needs the [dask] extra.", show_default=False
-    ),
+    resume: bool = _resume_option(),
+    overwrite: bool = _overwrite_option(),
+    dask: str | None = _dask_option(),
     strategy: StrategyChoice = _strategy_option(),
 ) -> None:
     """Run N independent closed-loop assemblies on the simulated plant and summarise them.
@@ -1075,16 +1071,14 @@ def montecarlo(
     `stressbots montecarlo SCENARIO --trials 5000 --out out/big --dask tcp://scheduler:8786 --resume`.
     """
     from . import montecarlo as mc
-    from .outputs import check_not_input, prepare_dir, save_figure, to_json, write_json
+    from .outputs import prepare_dir, save_figure, to_json, write_json
     from .pipeline import finite_budget
     from .viz import plot_montecarlo, plot_sweep
 
     factors = mc.parse_sweep(sweep) if sweep is not None else None
     finite_budget(time_budget_s)
     scn = scenario_arg(scenario, moving=True)
-    folder = prepare_dir(out_dir, inputs=[scenario])
-    for name in ("summary.json", "montecarlo.png", "sweep.png", "trials.sqlite", "trials.csv"):
-        check_not_input(folder / name, [scenario])
+    folder = prepare_dir(out_dir, inputs=[scenario], files=("summary.json", "montecarlo.png", "sweep.png", "trials.sqlite", "trials.csv"))
     if resume and overwrite:
         raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
     assemble = mc.default_assemble()
@@ -1111,18 +1105,24 @@ def montecarlo(
                     folder / "sweep.png")
     if as_json:
         sys.stdout.write(to_json(s))
-        return
-    if quiet:
-        return
+    elif not quiet:
+        _print_montecarlo(scn.name, s, seed, bool(factors), folder)
+
+
+def _montecarlo_percentiles(block: dict, unit: str) -> str:
+    """``p50 .., p90 .., p95 .., max .. unit`` of a summary's percentile block, ``-`` when it is empty."""
+    if block["n"] == 0:
+        return "-"
+    return f"p50 {block['p50']:.3g}, p90 {block['p90']:.3g}, p95 {block['p95']:.3g}, max {block['max']:.3g} {unit}"
+
+
+def _print_montecarlo(name: str, s: dict, seed: int, swept: bool, folder: Path) -> None:
+    """``montecarlo`` on the terminal: the success rate with its interval, error and duration percentiles,
+    failure reasons with seeds to rerun, the noise sweep and the files written."""
     lo, hi = s["success_rate_ci95"]
-
-    def pct(block: dict, unit: str) -> str:
-        if block["n"] == 0:
-            return "-"
-        return f"p50 {block['p50']:.3g}, p90 {block['p90']:.3g}, p95 {block['p95']:.3g}, max {block['max']:.3g} {unit}"
-
+    pct = _montecarlo_percentiles
     line = lambda text: out.print(text, highlight=False, soft_wrap=True)  # noqa: E731
-    line(f"[bold]{scn.name}[/bold]: {s['successes']}/{s['trials']} successes, rate {s['success_rate']:.3f} (95 % CI {lo:.3f}-{hi:.3f}), "
+    line(f"[bold]{name}[/bold]: {s['successes']}/{s['trials']} successes, rate {s['success_rate']:.3f} (95 % CI {lo:.3f}-{hi:.3f}), "
          f"seed {seed}, {s['run']['workers']} workers, {s['run']['wall_s']:.1f} s")
     if s["run"]["resumed_with"]:
         line(f"resumed: {s['run']['resumed_with']} trials were in the store, {s['run']['trials_run']} run now")
@@ -1134,19 +1134,24 @@ def montecarlo(
     if s["failed_trials"]:
         seeds = ", ".join(str(f["seed"]) for f in s["failed_trials"][:5])
         line(f"failed trials' seeds (rerun with `stressbots simulate --seed`): {seeds}{', ...' if len(s['failed_trials']) > 5 else ''}")
-    if factors:
-        from rich.table import Table
-
-        t = Table(title="noise sweep")
-        for col in ("noise scale", "successes", "rate", "95 % CI", "shape error p50 (um)"):
-            t.add_column(col, justify="right")
-        for row in s["sweep"]:
-            p50 = row["shape_error_rms_um"]["p50"]
-            t.add_row(f"{row['noise_scale']:g}", f"{row['successes']}/{row['trials']}", f"{row['success_rate']:.3f}",
-                      f"{row['success_rate_ci95'][0]:.3f}-{row['success_rate_ci95'][1]:.3f}", "-" if p50 is None else f"{p50:.3g}")
-        out.print(t)
-    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if factors else []) + ["trials.sqlite", "trials.csv"]
+    if swept:
+        out.print(_sweep_table(s["sweep"]))
+    files = ["summary.json", "montecarlo.png"] + (["sweep.png"] if swept else []) + ["trials.sqlite", "trials.csv"]
     line("wrote " + ", ".join(str(folder / f) for f in files))
+
+
+def _sweep_table(rows: list[dict]):
+    """The noise sweep of ``montecarlo --sweep``: successes, rate, interval and median shape error per scale."""
+    from rich.table import Table
+
+    t = Table(title="noise sweep")
+    for col in ("noise scale", "successes", "rate", "95 % CI", "shape error p50 (um)"):
+        t.add_column(col, justify="right")
+    for row in rows:
+        p50 = row["shape_error_rms_um"]["p50"]
+        t.add_row(f"{row['noise_scale']:g}", f"{row['successes']}/{row['trials']}", f"{row['success_rate']:.3f}",
+                  f"{row['success_rate_ci95'][0]:.3f}-{row['success_rate_ci95'][1]:.3f}", "-" if p50 is None else f"{p50:.3g}")
+    return t
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1246,15 +1251,10 @@ def study(
                                       help="Study file: layouts, [grid], [fixed], trials, seed (see examples/).", show_default=False),
     out_dir: Path = typer.Option(..., "--out", help="Folder for trials.sqlite, trials.csv, summary.json and report.html.",
                                  show_default=False),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="Worker processes (default: every core; 1 = in this process).",
-                                       show_default=False),
-    resume: bool = typer.Option(False, "--resume",
-                                help="Continue the study in DIR/trials.sqlite: run only its missing trials "
-                                     "(refused if the study changed)."),
-    overwrite: bool = typer.Option(False, "--overwrite",
-                                   help="Start again even though DIR/trials.sqlite holds a campaign (it is deleted)."),
-    dask: str | None = typer.Option(None, "--dask", metavar="ADDRESS",
-                                    help="Run on a Dask cluster: 'local', tcp://host:8786 or a scheduler file *.json.", show_default=False),
+    workers: int | None = _workers_option(),
+    resume: bool = _resume_option(),
+    overwrite: bool = _overwrite_option(),
+    dask: str | None = _dask_option(),
     as_json: bool = typer.Option(False, "--json", help="Print only summary.json on stdout."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar, print nothing but errors."),
 ) -> None:
@@ -1270,16 +1270,15 @@ def study(
 
     Example: `stressbots study examples/replanning.study.toml --out out/study`.
     """
-    from .outputs import check_not_input, prepare_dir, to_json, write_json, write_text
+    from .outputs import prepare_dir, to_json, write_json, write_text
     from .study import load_study, run_study
     from .studyreport import build_study_report
 
     if resume and overwrite:
         raise StressbotsError("choose one of --resume and --overwrite", source="--resume")
     spec = load_study(study_file)
-    folder = prepare_dir(out_dir, inputs=[study_file])
-    for name in ("summary.json", "report.html", "trials.sqlite", "trials.csv"):
-        check_not_input(folder / name, [study_file] + [lay.source for lay in spec.layouts])
+    folder = prepare_dir(out_dir, inputs=[study_file, *(lay.source for lay in spec.layouts)],
+                         files=("summary.json", "report.html", "trials.sqlite", "trials.csv"))
     show = not (quiet or as_json)
 
     def run_with_progress():
@@ -1293,9 +1292,13 @@ def study(
     write_text(folder / "report.html", build_study_report(summary))
     if as_json:
         sys.stdout.write(to_json(summary))
-        return
-    if quiet:
-        return
+    elif not quiet:
+        _print_study(summary, folder)
+
+
+def _print_study(summary: dict, folder: Path) -> None:
+    """``study`` on the terminal: the overall rate, one row per cell (conditions, successes, interval, most
+    common failure) and the files written."""
     from rich.table import Table
 
     lo, hi = summary["success_rate_ci95"]

@@ -59,14 +59,17 @@ def check_not_input(path: Path, inputs: Iterable[Path | str | None], *, option: 
             raise StressbotsError(f"would overwrite the input file {src}; choose another path", source=option)
 
 
-def prepare_dir(path: Path | str, *, inputs: Iterable[Path | str | None] = (), option: str = "--out") -> Path:
+def prepare_dir(path: Path | str, *, inputs: Iterable[Path | str | None] = (), option: str = "--out",
+                files: Iterable[str] = ()) -> Path:
     """Create an output folder (and parents) and check that it can be written, before any computation.
 
     Refuses a path that is an input, an existing file, under a regular file, or not writable, with one
-    :class:`StressbotsError` naming the path. Hidden temporary files that a killed earlier run left
-    behind (:func:`clean_stale_temporaries`) are removed.
+    :class:`StressbotsError` naming the path; with ``files`` (the names the command will write there) also
+    any of them that is an input (:func:`check_not_input`). Hidden temporary files that a killed earlier
+    run left behind (:func:`clean_stale_temporaries`) are removed.
     """
     out = Path(path)
+    inputs = list(inputs)
     for src in inputs:
         if src is not None and _same_file(out, Path(src)):
             raise StressbotsError(f"{out} is the input file {src}; give a folder for the outputs", source=option)
@@ -81,6 +84,8 @@ def prepare_dir(path: Path | str, *, inputs: Iterable[Path | str | None] = (), o
         raise StressbotsError(f"cannot create folder {out}: {exc.strerror or exc}", source=option) from None
     _probe_writable(out, option)
     clean_stale_temporaries(out)
+    for name in files:
+        check_not_input(out / name, inputs, option=option)
     return out
 
 
