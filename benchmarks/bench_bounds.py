@@ -43,8 +43,8 @@ def main() -> None:
             t = time.perf_counter()
             c = empirical_coverage(scn, trials=args.trials, seed=args.seed, k=k)
             dt = time.perf_counter() - t
-            print(f"{label:<28} {k:>4g} {c.checkpoints:>11} {c.checkpoints - c.inside:>7} {100 * c.fraction:>7.3f}% {100 * c.end_fraction:>7.3f}% "
-                  f"{c.ratio_p50:>13.3f} {c.ratio_p99:>6.3f} {c.ratio_max:>6.3f} {dt:>6.1f}")
+            print(f"{label:<28} {k:>4g} {c.checkpoints:>11} {c.checkpoints - c.inside:>7} {100 * c.fraction:>7.3f}% "
+                  f"{100 * c.end_fraction:>7.3f}% {c.ratio_p50:>13.3f} {c.ratio_p99:>6.3f} {c.ratio_max:>6.3f} {dt:>6.1f}")
 
     t = time.perf_counter()
     rep = analyse_bounds(example)
@@ -54,7 +54,8 @@ def main() -> None:
         print(f"  {rb.label:<7} t_2pi {rb.t_2pi_s:5.1f} s  r_alpha {rb.cylinder.radius_um:6.0f} um  "
               f"h_alpha {math.degrees(rb.cylinder.height_rad):6.1f} deg  {'guaranteed' if rb.guaranteed else 'not guaranteed'}")
     p = rep.projection
-    print(f"  D_n timed forward projection: t_4pi {p.t_4pi_s:.1f} s, radius {p.radius_um:.0f} um, heading +-{math.degrees(p.heading_rad):.1f} deg")
+    print(f"  D_n timed forward projection: t_4pi {p.t_4pi_s:.1f} s, radius {p.radius_um:.0f} um, "
+          f"heading +-{math.degrees(p.heading_rad):.1f} deg")
     for k in (3.0, 2.0):
         t = time.perf_counter()
         sc = critical_noise_scales(example, k=k, structure=rep.structure)

@@ -34,7 +34,7 @@ from stressbots.store import TrialStore
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _noop(ctx, task):
+def _noop(ctx, task):  # noqa: ARG001 - ctx is shipped like a real trial's context, unused
     """A Dask task that does no work but carries the same context and returns a trial-sized result."""
     from stressbots.montecarlo import TrialOutcome
 

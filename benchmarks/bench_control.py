@@ -77,7 +77,8 @@ def main() -> None:
             total[1] += out[1]
             walls += out[2]
     lo, hi = wilson_interval(total[0], total[1])
-    print(f"all: {total[0]}/{total[1]} = {total[0] / max(total[1], 1):.3f} [{lo:.3f}, {hi:.3f}]; wall per assembly median {np.median(walls):.2f} s, "
+    print(f"all: {total[0]}/{total[1]} = {total[0] / max(total[1], 1):.3f} [{lo:.3f}, {hi:.3f}]; "
+          f"wall per assembly median {np.median(walls):.2f} s, "
           f"95th {np.percentile(walls, 95):.2f} s")
 
 

@@ -133,7 +133,7 @@ def ompl_loop(starts, goals, radius):
         sa.append(u)
         sb.append(v)
     t0 = time.perf_counter()
-    for u, v in zip(sa, sb):
+    for u, v in zip(sa, sb, strict=True):
         dist(u, v)
     t_only = time.perf_counter() - t0
     return np.array(out), t_set, t_only
@@ -156,7 +156,7 @@ def main(argv=None) -> int:
     one_way = shortest_path_lengths(starts, goals, r)
     ns_ours = t_ours / n * 1e9
     print(f"stressbots shortest_path_lengths (batch, one-way): {ns_ours:8.1f} ns/pair (best of {args.repeat})")
-    single = [(tuple(map(float, s)), tuple(map(float, g))) for s, g in zip(starts[:5000], goals[:5000])]
+    single = [(tuple(map(float, s)), tuple(map(float, g))) for s, g in zip(starts[:5000], goals[:5000], strict=True)]
     t_single = best_time(lambda: [shortest_path(s, g, r) for s, g in single], args.repeat)
     print(f"stressbots shortest_path (one query, Path value, scalar fast path): {t_single / len(single) * 1e6:8.2f} us/call")
 

@@ -35,7 +35,6 @@ from stressbots.scenario import Noise, Scenario
 from stressbots.sim import SimulatedPlant
 from stressbots.waveform import Drive
 
-
 # ----------------------------------------------------------------------------------------------------
 # 1. drift spread
 
@@ -67,7 +66,8 @@ def bench_drift(n: int, deg_per_mm: float) -> None:
             wall = time.perf_counter() - t0
             old = math.degrees(sigma * dist) / math.sqrt(pieces)
             cut = "1 Drive" if pieces == 1 else "40 Drives"
-            print(f"{dist:>7.0f}um {cut:>10} {sd:7.3f} {model:7.3f} {model * math.sqrt(lo):8.3f}-{model * math.sqrt(hi):<8.3f} {old:20.3f} {wall:7.2f}")
+            band = f"{model * math.sqrt(lo):8.3f}-{model * math.sqrt(hi):<8.3f}"
+            print(f"{dist:>7.0f}um {cut:>10} {sd:7.3f} {model:7.3f} {band} {old:20.3f} {wall:7.2f}")
     a, b = spread(sc, 3, 1000.0, 1), spread(sc, 3, 1000.0, 40)
     print(f"same seed, 1 Drive vs 40 Drives: largest heading difference {np.abs(a - b).max():.2e} rad")
 

@@ -116,7 +116,8 @@ def main() -> None:
         rows.append(bench(name, scn, plan, args.seeds))
 
     print(f"\nsimulated plant, 4 robots, {args.seeds} plant seeds each (wall times on this machine)\n")
-    head = f"{'scenario':<24} {'plan s':>7} | {'sim s / wall s':>15} {'zero: ms per 1-s apply':>26} | {'sim s / wall s':>15} {'literature: ms per 1-s apply':>30} {'open-loop drift um':>19}"
+    head = (f"{'scenario':<24} {'plan s':>7} | {'sim s / wall s':>15} {'zero: ms per 1-s apply':>26} | {'sim s / wall s':>15} "
+            f"{'literature: ms per 1-s apply':>30} {'open-loop drift um':>19}")
     print(head)
     print("-" * len(head))
     for r in rows:

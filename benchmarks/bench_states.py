@@ -51,17 +51,17 @@ def main() -> None:
     print(f"{'design':<10} {'n':>5} {'method':<8} {'states':>8} {'time (s)':>10}  target")
     for n in (10, 100, 1000):
         vd, vu, e = string_design(n)
-        dt, a = timed(lambda: analyse_thresholds(vd, vu, e), args.repeat)
+        dt, a = timed(lambda vd=vd, vu=vu, e=e: analyse_thresholds(vd, vu, e), args.repeat)
         assert a.is_string and a.count == n + 1
         ok = "ok" if n != 1000 or dt < 1.0 else "MISSED (< 1 s)"
         print(f"{'STRING':<10} {n:>5} {a.method:<8} {a.count:>8} {dt:>10.4f}  {ok if n == 1000 else ''}")
         if n <= 100:
-            dt, b = timed(lambda: analyse_thresholds(vd, vu, e, method="search"), args.repeat)
+            dt, b = timed(lambda vd=vd, vu=vu, e=e: analyse_thresholds(vd, vu, e, method="search"), args.repeat)
             assert np.array_equal(a.accessible_states, b.accessible_states)
             print(f"{'STRING':<10} {n:>5} {'search':<8} {b.count:>8} {dt:>10.4f}  (cross-check)")
     for n in (8, 12, 16):
         vd, vu, e = nested_design(n)
-        dt, a = timed(lambda: analyse_thresholds(vd, vu, e), args.repeat)
+        dt, a = timed(lambda vd=vd, vu=vu, e=e: analyse_thresholds(vd, vu, e), args.repeat)
         assert not a.is_string and a.count == 2**n
         print(f"{'general':<10} {n:>5} {a.method:<8} {a.count:>8} {dt:>10.4f}  {'ok' if dt < 10 else 'MISSED (< 10 s)'}")
 

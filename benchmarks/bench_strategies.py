@@ -77,7 +77,8 @@ def main(argv=None) -> int:
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     print()
-    print("| strategy | success | Wilson 95 % | shape error RMS (um, median) | placement error (um, median) | duration (s sim, median) | wall per assembly (s, median) |")
+    print("| strategy | success | Wilson 95 % | shape error RMS (um, median) | placement error (um, median) | duration (s sim, median) "
+          "| wall per assembly (s, median) |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for strategy in STRATEGIES:
         mine = [r for r in rows if r["strategy"] == strategy]
