@@ -96,7 +96,7 @@ class Jammed(ProtocolOnly):
         before = self._inner.true_poses()[self.robot].copy()
         self._inner.apply(waveform)
         if self._inner.time_s >= self.after_s and self.jammed < self.frames:
-            self._inner._pose[self.robot] = before  # fault injection: the robot did not move
+            self._inner._bodies.pose[self.robot] = before  # fault injection: the robot did not move
             self.jammed += 1
 
 
