@@ -572,7 +572,8 @@ def _group_sides(pieces: Sequence[_Piece], grp: Sequence[int], names: Sequence[s
     """The sides of one line: its touching pieces (gaps up to :data:`POS_TOL_UM`) merged into runs.
 
     The line is the first piece's normal at the length-weighted mean offset (um). Each side comes with
-    its sort key ``(robot, edge, u0)`` of its first piece, so sides keep the order of the bodies' edges.
+    its sort key, the smallest ``(robot, edge, u0)`` of its pieces, so sides keep the order of the
+    bodies' edges.
     """
     n0 = pieces[grp[0]].normal
     t0 = np.array([n0[1], -n0[0]])
