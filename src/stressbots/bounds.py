@@ -1576,8 +1576,8 @@ class _MotionBounds(NamedTuple):
 
 
 def _motion_bounds(r, model: ErrorModel, levels: int, replan_interval_s: float) -> _MotionBounds:
-    """Turn rates, full-turn times and ``delta(t)`` of robot ``r``. The curves run to ``t_4pi`` (the time
-    D_n waits for D_(n-1) in G_1), or to 4 pi at the nominal turn rate when a turn may never complete."""
+    """Turn rates, full-turn times and ``delta(t)`` of robot ``r``. The curves run to ``t_4pi`` (two full
+    turns at the slowest turn rate), or to 4 pi at the nominal turn rate when a turn may never complete."""
     v, rad = r.speed_um_s, r.turn_radius_um
     t2 = turn_time(TWO_PI, v, rad, model)
     t4 = turn_time(2 * TWO_PI, v, rad, model)

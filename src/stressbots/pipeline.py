@@ -390,7 +390,8 @@ class JobSummary:
 
 def _prepared_out(scenario, out_dir: Path | str, inputs: list[Path | str], source: str | None) -> Path:
     """The output folder, checked before anything is computed: creatable, no output file on an input, and
-    a scenario the job can run (every robot has a start pose, can move, starts apart)."""
+    a scenario the job can run (every robot has a start pose, small enough to plan and simulate in
+    reasonable time, start bodies apart)."""
     from .outputs import check_not_input, prepare_dir
     from .scenario import check_movable, check_starts
 
