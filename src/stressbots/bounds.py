@@ -90,9 +90,9 @@ seed.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -666,6 +666,54 @@ def fine_motion_heading_error(turn_rad, length_um, model: ErrorModel):
     return np.abs(turn_rad) * g + s * model.drift_rad_per_um + model.walk_heading(s)
 
 
+class _ArcsThrough(NamedTuple):
+    """The clockwise arcs from poses ``a`` (positions x headings) through one target point ``q`` (seed eq. 1
+    corrected, as :func:`stressbots.paths.arc_through`); every array has shape ``(P, H)``."""
+
+    exists: np.ndarray  # bool: q lies to the right of a (or straight ahead), so a clockwise arc reaches it
+    radius_um: np.ndarray  # r' = d^2 / (2 right); inf straight ahead
+    turn_rad: np.ndarray  # 2 atan2(right, ahead); 0 straight ahead
+    length_um: np.ndarray  # r' turn, or the distance straight ahead
+
+
+def _arcs_through(pos: np.ndarray, sin_h: np.ndarray, cos_h: np.ndarray, q: np.ndarray) -> _ArcsThrough:
+    """The arcs from every position ``pos`` ``(P, 2)`` and heading (``sin_h``, ``cos_h`` ``(1, H)``) through ``q``."""
+    dx = (q[0] - pos[:, 0])[:, None]
+    dy = (q[1] - pos[:, 1])[:, None]
+    right = dx * cos_h - dy * sin_h  # offset of q to the robot's right
+    ahead = dx * sin_h + dy * cos_h
+    dist2 = dx * dx + dy * dy
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # eq. 1: r' = d^2 / (2 right); the arc turns 2 atan2(right, ahead); straight ahead: r' = inf
+        straight = (right == 0) & (ahead > 0)
+        exists = (right > 0) | straight
+        radius = np.where(right > 0, dist2 / (2.0 * right), np.inf)
+        turn = np.where(right > 0, 2.0 * np.arctan2(right, ahead), 0.0)
+        length = np.where(right > 0, radius * turn, np.maximum(ahead, 0.0))
+    return _ArcsThrough(exists, radius, turn, length)
+
+
+def _arcs_clear(pos: np.ndarray, hd: np.ndarray, arcs: _ArcsThrough, ok: np.ndarray, fractions: np.ndarray, obstacle,
+                arena_um) -> np.ndarray:
+    """For the arcs where ``ok`` ``(P, H)`` holds, whether the reference point stays out of ``obstacle`` and
+    inside the arena ``(w, h)`` (um) at the ``fractions`` of the arc's length; one bool per True of ``ok``
+    (in :func:`numpy.nonzero` order)."""
+    ip, ih = np.nonzero(ok)
+    p = np.stack([pos[ip, 0], pos[ip, 1], hd[ih]], axis=-1)
+    rr = arcs.radius_um[ip, ih]
+    kappa = np.where(np.isinf(rr), 0.0, 1.0 / rr)
+    pts = move(p[:, None, :], arcs.length_um[ip, ih][:, None] * fractions[None, :], kappa[:, None])
+    clear = np.ones(ip.size, dtype=bool)
+    if obstacle is not None:
+        import shapely
+
+        clear &= ~shapely.contains_xy(obstacle, pts[..., 0], pts[..., 1]).any(axis=1)
+    if arena_um is not None:
+        w, h = arena_um
+        clear &= ((pts[..., 0] >= 0) & (pts[..., 0] <= w) & (pts[..., 1] >= 0) & (pts[..., 1] <= h)).all(axis=1)
+    return clear
+
+
 def fine_motion_preimage(
     positions,
     headings,
@@ -709,36 +757,12 @@ def fine_motion_preimage(
     out = np.zeros((pos.shape[0], hd.size), dtype=bool)
     fr = np.linspace(0.0, 0.9, clearance_samples)
     for q in targets:
-        dx = (q[0] - pos[:, 0])[:, None]
-        dy = (q[1] - pos[:, 1])[:, None]
-        right = dx * cos_h - dy * sin_h  # offset of q to the robot's right
-        ahead = dx * sin_h + dy * cos_h
-        dist2 = dx * dx + dy * dy
-        with np.errstate(divide="ignore", invalid="ignore"):
-            # eq. 1: r' = d^2 / (2 right); the arc turns 2 atan2(right, ahead); straight ahead: r' = inf
-            straight = (right == 0) & (ahead > 0)
-            ok = (right > 0) | straight
-            radius = np.where(right > 0, dist2 / (2.0 * right), np.inf)
-            turn = np.where(right > 0, 2.0 * np.arctan2(right, ahead), 0.0)
-            length = np.where(right > 0, radius * turn, np.maximum(ahead, 0.0))
-        ok &= (radius >= min_radius_um) & (length > 0) & ~out
-        alpha = np.abs(np.mod(hd[None, :] + turn - goal_heading_rad + math.pi, TWO_PI) - math.pi)
-        ok &= alpha < cone_rad - fine_motion_heading_error(turn, length, model)
+        arcs = _arcs_through(pos, sin_h, cos_h, q)
+        ok = arcs.exists & (arcs.radius_um >= min_radius_um) & (arcs.length_um > 0) & ~out
+        alpha = np.abs(np.mod(hd[None, :] + arcs.turn_rad - goal_heading_rad + math.pi, TWO_PI) - math.pi)
+        ok &= alpha < cone_rad - fine_motion_heading_error(arcs.turn_rad, arcs.length_um, model)
         if (obstacle is not None or arena_um is not None) and ok.any():
-            ip, ih = np.nonzero(ok)
-            p = np.stack([pos[ip, 0], pos[ip, 1], hd[ih]], axis=-1)
-            rr = radius[ip, ih]
-            kappa = np.where(np.isinf(rr), 0.0, 1.0 / rr)
-            pts = move(p[:, None, :], length[ip, ih][:, None] * fr[None, :], kappa[:, None])
-            clear = np.ones(ip.size, dtype=bool)
-            if obstacle is not None:
-                import shapely
-
-                clear &= ~shapely.contains_xy(obstacle, pts[..., 0], pts[..., 1]).any(axis=1)
-            if arena_um is not None:
-                w, h = arena_um
-                clear &= ((pts[..., 0] >= 0) & (pts[..., 0] <= w) & (pts[..., 1] >= 0) & (pts[..., 1] <= h)).all(axis=1)
-            ok[ip, ih] = clear
+            ok[np.nonzero(ok)] = _arcs_clear(pos, hd, arcs, ok, fr, obstacle, arena_um)
         out |= ok
     return out
 
@@ -932,6 +956,79 @@ def erode(preimage: np.ndarray, spacing_um: float, heading_step_rad: float, radi
     return out
 
 
+class _Grid(NamedTuple):
+    """The regular pose grid A_i* is sampled on (world frame): positions (um) and periodic headings (rad)."""
+
+    xs_um: np.ndarray
+    ys_um: np.ndarray
+    headings_rad: np.ndarray
+    spacing_um: float
+
+    @property
+    def heading_step_rad(self) -> float:
+        return TWO_PI / self.headings_rad.size
+
+
+def _region_grid(proximity, grow_um: float, arena_um, spacing_um: float | None, heading_step_rad: float,
+                 max_cells: int) -> _Grid:
+    """The grid over C_O's bounding box grown by ``grow_um`` and clipped to the arena ``(w, h)`` (um).
+
+    The default spacing keeps at most ``max_cells`` cells per side (and is at least 10 um); headings
+    split the full turn evenly, at least 4 of them, as close to ``heading_step_rad`` as that allows.
+    """
+    x0, y0, x1, y1 = proximity.bounds
+    x0, y0, x1, y1 = x0 - grow_um, y0 - grow_um, x1 + grow_um, y1 + grow_um
+    if arena_um is not None:
+        x0, y0 = max(x0, 0.0), max(y0, 0.0)
+        x1, y1 = min(x1, float(arena_um[0])), min(y1, float(arena_um[1]))
+    if spacing_um is None:
+        spacing_um = max(10.0, max(x1 - x0, y1 - y0) / max_cells)
+    nh = max(4, int(round(TWO_PI / heading_step_rad)))
+    xs = np.arange(x0, x1 + 0.5 * spacing_um, spacing_um)
+    ys = np.arange(y0, y1 + 0.5 * spacing_um, spacing_um)
+    return _Grid(xs, ys, np.arange(nh) * (TWO_PI / nh), spacing_um)
+
+
+def _sampled_preimage(grid: _Grid, proximity, arena_um, half_diagonal_um: float, aim: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """The fine-motion preimage on ``grid``, ``(nx, ny, nh)`` bool, at the positions outside C_O (and with the
+    body's ``half_diagonal_um`` inside the arena): ``aim`` maps positions ``(P, 2)`` to their ``(P, nh)``
+    preimage (:func:`fine_motion_preimage`), called on chunks of at most 400,000 poses to bound memory."""
+    import shapely
+
+    X, Y = np.meshgrid(grid.xs_um, grid.ys_um, indexing="ij")
+    free = ~shapely.contains_xy(proximity, X, Y)
+    if arena_um is not None:
+        hd = half_diagonal_um
+        free &= (X >= hd) & (X <= arena_um[0] - hd) & (Y >= hd) & (Y <= arena_um[1] - hd)
+    nh = grid.headings_rad.size
+    pre = np.zeros(X.shape + (nh,), dtype=bool)
+    ii, jj = np.nonzero(free)
+    chunk = max(1, 400_000 // nh)
+    for s in range(0, ii.size, chunk):
+        a, b = ii[s : s + chunk], jj[s : s + chunk]
+        pre[a, b] = aim(np.stack([grid.xs_um[a], grid.ys_um[b]], axis=-1))
+    return pre
+
+
+def _empty_region_reason(pre: np.ndarray, grid: _Grid, erosion_radius_um: float, erosion_height_rad: float) -> str:
+    """Why A_i* came out empty: no preimage at all, a heading window (2 h_alpha) wider than the preimage
+    offers at any position, or no position with the clearance r_alpha (um) from the boundary."""
+    if not pre.any():
+        return "no pose outside C_O can reach the goal by fine motion within the compliance cone"
+    span = float(_longest_circular_run(pre).max()) * grid.heading_step_rad
+    heading_only = erode(pre, grid.spacing_um, grid.heading_step_rad, 0.0, erosion_height_rad)
+    if not heading_only.any():
+        return (
+            f"h_alpha = {math.degrees(erosion_height_rad):.1f} deg: the cylinder needs a heading window of "
+            f"{2 * math.degrees(erosion_height_rad):.0f} deg but the preimage of G* offers at most "
+            f"{math.degrees(span):.0f} deg at any position"
+        )
+    return (
+        f"r_alpha = {erosion_radius_um:.0f} um: no pose of the preimage of G* outside C_O keeps that "
+        f"clearance from its boundary (heading margin {math.degrees(erosion_height_rad):.1f} deg)"
+    )
+
+
 def intermediate_region(
     goal,
     targets,
@@ -978,59 +1075,22 @@ def intermediate_region(
         The window is C_O's bounding box grown by twice the erosion radius (at most ``max_grow_um``)
         plus ``margin_um``, clipped to the arena.
     """
-    import shapely
-
     goal = np.asarray(goal, dtype=np.float64)
     if not (math.isfinite(erosion_radius_um) and math.isfinite(erosion_height_rad)):
         raise ValueError("the erosion cylinder must be finite")
-    x0, y0, x1, y1 = proximity.bounds
     grow = min(2.0 * erosion_radius_um, max_grow_um) + margin_um
-    x0, y0, x1, y1 = x0 - grow, y0 - grow, x1 + grow, y1 + grow
-    if arena_um is not None:
-        x0, y0 = max(x0, 0.0), max(y0, 0.0)
-        x1, y1 = min(x1, float(arena_um[0])), min(y1, float(arena_um[1]))
-    if spacing_um is None:
-        spacing_um = max(10.0, max(x1 - x0, y1 - y0) / max_cells)
-    nh = max(4, int(round(TWO_PI / heading_step_rad)))
-    xs = np.arange(x0, x1 + 0.5 * spacing_um, spacing_um)
-    ys = np.arange(y0, y1 + 0.5 * spacing_um, spacing_um)
-    hs = np.arange(nh) * (TWO_PI / nh)
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    free = ~shapely.contains_xy(proximity, X, Y)
-    if arena_um is not None:
-        hd = 0.5 * math.hypot(body_length_um, body_width_um)
-        free &= (X >= hd) & (X <= arena_um[0] - hd) & (Y >= hd) & (Y <= arena_um[1] - hd)
+    grid = _region_grid(proximity, grow, arena_um, spacing_um, heading_step_rad, max_cells)
     obstacle = docking_object.buffer(0.5 * body_width_um)
-    pre = np.zeros(X.shape + (nh,), dtype=bool)
-    ii, jj = np.nonzero(free)
-    chunk = max(1, 400_000 // nh)
-    for s in range(0, ii.size, chunk):
-        a, b = ii[s : s + chunk], jj[s : s + chunk]
-        pre[a, b] = fine_motion_preimage(
-            np.stack([xs[a], ys[b]], axis=-1), hs, targets, float(goal[2]), cone_rad, min_radius_um, model,
-            obstacle=obstacle, arena_um=arena_um,
-        )
-    mask = erode(pre, spacing_um, TWO_PI / nh, erosion_radius_um, erosion_height_rad)
-    reason = ""
-    if not mask.any():
-        if not pre.any():
-            reason = "no pose outside C_O can reach the goal by fine motion within the compliance cone"
-        else:
-            span = float(_longest_circular_run(pre).max()) * (TWO_PI / nh)
-            heading_only = erode(pre, spacing_um, TWO_PI / nh, 0.0, erosion_height_rad)
-            if not heading_only.any():
-                reason = (
-                    f"h_alpha = {math.degrees(erosion_height_rad):.1f} deg: the cylinder needs a heading window of "
-                    f"{2 * math.degrees(erosion_height_rad):.0f} deg but the preimage of G* offers at most "
-                    f"{math.degrees(span):.0f} deg at any position"
-                )
-            else:
-                reason = (
-                    f"r_alpha = {erosion_radius_um:.0f} um: no pose of the preimage of G* outside C_O keeps that "
-                    f"clearance from its boundary (heading margin {math.degrees(erosion_height_rad):.1f} deg)"
-                )
-    return Region(robot, goal, xs, ys, hs, mask, pre, float(erosion_radius_um), float(erosion_height_rad), float(cone_rad),
-                  float(min_radius_um), reason)
+
+    def aim(xy: np.ndarray) -> np.ndarray:
+        return fine_motion_preimage(xy, grid.headings_rad, targets, float(goal[2]), cone_rad, min_radius_um, model,
+                                    obstacle=obstacle, arena_um=arena_um)
+
+    pre = _sampled_preimage(grid, proximity, arena_um, 0.5 * math.hypot(body_length_um, body_width_um), aim)
+    mask = erode(pre, grid.spacing_um, grid.heading_step_rad, erosion_radius_um, erosion_height_rad)
+    reason = "" if mask.any() else _empty_region_reason(pre, grid, erosion_radius_um, erosion_height_rad)
+    return Region(robot, goal, grid.xs_um, grid.ys_um, grid.headings_rad, mask, pre, float(erosion_radius_um),
+                  float(erosion_height_rad), float(cone_rad), float(min_radius_um), reason)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1179,6 +1239,76 @@ def _coverage_sequences(speed: float, radius: float, model: ErrorModel, step_s: 
     return seqs
 
 
+class _Checkpoint(NamedTuple):
+    """The true pose at the end of one Drive against ``delta(t)`` of its sequence."""
+
+    sequence: str
+    inside: bool  # position error <= delta_xy and heading error <= delta_theta
+    ratio: float  # max(err_xy / delta_xy, err_theta / delta_theta): < 1 inside
+    last: bool  # the sequence's last Drive
+
+
+def _bound_ratio(err_xy_um: float, err_theta_rad: float, delta_xy_um: float, delta_theta_rad: float) -> float:
+    """``max(err_xy / delta_xy, err_theta / delta_theta)``; against a zero bound an error within rounding
+    (1e-9 um, 1e-12 rad) counts 0 and a larger one infinity."""
+    return max(err_xy_um / delta_xy_um if delta_xy_um > 0 else (0.0 if err_xy_um <= 1e-9 else math.inf),
+               err_theta_rad / delta_theta_rad if delta_theta_rad > 0 else (0.0 if err_theta_rad <= 1e-12 else math.inf))
+
+
+def _drive_checked(plant, analysis, seq: PrimitiveSequence, curve: DeltaCurve, speed_um_s: float, radius_um: float,
+                   state: np.ndarray | None, checks: list[_Checkpoint]) -> np.ndarray | None:
+    """Drive ``seq`` on a one-robot ``plant`` from where it stands, appending one :class:`_Checkpoint` per
+    Drive to ``checks``: the true pose against the nominal motion from the sequence's start, within
+    ``curve`` at the Drive's end. ``state`` is the arm state the plant was left in (``None``: all arms
+    up); returns the state the sequence leaves."""
+    from .waveform import synthesize
+
+    p0 = np.asarray(plant.true_poses(), dtype=np.float64)[0]
+    ends_t = np.cumsum(seq.durations_s)
+    nominal = sequence_poses(p0, seq.turning, seq.durations_s, speed_um_s, radius_um, np.zeros((1, 3)), ends_t)[0]
+    bxy, bth = curve.at(ends_t)
+    for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s, strict=True)):
+        prim = analysis.primitive("P1" if turn else "P0")
+        plant.apply(synthesize(analysis, [(prim, float(dur))], initial=state))
+        state = np.array(prim.state, dtype=np.uint8)
+        p = np.asarray(plant.true_poses(), dtype=np.float64)[0]
+        exy = math.hypot(p[0] - nominal[kk, 0], p[1] - nominal[kk, 1])
+        eth = abs(float(angle_difference(p[2], nominal[kk, 2])))
+        ok = exy <= bxy[kk] + 1e-9 and eth <= bth[kk] + 1e-12
+        checks.append(_Checkpoint(seq.name, ok, _bound_ratio(exy, eth, bxy[kk], bth[kk]), kk == len(seq.durations_s) - 1))
+    return state
+
+
+def _coverage_of(checks: Sequence[_Checkpoint], *, trials: int, seed: int, k: float, plant: str) -> Coverage:
+    """The :class:`Coverage` of all checkpoints (every fraction 1.0 when there are none)."""
+    inside = checks_n = end_in = ends = 0
+    per: dict[str, list[int]] = {}
+    for c in checks:
+        checks_n += 1
+        inside += c.inside
+        tally = per.setdefault(c.sequence, [0, 0])
+        tally[0] += c.inside
+        tally[1] += 1
+        if c.last:
+            ends += 1
+            end_in += c.inside
+    rq = np.asarray([c.ratio for c in checks]) if checks else np.zeros(1)
+    return Coverage(
+        trials=int(trials),
+        seed=int(seed),
+        k=float(k),
+        checkpoints=int(checks_n),
+        inside=int(inside),
+        fraction=float(inside / checks_n) if checks_n else 1.0,
+        end_fraction=float(end_in / ends) if ends else 1.0,
+        by_sequence={name: float(a / b) for name, (a, b) in per.items()},
+        ratio_p50=float(np.quantile(rq, 0.5, method="inverted_cdf")),  # no interpolation: ratios may be inf
+        ratio_p99=float(np.quantile(rq, 0.99, method="inverted_cdf")),
+        ratio_max=float(rq.max()),
+        plant=plant,
+    )
+
+
 def empirical_coverage(
     scenario,
     *,
@@ -1200,7 +1330,6 @@ def empirical_coverage(
     ``SeedSequence(seed).spawn(trials)[t]``, the same for every robot.
     """
     from .electrostatics import analyse_scenario
-    from .waveform import synthesize
 
     if plant_factory is None:
         from .sim import SimulatedPlant
@@ -1209,9 +1338,7 @@ def empirical_coverage(
     model = ErrorModel.from_noise(scenario.noise, k)
     step = float(step_s if step_s is not None else scenario.control.replan_interval_s)
     children = np.random.SeedSequence(int(seed)).spawn(int(trials))
-    inside = checks = end_in = ends = 0
-    per: dict[str, list[int]] = {}
-    ratios: list[float] = []
+    checks: list[_Checkpoint] = []
     total = trials * scenario.n
     done = 0
     for i, rob in enumerate(scenario.robots):
@@ -1220,55 +1347,17 @@ def empirical_coverage(
         )
         analysis = analyse_scenario(solo)
         v, r = rob.speed_um_s, rob.turn_radius_um
-        seq_rng = np.random.default_rng(np.random.SeedSequence([int(seed), i, 1]))
-        seqs = _coverage_sequences(v, r, model, step, seq_rng)
+        seqs = _coverage_sequences(v, r, model, step, np.random.default_rng(np.random.SeedSequence([int(seed), i, 1])))
         curves = [deviation_envelope(s, v, r, model) for s in seqs]
         for t in range(trials):
-            trial_seed = int(children[t].generate_state(1, np.uint64)[0] >> np.uint64(11))
-            plant = plant_factory(solo, seed=trial_seed)
+            plant = plant_factory(solo, seed=int(children[t].generate_state(1, np.uint64)[0] >> np.uint64(11)))
             state = None
             for seq, curve in zip(seqs, curves, strict=True):
-                p0 = np.asarray(plant.true_poses(), dtype=np.float64)[0]
-                ends_t = np.cumsum(seq.durations_s)
-                nominal = sequence_poses(p0, seq.turning, seq.durations_s, v, r, np.zeros((1, 3)), ends_t)[0]
-                bxy, bth = curve.at(ends_t)
-                for kk, (turn, dur) in enumerate(zip(seq.turning, seq.durations_s, strict=True)):
-                    prim = analysis.primitive("P1" if turn else "P0")
-                    plant.apply(synthesize(analysis, [(prim, float(dur))], initial=state))
-                    state = np.array(prim.state, dtype=np.uint8)
-                    p = np.asarray(plant.true_poses(), dtype=np.float64)[0]
-                    exy = math.hypot(p[0] - nominal[kk, 0], p[1] - nominal[kk, 1])
-                    eth = abs(float(angle_difference(p[2], nominal[kk, 2])))
-                    ok = exy <= bxy[kk] + 1e-9 and eth <= bth[kk] + 1e-12
-                    ratio = max(exy / bxy[kk] if bxy[kk] > 0 else (0.0 if exy <= 1e-9 else math.inf),
-                                eth / bth[kk] if bth[kk] > 0 else (0.0 if eth <= 1e-12 else math.inf))
-                    ratios.append(ratio)
-                    checks += 1
-                    inside += ok
-                    tally = per.setdefault(seq.name, [0, 0])
-                    tally[0] += ok
-                    tally[1] += 1
-                    if kk == len(seq.durations_s) - 1:
-                        ends += 1
-                        end_in += ok
+                state = _drive_checked(plant, analysis, seq, curve, v, r, state, checks)
             done += 1
             if progress is not None:
                 progress(done, total)
-    rq = np.asarray(ratios) if ratios else np.zeros(1)
-    return Coverage(
-        trials=int(trials),
-        seed=int(seed),
-        k=float(k),
-        checkpoints=int(checks),
-        inside=int(inside),
-        fraction=float(inside / checks) if checks else 1.0,
-        end_fraction=float(end_in / ends) if ends else 1.0,
-        by_sequence={name: float(a / b) for name, (a, b) in per.items()},
-        ratio_p50=float(np.quantile(rq, 0.5, method="inverted_cdf")),  # no interpolation: ratios may be inf
-        ratio_p99=float(np.quantile(rq, 0.99, method="inverted_cdf")),
-        ratio_max=float(rq.max()),
-        plant=f"{plant_factory.__module__}.{plant_factory.__qualname__}",
-    )
+    return _coverage_of(checks, trials=trials, seed=seed, k=k, plant=f"{plant_factory.__module__}.{plant_factory.__qualname__}")
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1474,6 +1563,45 @@ def _cylinders(scenario, order, model, levels):
     return cyl, proj
 
 
+class _MotionBounds(NamedTuple):
+    """The open-loop motion bounds of one robot under the error model."""
+
+    omega_min_rad_s: float  # turn-rate range
+    omega_max_rad_s: float
+    t_2pi_s: float  # longest time a full turn (2 pi) and two full turns (4 pi) can take
+    t_4pi_s: float
+    delta_turning: DeltaCurve  # delta(t) of pure turning and pure straight motion up to t_4pi
+    delta_straight: DeltaCurve
+    delta_replan: tuple[float, float]  # (um, rad) over one replanning interval, worst of turning and straight
+
+
+def _motion_bounds(r, model: ErrorModel, levels: int, replan_interval_s: float) -> _MotionBounds:
+    """Turn rates, full-turn times and ``delta(t)`` of robot ``r``. The curves run to ``t_4pi`` (two full
+    turns at the slowest turn rate), or to 4 pi at the nominal turn rate when a turn may never complete."""
+    v, rad = r.speed_um_s, r.turn_radius_um
+    t2 = turn_time(TWO_PI, v, rad, model)
+    t4 = turn_time(2 * TWO_PI, v, rad, model)
+    w_lo, w_hi = turn_rate_range(v, rad, model)
+    horizon = t4 if math.isfinite(t4) else 4 * TWO_PI / r.turn_rate_rad_s
+    d_turn = deviation_envelope(turning_sequence(horizon), v, rad, model, levels=levels)
+    d_str = deviation_envelope(straight_sequence(horizon), v, rad, model, levels=levels)
+    short = [deviation_envelope(q(replan_interval_s), v, rad, model, levels=levels).end for q in (turning_sequence,
+                                                                                               straight_sequence)]
+    d_tx = (max(a for a, _ in short), max(b for _, b in short))
+    return _MotionBounds(float(w_lo), float(w_hi), float(t2), float(t4), d_turn, d_str, d_tx)
+
+
+def _fine_motion_cones(scenario, order: Sequence[str]) -> tuple[Cone, ...]:
+    """The reachable cones of fine motion: S_2f of every single robot D_1..D_(n-2) (of D_(n-1) when there
+    are none, as an example), then S_3f of D_n and D_(n-1)."""
+    name_n, name_m = order[-1], order[-2]
+    cones = [s2f_cone(scenario.robot(nm).turn_radius_um, robot=nm) for nm in order[:-2]]
+    if not cones:
+        cones = [s2f_cone(scenario.robot(name_m).turn_radius_um, robot=name_m)]
+    cones.extend(s3f_cones(scenario.robot(name_n).turn_radius_um, scenario.robot(name_m).turn_radius_um, robots=(name_n, name_m)))
+    return tuple(cones)
+
+
 def analyse_bounds(
     scenario,
     *,
@@ -1510,41 +1638,28 @@ def analyse_bounds(
     notes: list[str] = []
     order, structure = _prepare(scenario, structure, notes, say)
     cyl, proj = _cylinders(scenario, order, model, levels)
+    tx = float(scenario.control.replan_interval_s)
     robots_out = []
     for idx, nm in enumerate(order, start=1):
         r = scenario.robot(nm)
         slot = structure.slot(nm)
-        t2 = turn_time(TWO_PI, r.speed_um_s, r.turn_radius_um, model)
-        t4 = turn_time(2 * TWO_PI, r.speed_um_s, r.turn_radius_um, model)
-        w_lo, w_hi = turn_rate_range(r.speed_um_s, r.turn_radius_um, model)
-        horizon = t4 if math.isfinite(t4) else 4 * TWO_PI / r.turn_rate_rad_s
-        d_turn = deviation_envelope(turning_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
-        d_str = deviation_envelope(straight_sequence(horizon), r.speed_um_s, r.turn_radius_um, model, levels=levels)
-        tx = float(scenario.control.replan_interval_s)
-        short = [deviation_envelope(q(tx), r.speed_um_s, r.turn_radius_um, model, levels=levels).end for q in (turning_sequence,
-                                                                                                               straight_sequence)]
-        d_tx = (max(a for a, _ in short), max(b for _, b in short))
+        mb = _motion_bounds(r, model, levels, tx)
         say(f"sampling A_{idx}* ({nm})")
         region, ok, reason = _verdict(
             scenario, structure, model, order, nm, cyl[nm], proj, spacing_um=spacing_um, heading_step_deg=heading_step_deg
         )
         robots_out.append(
             RobotBounds(
-                nm, idx, slot.role, slot.pose.as_array(), r.speed_um_s, r.turn_radius_um, float(w_lo), float(w_hi), float(t2),
-                float(t4), d_turn, d_str, cyl[nm], region, ok, reason, tx, d_tx,
+                nm, idx, slot.role, slot.pose.as_array(), r.speed_um_s, r.turn_radius_um, mb.omega_min_rad_s, mb.omega_max_rad_s,
+                mb.t_2pi_s, mb.t_4pi_s, mb.delta_turning, mb.delta_straight, cyl[nm], region, ok, reason, tx, mb.delta_replan,
             )
         )
-    name_n, name_m = order[-1], order[-2]
-    cones = [s2f_cone(scenario.robot(nm).turn_radius_um, robot=nm) for nm in order[:-2]]
-    if not cones:
-        cones = [s2f_cone(scenario.robot(name_m).turn_radius_um, robot=name_m)]
-    cones.extend(s3f_cones(scenario.robot(name_n).turn_radius_um, scenario.robot(name_m).turn_radius_um, robots=(name_n, name_m)))
     return BoundsReport(
         scenario=scenario.name,
         model=model,
         robots=tuple(robots_out),
         projection=proj,
-        cones=tuple(cones),
+        cones=_fine_motion_cones(scenario, order),
         structure=structure,
         arena_um=scenario.arena_um,
         notes=tuple(notes),

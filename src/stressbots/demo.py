@@ -87,29 +87,24 @@ def _figure(waveform, decoded, analysis, steps):
 DEMO_TIME_BUDGET_S = 600.0
 
 
-def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_console=None) -> dict:
-    """Run the demo, print what it does (unless ``quiet``) and write its outputs into ``out_dir``.
+def _print_analysis(scenario, analysis, console) -> None:
+    """The voltage analysis and the waveform that reaches each primitive from all arms up (Holds of
+    ``hold_s``, then a Drive of :data:`STEP_S`)."""
+    from .console import render_analysis, render_waveform
+    from .waveform import synthesize_primitive
 
-    The main job (:func:`stressbots.pipeline.run_job`) on the built-in scenario, with the literature's
-    error levels, plus the waveform tour (``tour/``) and, for comparison, the same plan open loop with and
-    without noise and closed loop without noise (``comparisons/``). Returns a small summary dict.
-    """
-    from .console import RichJobObserver, render_analysis, render_waveform
-    from .electrostatics import analyse_scenario
-    from .outputs import prepare_dir, save_figure, write_json
-    from .pipeline import run_job
-    from .waveform import export, replay, synthesize, synthesize_primitive, to_json
+    render_analysis(analysis, console, title=f"built-in scenario {scenario.name!r}")
+    console.print()
+    console.print("[bold]Waveform of each primitive from all arms up[/bold] (Holds of hold_s, then a Drive)")
+    for p in analysis.primitives:
+        segs = synthesize_primitive(analysis, p, STEP_S)
+        render_waveform(segs, console, title=f"{p.name}: turning {', '.join(p.turning) or 'none'}")
 
-    out = prepare_dir(out_dir)
-    scenario = load_builtin()
-    analysis = analyse_scenario(scenario)
-    if not quiet:
-        render_analysis(analysis, console, title=f"built-in scenario {scenario.name!r}")
-        console.print()
-        console.print("[bold]Waveform of each primitive from all arms up[/bold] (Holds of hold_s, then a Drive)")
-        for p in analysis.primitives:
-            segs = synthesize_primitive(analysis, p, STEP_S)
-            render_waveform(segs, console, title=f"{p.name}: turning {', '.join(p.turning) or 'none'}")
+
+def _checked_tour(analysis):
+    """The tour's steps, waveform and decoding, checked: every Drive must decode to the arm state of its
+    primitive (else the synthesis and the decoder disagree: an internal error)."""
+    from .waveform import replay, synthesize
 
     steps = tour(analysis)
     waveform = synthesize(analysis, steps)
@@ -118,27 +113,63 @@ def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_
     got = np.array([d.states for d in decoded.drives], dtype=np.uint8)
     if got.shape != intended.shape or not np.array_equal(got, intended) or not all(d.ok for d in decoded.drives):
         raise RuntimeError("internal error: the demo waveform does not decode to its primitives")
+    return steps, waveform, decoded
+
+
+def _write_tour(out: Path, scenario, analysis, steps, waveform, decoded):
+    """``tour/``: the waveform as segments (``waveform.json``), sampled at :data:`RATE_HZ`
+    (``waveform.npy``) and drawn (``waveform.png``); returns the sampled file's summary."""
+    from .outputs import prepare_dir, save_figure, write_json
+    from .waveform import export, to_json
+
     tdir = prepare_dir(out / "tour")
     write_json(tdir / "waveform.json", to_json(waveform))
     summary = export(waveform, tdir / "waveform.npy", rate_hz=RATE_HZ, drive_frequency_hz=scenario.electrodes.drive_frequency_hz)
     save_figure(_figure(waveform, decoded, analysis, steps), tdir / "waveform.png")
-    if not quiet:
-        console.print()
-        console.print("[bold]Tour[/bold] " + " -> ".join(name for name, _ in steps), highlight=False)
-        for d, (name, _) in zip(decoded.drives, steps, strict=True):
-            turning = [analysis.names[i] for i in np.flatnonzero(d.states)]
-            console.print(
-                f"  t = {d.t_start_s:7.3f} s  {name}: decoded turning {', '.join(turning) or 'none'} (as intended)",
-                highlight=False,
-            )
-        verdict = f"STRING, order {', '.join(analysis.order or ())}" if analysis.is_string else "not STRING"
+    return summary
+
+
+def _print_tour(console, scenario, analysis, steps, decoded, summary) -> None:
+    """The tour as decoded (the robots each Drive turns, which are the intended ones) and what it wrote."""
+    console.print()
+    console.print("[bold]Tour[/bold] " + " -> ".join(name for name, _ in steps), highlight=False)
+    for d, (name, _) in zip(decoded.drives, steps, strict=True):
+        turning = [analysis.names[i] for i in np.flatnonzero(d.states)]
         console.print(
-            f"tour: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; {len(steps)} primitives, "
-            f"{summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V within "
-            f"[0, {scenario.electrodes.max_V:g}] V; wrote tour/waveform.json, tour/waveform.npy, tour/waveform.png",
-            soft_wrap=True, highlight=False,
+            f"  t = {d.t_start_s:7.3f} s  {name}: decoded turning {', '.join(turning) or 'none'} (as intended)",
+            highlight=False,
         )
-        console.print()
+    verdict = f"STRING, order {', '.join(analysis.order or ())}" if analysis.is_string else "not STRING"
+    console.print(
+        f"tour: {analysis.n} robots, {verdict}, {analysis.count} accessible control states; {len(steps)} primitives, "
+        f"{summary.duration_s:.3f} s, levels {min(summary.levels_V):g}-{max(summary.levels_V):g} V within "
+        f"[0, {scenario.electrodes.max_V:g}] V; wrote tour/waveform.json, tour/waveform.npy, tour/waveform.png",
+        soft_wrap=True, highlight=False,
+    )
+    console.print()
+
+
+def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_console=None) -> dict:
+    """Run the demo, print what it does (unless ``quiet``) and write its outputs into ``out_dir``.
+
+    The main job (:func:`stressbots.pipeline.run_job`) on the built-in scenario, with the literature's
+    error levels, plus the waveform tour (``tour/``) and, for comparison, the same plan open loop with and
+    without noise and closed loop without noise (``comparisons/``). Returns a small summary dict.
+    """
+    from .console import RichJobObserver
+    from .electrostatics import analyse_scenario
+    from .outputs import prepare_dir
+    from .pipeline import run_job
+
+    out = prepare_dir(out_dir)
+    scenario = load_builtin()
+    analysis = analyse_scenario(scenario)
+    if not quiet:
+        _print_analysis(scenario, analysis, console)
+    steps, waveform, decoded = _checked_tour(analysis)
+    summary = _write_tour(out, scenario, analysis, steps, waveform, decoded)
+    if not quiet:
+        _print_tour(console, scenario, analysis, steps, decoded, summary)
     job = run_job(
         scenario, out, seed=seed, source="built-in demo scenario (stressbots/data/demo.toml)", time_budget_s=DEMO_TIME_BUDGET_S,
         observer=RichJobObserver(console, err_console, quiet=quiet, show_analysis=False), extra=_comparisons,

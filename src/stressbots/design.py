@@ -234,64 +234,51 @@ def _staircase(n: int, k_d: int, _k_u: int) -> tuple[np.ndarray, np.ndarray]:
     return d, s - d
 
 
-def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> StringDesign:
-    """The STRING design for ``n`` robots with the largest clearance (see the module docstring).
-
-    Raises
-    ------
-    DesignError
-        The limits are impossible, or ``n`` robots do not fit; the message gives the largest N that does.
-    """
-    check_limits(electrodes)
+def _checked_count(n: Any, e: Electrodes, ties: bool) -> int:
+    """``n`` as a robot count, or a :class:`DesignError` on ``--robots``: not a whole number >= 1, beyond
+    :data:`MAX_DESIGN_ROBOTS`, or more than fit the limits (saying how many do, and how many with the
+    other tie setting when that differs)."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise DesignError(f"must be a whole number >= 1, got {n!r}", source="--robots")
     n = int(n)
     if n > MAX_DESIGN_ROBOTS:
         raise DesignError(f"at most {MAX_DESIGN_ROBOTS} robots per design, got {n}", source="--robots")
-    e = electrodes
-    m = float(e.margin_V)
-    wu, wd = _side_widths(e)
     best = max_robots(e, ties=ties)
     if n > best:
         other = max_robots(e, ties=not ties)
         hint = f" ({other} with {'--no-ties' if ties else '--ties'})" if other != best else ""
         raise DesignError(
-            f"{n} robots do not fit: the largest STRING design within max_V {e.max_V:g} V, margin_V {m:g} V and the "
-            f"drive band [{e.drive_low_V:g}, {e.drive_high_V:g}] V has {best} robot{'s' if best != 1 else ''}{hint}",
+            f"{n} robots do not fit: the largest STRING design within max_V {e.max_V:g} V, margin_V {float(e.margin_V):g} V and "
+            f"the drive band [{e.drive_low_V:g}, {e.drive_high_V:g}] V has {best} robot{'s' if best != 1 else ''}{hint}",
             source="--robots",
         )
-    if ties:
-        # Fewest distinct values (k_u + k_d = n + 1); pick the split with the largest worst clearance.
-        splits = [(k_u, n + 1 - k_u) for k_u in range(1, n + 1)]
-        k_u, k_d = max(
-            splits,
-            key=lambda s: (
-                min(side_clearance(wu, s[0], m), side_clearance(wd, s[1], m)),
-                side_clearance(wu, s[0], m) + side_clearance(wd, s[1], m),
-            ),
-        )
-        d_idx, u_idx = _staircase(n, k_d, k_u)
-    else:
-        k_u = k_d = n
-        d_idx = u_idx = np.arange(n)
-    rho_u, rho_d = side_clearance(wu, k_u, m), side_clearance(wd, k_d, m)
-    u_vals = rho_u * (2 * np.arange(k_u) + 1)  # rho above 0 V, 2 rho apart
-    d_vals = e.max_V - rho_d * (2 * np.arange(k_d)[::-1] + 1)  # rho below max_V, 2 rho apart
-    vd = d_vals[d_idx]
-    vu = u_vals[u_idx]
-    names = tuple(f"D{i + 1}" for i in range(n))
-    gaps = [2 * rho_u] * (k_u > 1) + [2 * rho_d] * (k_d > 1)
-    draft = StringDesign(
-        electrodes=e,
-        names=names,
-        snap_down_V=tuple(float(x) for x in vd),
-        release_V=tuple(float(x) for x in vu),
-        raise_levels_V=(),
-        release_levels_V=(),
-        min_gap_V=float(min(gaps)) if gaps else math.inf,
-        clearance_V=float(min(rho_u, rho_d)),
-        ties=ties,
+    return n
+
+
+def _value_counts(n: int, wu: float, wd: float, m: float, ties: bool) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """``(k_u, k_d, d_idx, u_idx)``: how many distinct release / snap-down values the design uses and
+    which of them each robot D_1..D_n gets.
+
+    Without ties every robot has its own two values. With ties the fewest values serve
+    (``k_u + k_d = n + 1``, a staircase), split between the release side (width ``wu``, V) and the
+    snap-down side (``wd``) so that the worse side's clearance is the largest, then their sum.
+    """
+    if not ties:
+        return n, n, np.arange(n), np.arange(n)
+    splits = [(k_u, n + 1 - k_u) for k_u in range(1, n + 1)]
+    k_u, k_d = max(
+        splits,
+        key=lambda s: (
+            min(side_clearance(wu, s[0], m), side_clearance(wd, s[1], m)),
+            side_clearance(wu, s[0], m) + side_clearance(wd, s[1], m),
+        ),
     )
+    d_idx, u_idx = _staircase(n, k_d, k_u)
+    return k_u, k_d, d_idx, u_idx
+
+
+def _with_hold_levels(draft: StringDesign) -> StringDesign:
+    """``draft`` with the Hold levels that set each primitive, from its analysis (it must be STRING)."""
     a = draft.analysis()
     if not a.is_string:  # pragma: no cover - guarded by max_robots; a bug if it happens
         raise DesignError("internal error: the design is not STRING: " + "; ".join(a.reasons))
@@ -301,6 +288,38 @@ def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> Stri
         raise_levels_V=tuple(float(x) for x in a.raise_levels_V),
         release_levels_V=tuple(float(x) for x in a.release_levels_V),
     )
+
+
+def design_string(n: int, electrodes: Electrodes, *, ties: bool = False) -> StringDesign:
+    """The STRING design for ``n`` robots with the largest clearance (see the module docstring).
+
+    Raises
+    ------
+    DesignError
+        The limits are impossible, or ``n`` robots do not fit; the message gives the largest N that does.
+    """
+    check_limits(electrodes)
+    e = electrodes
+    n = _checked_count(n, e, ties)
+    m = float(e.margin_V)
+    wu, wd = _side_widths(e)
+    k_u, k_d, d_idx, u_idx = _value_counts(n, wu, wd, m, ties)
+    rho_u, rho_d = side_clearance(wu, k_u, m), side_clearance(wd, k_d, m)
+    u_vals = rho_u * (2 * np.arange(k_u) + 1)  # rho above 0 V, 2 rho apart
+    d_vals = e.max_V - rho_d * (2 * np.arange(k_d)[::-1] + 1)  # rho below max_V, 2 rho apart
+    gaps = [2 * rho_u] * (k_u > 1) + [2 * rho_d] * (k_d > 1)
+    draft = StringDesign(
+        electrodes=e,
+        names=tuple(f"D{i + 1}" for i in range(n)),
+        snap_down_V=tuple(float(x) for x in d_vals[d_idx]),
+        release_V=tuple(float(x) for x in u_vals[u_idx]),
+        raise_levels_V=(),
+        release_levels_V=(),
+        min_gap_V=float(min(gaps)) if gaps else math.inf,
+        clearance_V=float(min(rho_u, rho_d)),
+        ties=ties,
+    )
+    return _with_hold_levels(draft)
 
 
 #: Resolution of the levels an instrument sets (V): a waveform generator behind a high-voltage amplifier

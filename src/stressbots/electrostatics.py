@@ -36,8 +36,9 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -175,27 +176,15 @@ def _thresholds(snap_down_V, release_V) -> tuple[np.ndarray, np.ndarray]:
     return vd, vu
 
 
-def admissible_levels(snap_down_V, release_V, electrodes: Electrodes) -> LevelTable:
-    """Every distinct effect an admissible level can have, with the best level for each.
+def _level_cells(t: np.ndarray, max_v: float, m_eff: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The admissible level cells between the sorted distinct thresholds ``t`` (V): ``(volts (L,),
+    ranges (L, 2), clearances (L,))``, one per gap that holds a level, plus, when the required distance
+    ``m_eff`` (margin minus tolerance) is not positive, the thresholds within ``[0, max_v]`` as points.
 
-    A level ``V`` is admissible when ``0 <= V <= max_V`` and ``|V - t| >= margin_V`` for every
-    threshold ``t`` (up to :data:`TOLERANCE_V`). Between two consecutive distinct thresholds ``a < b``
-    every level has the same effect, so the admissible levels form at most ``2n + 1`` interval cells
-    ``[a + margin, b - margin]`` (clipped to ``[0, max_V]``) plus, when the margin is 0, the ``<= 2n``
-    threshold points themselves. Cells with the same effect are merged, keeping the level with the
-    larger clearance.
-
-    Parameters
-    ----------
-    snap_down_V, release_V:
-        ``(n,)`` thresholds (V), scenario order.
-    electrodes:
-        Supplies ``max_V`` and ``margin_V``.
+    A gap's representative is its midpoint clipped to the admissible interval (0 V below the lowest
+    threshold, ``max_v`` above the highest); with margin 0 a clipped level that lands on a threshold
+    moves to the middle of its interval, so it stays inside the open gap.
     """
-    vd, vu = _thresholds(snap_down_V, release_V)
-    max_v = float(electrodes.max_V)
-    m_eff = float(electrodes.margin_V) - TOLERANCE_V  # required distance, with the tolerance
-    t = np.unique(np.concatenate([vd, vu]))
     a = np.concatenate([[-np.inf], t])  # cell (a, b)
     b = np.concatenate([t, [np.inf]])
     if m_eff > 0:
@@ -220,9 +209,29 @@ def admissible_levels(snap_down_V, release_V, electrodes: Electrodes) -> LevelTa
         volts.append(pts)
         ranges.append(np.stack([pts, pts], axis=1))
         clear.append(np.zeros_like(pts))
-    v = np.concatenate(volts)
-    r = np.concatenate(ranges).reshape(-1, 2)
-    c = np.concatenate(clear)
+    return np.concatenate(volts), np.concatenate(ranges).reshape(-1, 2), np.concatenate(clear)
+
+
+def admissible_levels(snap_down_V, release_V, electrodes: Electrodes) -> LevelTable:
+    """Every distinct effect an admissible level can have, with the best level for each.
+
+    A level ``V`` is admissible when ``0 <= V <= max_V`` and ``|V - t| >= margin_V`` for every
+    threshold ``t`` (up to :data:`TOLERANCE_V`). Between two consecutive distinct thresholds ``a < b``
+    every level has the same effect, so the admissible levels form at most ``2n + 1`` interval cells
+    ``[a + margin, b - margin]`` (clipped to ``[0, max_V]``) plus, when the margin is 0, the ``<= 2n``
+    threshold points themselves. Cells with the same effect are merged, keeping the level with the
+    larger clearance.
+
+    Parameters
+    ----------
+    snap_down_V, release_V:
+        ``(n,)`` thresholds (V), scenario order.
+    electrodes:
+        Supplies ``max_V`` and ``margin_V``.
+    """
+    vd, vu = _thresholds(snap_down_V, release_V)
+    m_eff = float(electrodes.margin_V) - TOLERANCE_V  # required distance, with the tolerance
+    v, r, c = _level_cells(np.unique(np.concatenate([vd, vu])), float(electrodes.max_V), m_eff)
     snaps = v[:, None] >= vd[None, :]
     rel = v[:, None] <= vu[None, :]
     # Merge cells with one effect (threshold points share the effect of a neighbouring gap).
@@ -260,6 +269,89 @@ def _listed(items: list[str], limit: int = 3) -> str:
     return shown + (f"; and {len(items) - limit} more" if len(items) > limit else "")
 
 
+def _volts(x: float) -> str:
+    return f"{x:g} V"
+
+
+def _order_reasons(sd: np.ndarray, su: np.ndarray, nm: list[str]) -> list[str]:
+    """STRING rules 1 and 2 on the thresholds sorted by ``V_d`` (ties by ``V_u``): release voltages that
+    fall along the order, and neighbours that share both thresholds."""
+    reasons = []
+    bad = [
+        f"{nm[k]} (V_d {_volts(sd[k])}, V_u {_volts(su[k])}) comes before {nm[k + 1]} (V_d {_volts(sd[k + 1])}, "
+        f"V_u {_volts(su[k + 1])})"
+        for k in np.flatnonzero(su[1:] < su[:-1])
+    ]
+    if bad:
+        reasons.append("release voltages do not rise with snap-down voltages: " + _listed(bad))
+    same = [
+        f"{nm[k]} and {nm[k + 1]} (V_d {_volts(sd[k])}, V_u {_volts(su[k])})"
+        for k in np.flatnonzero((sd[1:] == sd[:-1]) & (su[1:] == su[:-1]))
+    ]
+    if same:
+        reasons.append("robots share both thresholds, so no level tells them apart: " + _listed(same))
+    return reasons
+
+
+def _spacing_reasons(vd: np.ndarray, vu: np.ndarray, names: list[str], m: float) -> list[str]:
+    """STRING rule 3: distinct thresholds of one kind closer than ``2 m`` (V), with no level between them."""
+    reasons = []
+    for kind, vals in (("snap-down", vd), ("release", vu)):
+        uniq, first = np.unique(vals, return_index=True)
+        gaps = np.diff(uniq)
+        close = [
+            f"{names[first[k]]} ({_volts(uniq[k])}) and {names[first[k + 1]]} ({_volts(uniq[k + 1])})"
+            for k in np.flatnonzero(gaps < 2.0 * m - 2.0 * TOLERANCE_V)
+        ]
+        if close:
+            reasons.append(
+                f"{kind} voltages closer than 2*margin_V = {_volts(2 * m)}, so no level fits between them: " + _listed(close)
+            )
+    return reasons
+
+
+def _drive_band_reasons(vd: np.ndarray, vu: np.ndarray, names: list[str], e: Electrodes) -> list[str]:
+    """STRING rule 4: thresholds the drive band could cross (release above ``drive_low_V - 2 margin``,
+    snap-down below ``drive_high_V + 2 margin``), strictly even with margin 0: a drive level equal to a
+    threshold flips the arm."""
+    m, tol = float(e.margin_V), TOLERANCE_V
+    reasons = []
+    u_max = e.drive_low_V - 2.0 * m
+    high = [f"{names[i]} ({_volts(vu[i])})" for i in np.flatnonzero((vu > u_max + tol) | (vu >= e.drive_low_V))]
+    if high:
+        reasons.append(
+            f"release voltages above drive_low_V - 2*margin_V = {_volts(u_max)} (the drive band could release the arm): "
+            + _listed(high)
+        )
+    d_min = e.drive_high_V + 2.0 * m
+    low = [f"{names[i]} ({_volts(vd[i])})" for i in np.flatnonzero((vd < d_min - tol) | (vd <= e.drive_high_V))]
+    if low:
+        reasons.append(
+            f"snap-down voltages below drive_high_V + 2*margin_V = {_volts(d_min)} (the drive band could snap the arm "
+            "down): " + _listed(low)
+        )
+    return reasons
+
+
+def _crossing_reasons(vd: np.ndarray, vu: np.ndarray, names: list[str], e: Electrodes) -> list[str]:
+    """STRING rule 5: no level >= 0 V below the lowest release voltage, or none <= ``max_V`` above the
+    highest snap-down voltage (margins included)."""
+    m, tol = float(e.margin_V), TOLERANCE_V
+    reasons = []
+    i_lo = int(np.argmin(vu))
+    if vu[i_lo] < m - tol:
+        reasons.append(
+            f"no level >= 0 V fits below the lowest release voltage ({names[i_lo]}, {_volts(vu[i_lo])}) with margin_V {_volts(m)}"
+        )
+    i_hi = int(np.argmax(vd))
+    if vd[i_hi] > e.max_V - m + tol:
+        reasons.append(
+            f"no level <= max_V ({_volts(e.max_V)}) fits above the highest snap-down voltage ({names[i_hi]}, {_volts(vd[i_hi])}) "
+            f"with margin_V {_volts(m)}"
+        )
+    return reasons
+
+
 def classify_string(snap_down_V, release_V, electrodes: Electrodes, names: Sequence[str] | None = None) -> StringVerdict:
     """Classify a design as STRING or not (SPEC 4), with the reasons when not.
 
@@ -282,66 +374,13 @@ def classify_string(snap_down_V, release_V, electrodes: Electrodes, names: Seque
     vd, vu = _thresholds(snap_down_V, release_V)
     n = vd.size
     names = [str(x) for x in (names if names is not None else [f"#{i}" for i in range(n)])]
-    e = electrodes
-    m = float(e.margin_V)
-    tol = TOLERANCE_V
     order = np.lexsort((np.arange(n), vu, vd))  # by V_d, then V_u, then file order
-    sd, su = vd[order], vu[order]
-    nm = [names[i] for i in order]
-    reasons: list[str] = []
-
-    def v(x: float) -> str:
-        return f"{x:g} V"
-
-    bad = [
-        f"{nm[k]} (V_d {v(sd[k])}, V_u {v(su[k])}) comes before {nm[k + 1]} (V_d {v(sd[k + 1])}, V_u {v(su[k + 1])})"
-        for k in np.flatnonzero(su[1:] < su[:-1])
-    ]
-    if bad:
-        reasons.append("release voltages do not rise with snap-down voltages: " + _listed(bad))
-    same = [
-        f"{nm[k]} and {nm[k + 1]} (V_d {v(sd[k])}, V_u {v(su[k])})"
-        for k in np.flatnonzero((sd[1:] == sd[:-1]) & (su[1:] == su[:-1]))
-    ]
-    if same:
-        reasons.append("robots share both thresholds, so no level tells them apart: " + _listed(same))
-    for kind, vals in (("snap-down", vd), ("release", vu)):
-        uniq, first = np.unique(vals, return_index=True)
-        gaps = np.diff(uniq)
-        close = [
-            f"{names[first[k]]} ({v(uniq[k])}) and {names[first[k + 1]]} ({v(uniq[k + 1])})"
-            for k in np.flatnonzero(gaps < 2.0 * m - 2.0 * tol)
-        ]
-        if close:
-            reasons.append(
-                f"{kind} voltages closer than 2*margin_V = {v(2 * m)}, so no level fits between them: " + _listed(close)
-            )
-    # With margin_V 0 the rule must still be strict: a drive level equal to a threshold flips the arm.
-    u_max = e.drive_low_V - 2.0 * m
-    high = [f"{names[i]} ({v(vu[i])})" for i in np.flatnonzero((vu > u_max + tol) | (vu >= e.drive_low_V))]
-    if high:
-        reasons.append(
-            f"release voltages above drive_low_V - 2*margin_V = {v(u_max)} (the drive band could release the arm): "
-            + _listed(high)
-        )
-    d_min = e.drive_high_V + 2.0 * m
-    low = [f"{names[i]} ({v(vd[i])})" for i in np.flatnonzero((vd < d_min - tol) | (vd <= e.drive_high_V))]
-    if low:
-        reasons.append(
-            f"snap-down voltages below drive_high_V + 2*margin_V = {v(d_min)} (the drive band could snap the arm down): "
-            + _listed(low)
-        )
-    i_lo = int(np.argmin(vu))
-    if vu[i_lo] < m - tol:
-        reasons.append(
-            f"no level >= 0 V fits below the lowest release voltage ({names[i_lo]}, {v(vu[i_lo])}) with margin_V {v(m)}"
-        )
-    i_hi = int(np.argmax(vd))
-    if vd[i_hi] > e.max_V - m + tol:
-        reasons.append(
-            f"no level <= max_V ({v(e.max_V)}) fits above the highest snap-down voltage ({names[i_hi]}, {v(vd[i_hi])}) "
-            f"with margin_V {v(m)}"
-        )
+    reasons = (
+        _order_reasons(vd[order], vu[order], [names[i] for i in order])
+        + _spacing_reasons(vd, vu, names, float(electrodes.margin_V))
+        + _drive_band_reasons(vd, vu, names, electrodes)
+        + _crossing_reasons(vd, vu, names, electrodes)
+    )
     return StringVerdict(is_string=not reasons, order=tuple(int(i) for i in order), reasons=tuple(reasons))
 
 
@@ -382,6 +421,79 @@ def _too_many(max_states: int, source: str | None) -> DesignError:
     )
 
 
+class _BitsetLevels(NamedTuple):
+    """The levels that change some arm, as bitset operations on packed states: a level ``j`` takes a
+    state ``s`` to ``(s & keep[j]) | snaps[j]`` (it releases the arms outside ``keep``)."""
+
+    useful: np.ndarray  # (L,) indices of these levels in the level table
+    snaps: np.ndarray  # (L, W) uint64
+    keep: np.ndarray  # (L, W) uint64
+
+
+def _bitset_levels(snaps: np.ndarray, releases: np.ndarray) -> _BitsetLevels:
+    n = snaps.shape[1]
+    useful = np.flatnonzero(snaps.any(axis=1) | releases.any(axis=1))
+    return _BitsetLevels(useful, _pack(snaps[useful], n), ~_pack(releases[useful], n))
+
+
+def _fresh_successors(f: np.ndarray, levels: _BitsetLevels, seen: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The successors of the frontier states ``f`` ``(F, W)`` under every level that ``seen`` (sorted keys)
+    does not hold, each once: ``(keys, states, candidate index j = frontier row * L + level)``, or
+    ``None`` when all are known."""
+    W = levels.snaps.shape[1]
+    cand = ((f[:, None, :] & levels.keep[None, :, :]) | levels.snaps[None, :, :]).reshape(-1, W)
+    uk, first = np.unique(_keys(cand), return_index=True)
+    pos = np.minimum(np.searchsorted(seen, uk), seen.shape[0] - 1)
+    fresh = seen[pos] != uk
+    if not fresh.any():
+        return None
+    idx = first[fresh]
+    return uk[fresh], cand[idx], idx
+
+
+@dataclass
+class _NewLayer:
+    """The states one breadth-first layer discovers, gathered chunk by chunk of the frontier: key, bitset,
+    parent (row of the previous layer) and level index of each. Chunks may find the same state."""
+
+    keys: list[np.ndarray] = field(default_factory=list)
+    states: list[np.ndarray] = field(default_factory=list)
+    parents: list[np.ndarray] = field(default_factory=list)
+    levels: list[np.ndarray] = field(default_factory=list)
+    pending: int = 0  # states gathered so far, counting a state once per chunk that found it
+
+    def add(self, keys: np.ndarray, states: np.ndarray, parents: np.ndarray, levels: np.ndarray) -> None:
+        self.keys.append(keys)
+        self.states.append(states)
+        self.parents.append(parents)
+        self.levels.append(levels)
+        self.pending += int(keys.size)
+
+    def distinct(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``(keys, states, parents, levels)`` of the distinct states, sorted by key (first finding kept)."""
+        k_all, first = np.unique(np.concatenate(self.keys), return_index=True)
+        return k_all, np.concatenate(self.states)[first], np.concatenate(self.parents)[first], np.concatenate(self.levels)[first]
+
+    def compact(self) -> None:
+        """Keep the distinct states only, so that :attr:`pending` counts each once."""
+        k_all, states, parents, levels = self.distinct()
+        self.keys, self.states, self.parents, self.levels = [k_all], [states], [parents], [levels]
+        self.pending = int(k_all.size)
+
+    def path_to(self, key, layers: Sequence[tuple[np.ndarray, np.ndarray]]) -> list[int] | None:
+        """The level indices from the start to the state ``key`` if the last chunk found it, backtracking
+        through the completed ``layers`` (parent rows, level indices); else ``None``."""
+        hit = np.flatnonzero(self.keys[-1] == key)
+        if not hit.size:
+            return None
+        path = [int(self.levels[-1][hit[0]])]
+        parent = int(self.parents[-1][hit[0]])
+        for par, lev in reversed(layers):
+            path.append(int(lev[parent]))
+            parent = int(par[parent])
+        return path[::-1]
+
+
 def _search(
     snaps: np.ndarray,
     releases: np.ndarray,
@@ -399,10 +511,8 @@ def _search(
     """
     max_states = DEFAULT_MAX_STATES if max_states is None else int(max_states)
     n = snaps.shape[1]
-    useful = np.flatnonzero(snaps.any(axis=1) | releases.any(axis=1))
-    S = _pack(snaps[useful], n)
-    keep = ~_pack(releases[useful], n)
-    L, W = S.shape
+    levels = _bitset_levels(snaps, releases)
+    L, W = levels.snaps.shape
     s0 = _pack(start, n)
     t_key = _keys(_pack(target, n))[0] if target is not None else None
     if t_key is not None and _keys(s0)[0] == t_key:
@@ -413,47 +523,25 @@ def _search(
     frontier = s0
     chunk = max(1, 4_000_000 // max(1, L * W))  # bounds the candidate array to ~4M rows
     while frontier.shape[0] and L:
-        keys_l, states_l, parent_l, level_l = [], [], [], []
-        pending = 0
+        layer = _NewLayer()
         for c0 in range(0, frontier.shape[0], chunk):
-            f = frontier[c0 : c0 + chunk]
-            cand = ((f[:, None, :] & keep[None, :, :]) | S[None, :, :]).reshape(-1, W)
-            uk, first = np.unique(_keys(cand), return_index=True)
-            pos = np.minimum(np.searchsorted(seen, uk), seen.shape[0] - 1)
-            fresh = seen[pos] != uk
-            if not fresh.any():
+            fresh = _fresh_successors(frontier[c0 : c0 + chunk], levels, seen)
+            if fresh is None:
                 continue
-            idx = first[fresh]
-            keys_l.append(uk[fresh])
-            states_l.append(cand[idx])
-            parent_l.append(c0 + idx // L)
-            level_l.append(useful[idx % L])
-            pending += int(idx.size)
-            if seen.shape[0] + pending > max_states:
-                # Chunks may share new states: count the distinct ones before giving up.
-                k_all, first = np.unique(np.concatenate(keys_l), return_index=True)
-                keys_l, states_l = [k_all], [np.concatenate(states_l)[first]]
-                parent_l, level_l = [np.concatenate(parent_l)[first]], [np.concatenate(level_l)[first]]
-                pending = int(k_all.size)
-                if seen.shape[0] + pending > max_states:
+            keys, states, idx = fresh
+            layer.add(keys, states, c0 + idx // L, levels.useful[idx % L])
+            if seen.shape[0] + layer.pending > max_states:
+                layer.compact()  # chunks may share new states: count the distinct ones before giving up
+                if seen.shape[0] + layer.pending > max_states:
                     raise _too_many(max_states, source)
-            if t_key is not None:
-                hit = np.flatnonzero(keys_l[-1] == t_key)
-                if hit.size:
-                    # Backtrack through the completed layers to the start.
-                    path = [int(level_l[-1][hit[0]])]
-                    parent = int(parent_l[-1][hit[0]])
-                    for par, lev in reversed(layers):
-                        path.append(int(lev[parent]))
-                        parent = int(par[parent])
-                    return path[::-1]
-        if not keys_l:
+            if t_key is not None and (path := layer.path_to(t_key, layers)) is not None:
+                return path
+        if not layer.keys:
             break
-        new_keys, first = np.unique(np.concatenate(keys_l), return_index=True)  # dedupe across chunks
+        new_keys, frontier, parents, level_idx = layer.distinct()  # dedupe across chunks
         if seen.shape[0] + new_keys.shape[0] > max_states:
             raise _too_many(max_states, source)
-        frontier = np.concatenate(states_l)[first]
-        layers.append((np.concatenate(parent_l)[first], np.concatenate(level_l)[first]))
+        layers.append((parents, level_idx))
         found.append(frontier)
         seen = np.sort(np.concatenate([seen, new_keys]))
     if t_key is not None:
@@ -664,6 +752,62 @@ def _string_levels(table: LevelTable, order: np.ndarray) -> tuple[np.ndarray, np
     return raise_v, release_v
 
 
+def _string_analysis(vd: np.ndarray, vu: np.ndarray, electrodes: Electrodes, names: tuple[str, ...], verdict: StringVerdict,
+                     table: LevelTable, *, search: bool, max_states: int | None, source: str | None) -> ControlAnalysis:
+    """The analysis of a STRING design: Lemma 1's ``n + 1`` prefix states ``P_k`` (D_1..D_k down), its
+    control matrix and the one Hold level that sets each primitive. With ``search`` the accessible
+    states come from the exhaustive search instead (to check Lemma 1)."""
+    n = vd.size
+    order = np.asarray(verdict.order, dtype=np.intp)
+    rank = np.empty(n, dtype=np.intp)
+    rank[order] = np.arange(n)
+    prefix = (rank[None, :] < np.arange(n + 1)[:, None]).astype(np.uint8)  # (n+1, n): P_k
+    if search:
+        states = _sorted_rows(_search(table.snaps, table.releases, np.zeros(n, np.uint8), max_states=max_states, source=source))
+    else:
+        states = _sorted_rows(prefix)
+    raise_v, release_v = _string_levels(table, order)
+    return ControlAnalysis(
+        names=names,
+        snap_down_V=vd,
+        release_V=vu,
+        electrodes=electrodes,
+        is_string=True,
+        order=tuple(names[i] for i in order),
+        order_index=tuple(int(i) for i in order),
+        reasons=(),
+        accessible_states=states,
+        primitive_states=prefix,
+        control_matrix=(np.arange(n)[:, None] < np.arange(n + 1)[None, :]).astype(np.uint8),
+        levels=table,
+        method="search" if search else "lemma1",
+        raise_levels_V=raise_v,
+        release_levels_V=release_v,
+    )
+
+
+def _searched_analysis(vd: np.ndarray, vu: np.ndarray, electrodes: Electrodes, names: tuple[str, ...], verdict: StringVerdict,
+                       table: LevelTable, *, max_states: int | None, source: str | None) -> ControlAnalysis:
+    """The analysis of a design that is not STRING: every accessible state by exhaustive search, each one
+    a primitive (``P0`` = all up first), the control matrix their transpose."""
+    states = _sorted_rows(_search(table.snaps, table.releases, np.zeros(vd.size, np.uint8), max_states=max_states, source=source))
+    return ControlAnalysis(
+        names=names,
+        snap_down_V=vd,
+        release_V=vu,
+        electrodes=electrodes,
+        is_string=False,
+        order=None,
+        order_index=None,
+        reasons=verdict.reasons,
+        accessible_states=states,
+        primitive_states=states,
+        control_matrix=np.ascontiguousarray(states.T),
+        levels=table,
+        method="search",
+    )
+
+
 def analyse_thresholds(
     snap_down_V,
     release_V,
@@ -696,50 +840,9 @@ def analyse_thresholds(
     verdict = classify_string(vd, vu, electrodes, names_t)
     table = admissible_levels(vd, vu, electrodes)
     if verdict.is_string:
-        order = np.asarray(verdict.order, dtype=np.intp)
-        rank = np.empty(n, dtype=np.intp)
-        rank[order] = np.arange(n)
-        prefix = (rank[None, :] < np.arange(n + 1)[:, None]).astype(np.uint8)  # (n+1, n): P_k
-        if method == "search":
-            states = _sorted_rows(_search(table.snaps, table.releases, np.zeros(n, np.uint8), max_states=max_states, source=source))
-        else:
-            states = _sorted_rows(prefix)
-        order_names = tuple(names_t[i] for i in order)
-        matrix = (np.arange(n)[:, None] < np.arange(n + 1)[None, :]).astype(np.uint8)
-        raise_v, release_v = _string_levels(table, order)
-        return ControlAnalysis(
-            names=names_t,
-            snap_down_V=vd,
-            release_V=vu,
-            electrodes=electrodes,
-            is_string=True,
-            order=order_names,
-            order_index=tuple(int(i) for i in order),
-            reasons=(),
-            accessible_states=states,
-            primitive_states=prefix,
-            control_matrix=matrix,
-            levels=table,
-            method="lemma1" if method == "auto" else "search",
-            raise_levels_V=raise_v,
-            release_levels_V=release_v,
-        )
-    states = _sorted_rows(_search(table.snaps, table.releases, np.zeros(n, np.uint8), max_states=max_states, source=source))
-    return ControlAnalysis(
-        names=names_t,
-        snap_down_V=vd,
-        release_V=vu,
-        electrodes=electrodes,
-        is_string=False,
-        order=None,
-        order_index=None,
-        reasons=verdict.reasons,
-        accessible_states=states,
-        primitive_states=states,
-        control_matrix=np.ascontiguousarray(states.T),
-        levels=table,
-        method="search",
-    )
+        return _string_analysis(vd, vu, electrodes, names_t, verdict, table, search=method == "search", max_states=max_states,
+                                source=source)
+    return _searched_analysis(vd, vu, electrodes, names_t, verdict, table, max_states=max_states, source=source)
 
 
 def analyse(robots, electrodes: Electrodes, **kwargs) -> ControlAnalysis:

@@ -331,6 +331,30 @@ class Study:
         return self.summary.get("sweep")
 
 
+def _noise_scales(sweep: Sequence[float] | None) -> tuple[float, ...]:
+    """The noise scales a study runs, in order and each once: the scenario's own noise (1.0) first, then
+    the ``sweep`` factors."""
+    scales = (1.0,) + tuple(float(f) for f in (sweep or ()) if f != 1.0)
+    return tuple(dict.fromkeys(scales))
+
+
+def _study_summary(scenario, outcomes: dict[float, list[TrialOutcome]], seed: int, plan, run, *, sweep: Sequence[float] | None,
+                   source: str | None, strategy: str | None, store: Path | str | None) -> dict[str, Any]:
+    """``summary.json``: the deterministic part from the stored outcomes (:func:`montecarlo_summary`), the
+    strategy, the ``"run"`` block (backend, workers, wall times: what depends on the machine and on
+    interruptions), where the trial store is, and the provenance."""
+    from .outputs import provenance
+
+    summary = montecarlo_summary(scenario, outcomes, seed, plan, sweep=sweep, source=source)
+    summary["strategy"] = "rendezvous" if strategy in (None, "default") else strategy
+    summary["run"] = {**run.to_dict(), "trial_wall_s": percentiles(o.wall_s for v in outcomes.values() for o in v)}
+    if store is not None:
+        summary["store"] = {"path": Path(store).name, "trials": sum(len(v) for v in outcomes.values()),
+                            "table": "trials", "campaign_settings": "table campaign, key 'settings'"}
+    summary["provenance"] = provenance(seed, scenario=source or scenario.name)
+    return summary
+
+
 def run_study(
     scenario,
     trials: int,
@@ -378,8 +402,7 @@ def run_study(
     assemble = assemble or default_assemble()
     if plan is None:
         plan = default_planner()(scenario)
-    scales = (1.0,) + tuple(float(f) for f in (sweep or ()) if f != 1.0)
-    scales = tuple(dict.fromkeys(scales))
+    scales = _noise_scales(sweep)
     camp = montecarlo_campaign(scenario, trials, seed, scales, assemble=assemble, plan=plan, time_budget_s=time_budget_s,
                                strategy=strategy, options=options)
     settings = montecarlo_settings(scenario, trials, seed, scales, time_budget_s=time_budget_s, strategy=strategy, options=options)
@@ -388,13 +411,7 @@ def run_study(
                          cells=[(c.label, c.params) for c in camp.cells]) as st:
         run = run_campaign(camp, st, workers=workers, dask=dask, progress=progress)
         outcomes = _by_scale(camp, st.rows())
-    summary = montecarlo_summary(scenario, outcomes, seed, plan, sweep=sweep, source=source)
-    summary["strategy"] = "rendezvous" if strategy in (None, "default") else strategy
-    summary["run"] = {**run.to_dict(), "trial_wall_s": percentiles(o.wall_s for v in outcomes.values() for o in v)}
-    if store is not None:
-        summary["store"] = {"path": Path(store).name, "trials": sum(len(v) for v in outcomes.values()),
-                            "table": "trials", "campaign_settings": "table campaign, key 'settings'"}
-    summary["provenance"] = provenance(seed, scenario=source or scenario.name)
+    summary = _study_summary(scenario, outcomes, seed, plan, run, sweep=sweep, source=source, strategy=strategy, store=store)
     return Study(summary, outcomes)
 
 

@@ -689,6 +689,37 @@ def _fmt_intervals(iv) -> str:
     return " U ".join(f"[{lo:.9g}, {hi:.9g}]" if math.isfinite(hi) else f"[{lo:.9g}, inf)" for lo, hi in iv)
 
 
+def _atoms_without_loop(c: _Classes, want: float) -> tuple[float, list[tuple[float, float]]]:
+    """``(turn, atoms)`` of a path of class k = 0 (turning only ``delta``) of length ``want`` (um, within the
+    class's lengths): straights as ``(heading offset rad, mass um)``.
+
+    Below a half turn the class is bounded: blend the one-straight path (the straight at the offset of
+    the line to the goal) with the two-straight SRS through the heading window's ends. From a half turn
+    on, add two opposite straights of equal mass (at 0 and pi), which lengthen without moving the end.
+    """
+    delta, d, off = float(c.g.delta), float(c.g.d), float(c.g.off)
+    if delta < _PI:
+        a, b = c.srs
+        t = 0.0 if c.hi0 - c.lo0 <= 0.0 else (want - c.lo0) / (c.hi0 - c.lo0)
+        if not (math.isfinite(a) and math.isfinite(b)):
+            t, a, b = 0.0, 0.0, 0.0
+        return delta, [(0.0, t * a), (off, (1.0 - t) * d), (delta, t * b)]
+    if off <= delta:
+        atoms = [(off, d)]
+    else:
+        a, b = c.srs
+        atoms = [(0.0, max(a, 0.0)), (delta, max(b, 0.0))]
+    e = 0.5 * (want - c.lo0)
+    return delta, atoms + [(0.0, e), (_PI, e)]
+
+
+def _atoms_with_loop(c: _Classes, want: float) -> tuple[float, list[tuple[float, float]]]:
+    """``(turn, atoms)`` of a path of class k = 1 (turning ``delta + 2 pi``) of length ``want`` (um): the
+    straight to the goal plus two opposite straights of equal mass for the extra length."""
+    e = 0.5 * (want - c.lo1)
+    return float(c.g.delta) + TWO_PI, [(float(c.g.off), float(c.g.d)), (0.0, e), (_PI, e)]
+
+
 def path_of_length(start, goal, radius, length_um, *, approach_um=0.0) -> Path:
     """A path from ``start`` to ``goal`` of exactly ``length_um`` (um), when one exists.
 
@@ -723,30 +754,11 @@ def path_of_length(start, goal, radius, length_um, *, approach_um=0.0) -> Path:
     ell = float(ell)
     want = float(length_um) - ell
     c = _classes(s, g, r)
-    delta, d, off = float(c.g.delta), float(c.g.d), float(c.g.off)
     slack = float(c.g.tol) * 4 + 1e-12 * abs(want)
     if c.lo0 - slack <= want <= c.hi0 + slack:
-        want = min(max(want, c.lo0), c.hi0)
-        turn = delta
-        if delta < _PI:  # bounded class: blend the one-straight and the two-straight representations
-            a, b = c.srs
-            t = 0.0 if c.hi0 - c.lo0 <= 0.0 else (want - c.lo0) / (c.hi0 - c.lo0)
-            if not (math.isfinite(a) and math.isfinite(b)):
-                t, a, b = 0.0, 0.0, 0.0
-            atoms = [(0.0, t * a), (off, (1.0 - t) * d), (delta, t * b)]
-        else:
-            if off <= delta:
-                atoms = [(off, d)]
-            else:
-                a, b = c.srs
-                atoms = [(0.0, max(a, 0.0)), (delta, max(b, 0.0))]
-            e = 0.5 * (want - c.lo0)
-            atoms += [(0.0, e), (_PI, e)]
+        turn, atoms = _atoms_without_loop(c, min(max(want, c.lo0), c.hi0))
     elif want >= c.lo1 - slack:
-        want = max(want, c.lo1)
-        turn = delta + TWO_PI
-        e = 0.5 * (want - c.lo1)
-        atoms = [(off, d), (0.0, e), (_PI, e)]
+        turn, atoms = _atoms_with_loop(c, max(want, c.lo1))
     else:
         iv = _intervals(c, ell)
         raise InfeasibleLengthError(

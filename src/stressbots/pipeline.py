@@ -388,6 +388,52 @@ class JobSummary:
     lines: tuple[str, ...] = ()
 
 
+def _prepared_out(scenario, out_dir: Path | str, inputs: list[Path | str], source: str | None) -> Path:
+    """The output folder, checked before anything is computed: creatable, no output file on an input, and
+    a scenario the job can run (every robot has a start pose, small enough to plan and simulate in
+    reasonable time, start bodies apart)."""
+    from .outputs import check_not_input, prepare_dir
+    from .scenario import check_movable, check_starts
+
+    out = prepare_dir(out_dir, inputs=inputs)
+    for name, _ in OUTPUT_FILES:
+        check_not_input(out / name, inputs)
+    if not scenario.has_starts:
+        raise StressbotsError("every robot needs a start pose for the job (robots[].start)", source=source, field="robots")
+    check_movable(scenario, source=source)
+    check_starts(scenario, source=source)
+    return out
+
+
+def _closed_loop_stage(scenario, plan_result, obs: JobObserver, *, seed: int, budget: float | None, strategy: str,
+                       camera: str) -> ClosedLoop:
+    """The closed-loop run as the ``closed loop`` stage: progress in simulated seconds (s) against the
+    time budget, then the simulated duration and the outcome."""
+    obs.stage("closed loop", total=budget or None)
+
+    def on_time(t: float) -> None:
+        obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
+
+    run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy,
+                      camera=camera)
+    res = run.result
+    obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
+              info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
+    return run
+
+
+def _extra_stage(extra: Callable[[JobContext], Extra] | None, ctx: JobContext, obs: JobObserver) -> Extra:
+    """The ``extra`` step (the demo's comparisons, the controller's regions) as the ``comparisons`` stage;
+    nothing without one."""
+    if extra is None:
+        return Extra()
+    obs.stage("comparisons")
+    more = extra(ctx)
+    obs.stage("comparisons", total=1, completed=1,
+              info=f"{len(more.comparisons)} runs" if more.comparisons or not more.lines else more.lines[0])
+    return more
+
+
 def run_job(
     scenario,
     out_dir: Path | str,
@@ -410,20 +456,11 @@ def run_job(
     before anything is computed.
     """
     from .electrostatics import analyse_scenario
-    from .outputs import check_not_input, prepare_dir
-    from .scenario import check_movable, check_starts
     from .sim import plan_waveform
 
     t_job = time.perf_counter()
     obs = observer or JobObserver()
-    inputs = [p for p in inputs if p is not None]
-    out = prepare_dir(out_dir, inputs=inputs)
-    for name, _ in OUTPUT_FILES:
-        check_not_input(out / name, inputs)
-    if not scenario.has_starts:
-        raise StressbotsError("every robot needs a start pose for the job (robots[].start)", source=source, field="robots")
-    check_movable(scenario, source=source)
-    check_starts(scenario, source=source)
+    out = _prepared_out(scenario, out_dir, [p for p in inputs if p is not None], source)
     budget = time_budget_s if time_budget_s is not None else layout_time_budget_s(scenario)
     analysis = analyse_scenario(scenario)
     obs.analysed(scenario, analysis, source)
@@ -433,26 +470,12 @@ def run_job(
         s = plan_result.summary
         obs.stage("planning", total=1, completed=1, info=f"{s['duration_s']:.1f} s plan, {s['steps']} steps")
         wf = plan_waveform(scenario, plan_result.plan)
-        obs.stage("closed loop", total=budget or None)
-
-        def on_time(t: float) -> None:
-            obs.stage("closed loop", completed=min(t, budget) if budget else t, info=f"{t:.0f} s simulated")
-
-        run = closed_loop(scenario, plan_result, seed=seed, time_budget_s=budget, on_time=on_time, strategy=strategy,
-                          camera=camera)
-        res = run.result
-        obs.stage("closed loop", total=max(res.duration_s, 1e-9), completed=max(res.duration_s, 1e-9),
-                  info=f"{res.duration_s:.0f} s simulated, {'assembled' if res.success else 'not assembled'}")
-        more = Extra()
-        if extra is not None:
-            obs.stage("comparisons")
-            more = extra(JobContext(scenario, analysis, plan_result, out, run))
-            obs.stage("comparisons", total=1, completed=1,
-                      info=f"{len(more.comparisons)} runs" if more.comparisons or not more.lines else more.lines[0])
+        run = _closed_loop_stage(scenario, plan_result, obs, seed=seed, budget=budget, strategy=strategy, camera=camera)
+        more = _extra_stage(extra, JobContext(scenario, analysis, plan_result, out, run), obs)
         doc, files, report_bytes = _write_outputs(scenario, analysis, plan_result, wf, run, more, out, obs,
                                                   source=source, title=title)
     wall = time.perf_counter() - t_job
-    obs.finished(JobSummary(scenario, s, res, doc, out, report_bytes, wall, tuple(more.lines)))
+    obs.finished(JobSummary(scenario, s, run.result, doc, out, report_bytes, wall, tuple(more.lines)))
     return JobResult(out, doc, out / "report.html", report_bytes, wall, files, more.summary)
 
 

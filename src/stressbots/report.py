@@ -105,6 +105,79 @@ def _hex(colour) -> str:
     return to_hex(colour)
 
 
+#: Border around the drawn points when the scenario has no arena (um): room for the bodies' half-lengths.
+_VIEW_MARGIN_UM = 300.0
+
+
+def _uniform_poses(scenario, times, poses, frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """The trajectory at ``frames`` uniform times: ``(grid (frames,) s, poses (frames, n, 3) um, rad)``.
+
+    Of repeated times the last sample is kept (the pose after an instantaneous compliance move).
+    Headings are unwrapped before the linear interpolation, so a robot turning through +-pi does not
+    spin back. Without samples every frame shows the start poses.
+    """
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    p = np.asarray(poses, dtype=np.float64).reshape(t.size, scenario.n, 3)
+    if t.size:
+        last = np.concatenate([np.diff(t) > 0, [True]])
+        t, p = t[last], p[last]
+    if t.size == 0:
+        t = np.zeros(1)
+        p = np.asarray(scenario.starts, dtype=np.float64)[None]
+    grid = np.linspace(t[0], t[-1], frames) if t[-1] > t[0] else np.full(frames, t[0])
+    out = np.empty((frames, scenario.n, 3))
+    for i in range(scenario.n):
+        theta = np.unwrap(p[:, i, 2])
+        for c, series in enumerate((p[:, i, 0], p[:, i, 1], theta)):
+            out[:, i, c] = np.interp(grid, t, series) if t.size > 1 else series[0]
+    return grid, out
+
+
+def _drawn_slots(scenario, goals, retargeted, retarget_time_s: float | None) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The slot outlines worth drawing: ``(planned (n, 3) or None, re-targeted (n, 3) or None)`` (um, rad).
+
+    Planned slots with a non-finite entry (no plan) are not drawn. Re-targeted slots are drawn only with
+    the time the controller learnt them, and only where they differ from the planned ones (by more than
+    0.05 um or rad), so a run that never moved its targets shows one set of outlines.
+    """
+    g = None
+    if goals is not None:
+        garr = np.asarray(goals, dtype=np.float64).reshape(scenario.n, 3)
+        if np.isfinite(garr).all():
+            g = garr
+    rt = None
+    if retargeted is not None and retarget_time_s is not None and math.isfinite(float(retarget_time_s)):
+        rarr = np.asarray(retargeted, dtype=np.float64).reshape(scenario.n, 3)
+        if np.isfinite(rarr).all() and (g is None or not np.allclose(rarr, g, atol=0.05)):
+            rt = rarr
+    return g, rt
+
+
+def _view_box(scenario, points: Sequence[np.ndarray]) -> list[float]:
+    """The drawn area ``[x_min, y_min, x_max, y_max]`` (um): the arena, or else every finite point of
+    ``points`` (each ``(k, 2)``) with a border of :data:`_VIEW_MARGIN_UM`."""
+    if scenario.arena_um is not None:
+        w, h = scenario.arena_um
+        return [0.0, 0.0, float(w), float(h)]
+    allp = np.vstack(points)
+    allp = allp[np.isfinite(allp).all(axis=1)]
+    lo, hi = allp.min(axis=0) - _VIEW_MARGIN_UM, allp.max(axis=0) + _VIEW_MARGIN_UM
+    return [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
+
+
+def _timed_events(events: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The events the animation lists, by time (s, rounded to ms); events without a finite time are left out."""
+    evs: list[dict[str, Any]] = []
+    for ev in events:
+        tt = ev.get("t_s", ev.get("time_s"))
+        if tt is None or not math.isfinite(float(tt)):
+            continue
+        evs.append({"t": round(float(tt), 3), "robot": ev.get("robot"), "kind": str(ev.get("kind", "")),
+                    "detail": str(ev.get("detail", ""))})
+    evs.sort(key=lambda e: e["t"])
+    return evs
+
+
 def animation_data(
     scenario,
     times,
@@ -129,57 +202,16 @@ def animation_data(
     """
     from .viz import robot_colours
 
-    t = np.asarray(times, dtype=np.float64).reshape(-1)
-    p = np.asarray(poses, dtype=np.float64).reshape(t.size, scenario.n, 3)
-    if t.size:  # of repeated times keep the last sample (after an instantaneous compliance move)
-        last = np.concatenate([np.diff(t) > 0, [True]])
-        t, p = t[last], p[last]
     frames = int(max(2, max_frames))
-    if t.size == 0:
-        t = np.zeros(1)
-        p = np.asarray(scenario.starts, dtype=np.float64)[None]
-    grid = np.linspace(t[0], t[-1], frames) if t[-1] > t[0] else np.full(frames, t[0])
-    out = np.empty((frames, scenario.n, 3))
-    for i in range(scenario.n):
-        theta = np.unwrap(p[:, i, 2])
-        for c, series in enumerate((p[:, i, 0], p[:, i, 1], theta)):
-            out[:, i, c] = np.interp(grid, t, series) if t.size > 1 else series[0]
-    cols = robot_colours(scenario.n)
-    pts = [out[:, :, :2].reshape(-1, 2)]
-    g = None
-    if goals is not None:
-        garr = np.asarray(goals, dtype=np.float64).reshape(scenario.n, 3)
-        if np.isfinite(garr).all():
-            g = garr
-            pts.append(g[:, :2])
-    rt = None
-    if retargeted is not None and retarget_time_s is not None and math.isfinite(float(retarget_time_s)):
-        rarr = np.asarray(retargeted, dtype=np.float64).reshape(scenario.n, 3)
-        if np.isfinite(rarr).all() and (g is None or not np.allclose(rarr, g, atol=0.05)):
-            rt = rarr
-            pts.append(rt[:, :2])
-    allp = np.vstack(pts)
-    allp = allp[np.isfinite(allp).all(axis=1)]
-    if scenario.arena_um is not None:
-        w, h = scenario.arena_um
-        box = [0.0, 0.0, float(w), float(h)]
-    else:
-        lo, hi = allp.min(axis=0) - 300.0, allp.max(axis=0) + 300.0
-        box = [float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])]
-    evs: list[dict[str, Any]] = []
-    for ev in events:
-        tt = ev.get("t_s", ev.get("time_s"))
-        if tt is None or not math.isfinite(float(tt)):
-            continue
-        evs.append({"t": round(float(tt), 3), "robot": ev.get("robot"), "kind": str(ev.get("kind", "")),
-                    "detail": str(ev.get("detail", ""))})
-    evs.sort(key=lambda e: e["t"])
+    grid, out = _uniform_poses(scenario, times, poses, frames)
+    g, rt = _drawn_slots(scenario, goals, retargeted, retarget_time_s)
+    box = _view_box(scenario, [out[:, :, :2].reshape(-1, 2)] + [s[:, :2] for s in (g, rt) if s is not None])
     return {
         "title": title,
         "names": list(scenario.names),
         "lengths": [round(float(x), 3) for x in scenario.lengths_um],
         "widths": [round(float(x), 3) for x in scenario.widths_um],
-        "colours": [_hex(c) for c in cols],
+        "colours": [_hex(c) for c in robot_colours(scenario.n)],
         "box": box,
         "arena": scenario.arena_um is not None,
         "t": [round(float(x), 3) for x in grid],
@@ -187,7 +219,7 @@ def animation_data(
         "goals": None if g is None else np.round(g, 3).tolist(),
         "retargeted": None if rt is None else np.round(rt, 3).tolist(),
         "retarget_t": None if rt is None or retarget_time_s is None else round(float(retarget_time_s), 3),
-        "events": evs,
+        "events": _timed_events(events),
     }
 
 
@@ -467,24 +499,29 @@ def _img(figures: Mapping[str, bytes], key: str, alt: str) -> str:
     return f'<img src="{png_data_uri(png)}" alt="{_e(alt)}">'
 
 
-def _design_section(scenario, analysis, goals) -> str:
-    a = analysis
+def _design_verdict(a) -> str:
+    """Whether the design is STRING (order D_1..D_n and Lemma 1's count) or why not, and the electrode limits
+    (V, Hz, ms) every level keeps."""
     e = a.electrodes
-    parts = []
     if a.is_string:
-        parts.append(
+        verdict = (
             f"<p><b>{a.n} robots, STRING</b>: order D<sub>1</sub>..D<sub>{a.n}</sub> = {_e(', '.join(a.order))} "
             f"(by snap-down voltage). Lemma 1: {a.count} accessible control states, the primitives "
             f"P<sub>0</sub>..P<sub>{a.n}</sub> (P<sub>k</sub>: D<sub>1</sub>..D<sub>k</sub> arm down, turning).</p>"
         )
     else:
         reasons = "".join(f"<li>{_e(r)}</li>" for r in a.reasons)
-        parts.append(f"<p><b>{a.n} robots, not STRING</b>:</p><ul>{reasons}</ul>"
-                     f"<p>{a.count} accessible control states (exhaustive search).</p>")
-    parts.append(
+        verdict = (f"<p><b>{a.n} robots, not STRING</b>:</p><ul>{reasons}</ul>"
+                   f"<p>{a.count} accessible control states (exhaustive search).</p>")
+    return verdict + (
         f"<p>Limits: every level in [0, {e.max_V:g}] V and at least {e.margin_V:g} V from every threshold; drive band "
         f"[{e.drive_low_V:g}, {e.drive_high_V:g}] V at {e.drive_frequency_hz:g} Hz; setting levels held {e.hold_s * 1e3:g} ms.</p>"
     )
+
+
+def _robots_table(scenario, a, goals) -> str:
+    """One row per robot (scenario order): its place D_k in the STRING order, thresholds (V), body (um),
+    speed (um/s), turning radius (um), start and planned slot (headings in degrees)."""
     rank = {i: k + 1 for k, i in enumerate(a.order_index)} if a.is_string else {}
     rows = []
     for i, r in enumerate(scenario.robots):
@@ -494,21 +531,45 @@ def _design_section(scenario, analysis, goals) -> str:
             _e(r.name), f"D<sub>{rank[i]}</sub>" if rank else "-", f"{a.snap_down_V[i]:g}", f"{a.release_V[i]:g}",
             f"{r.length_um:g} &times; {r.width_um:g}", f"{r.speed_um_s:g}", f"{r.turn_radius_um:g}", _pose(start), _pose(goal),
         ])
-    parts.append("<h3>Robots</h3>" + _table(
+    return "<h3>Robots</h3>" + _table(
         ["robot", "order", "snap-down V_d (V)", "release V_u (V)", "body L x W (um)", "speed (um/s)", "turn radius (um)",
-         "start (x, y, heading)", "slot (x, y, heading)"], rows))
+         "start (x, y, heading)", "slot (x, y, heading)"], rows)
+
+
+def _states_table(a) -> str:
+    """The accessible control states (arm down = 1) with their primitive; the first :data:`MAX_STATE_ROWS`
+    only, since a non-STRING design can reach up to 2^n states (states.json lists them all)."""
     st_rows = []
     for s in a.accessible_states[:MAX_STATE_ROWS]:
         prim = a.primitive_for_state(s)
         down = [a.names[i] for i in np.flatnonzero(s)]
         st_rows.append([_e(prim.name if prim is not None else "-")] + [str(int(x)) for x in s] + [_e(", ".join(down) or "none")])
     more = a.count - min(a.count, MAX_STATE_ROWS)
-    parts.append(
+    return (
         "<h3>Accessible control states</h3><p class=\"note\">1 = arm down (the robot turns under a Drive), "
         "scenario order; reached from all arms up by levels within the limits.</p>"
         + _table(["primitive"] + list(a.names) + ["arms down"], st_rows, left=(0, a.n + 1))
         + (f'<p class="note">... {more} more states (see states.json).</p>' if more > 0 else "")
     )
+
+
+def _primitive_levels_table(a) -> str:
+    """For a STRING design: the Hold level (V) that sets each primitive P_k, coming from a lower and from a
+    higher primitive (empty otherwise)."""
+    if not (a.is_string and a.raise_levels_V is not None):
+        return ""
+    lv = []
+    for k, p in enumerate(a.primitives):
+        up = a.raise_levels_V[k]
+        down = a.release_levels_V[k]
+        lv.append([_e(p.name), _e(", ".join(p.turning) or "none"), _fmt(up, "g") if np.isfinite(up) else "-",
+                   _fmt(down, "g") if np.isfinite(down) else "-"])
+    return ("<h3>Primitives</h3>" + _table(
+        ["primitive", "turning (arm down)", "Hold from a lower primitive (V)", "Hold from a higher primitive (V)"], lv, left=(0, 1)))
+
+
+def _control_matrix_table(a) -> str:
+    """The control matrix M (robots x primitives, at most 64 x 64 shown), rows named D_k for a STRING design."""
     M = np.asarray(a.control_matrix)
     if a.is_string:
         row_names = [f"D<sub>{k + 1}</sub> ({_e(a.order[k])})" for k in range(a.n)]
@@ -516,21 +577,16 @@ def _design_section(scenario, analysis, goals) -> str:
         row_names = [_e(nm) for nm in a.names]
     cols = [p.name for p in a.primitives[: M.shape[1]]] if M.shape[1] <= 64 else [f"P{k}" for k in range(M.shape[1])]
     m_rows = [[row_names[i]] + [str(int(x)) for x in M[i, :64]] for i in range(min(M.shape[0], 64))]
-    levels = ""
-    if a.is_string and a.raise_levels_V is not None:
-        lv = []
-        for k, p in enumerate(a.primitives):
-            up = a.raise_levels_V[k]
-            down = a.release_levels_V[k]
-            lv.append([_e(p.name), _e(", ".join(p.turning) or "none"), _fmt(up, "g") if np.isfinite(up) else "-",
-                       _fmt(down, "g") if np.isfinite(down) else "-"])
-        levels = ("<h3>Primitives</h3>" + _table(
-            ["primitive", "turning (arm down)", "Hold from a lower primitive (V)", "Hold from a higher primitive (V)"], lv, left=(0, 1)))
-    parts.append(
+    return (
         "<h3>Control matrix M</h3><p class=\"note\">M[i][k] = 1 when the robot turns under P<sub>k</sub>; "
-        "a 0 means it drives straight.</p>" + _table(["robot"] + cols[:64], m_rows) + levels
+        "a 0 means it drives straight.</p>" + _table(["robot"] + cols[:64], m_rows)
     )
-    return "".join(parts)
+
+
+def _design_section(scenario, analysis, goals) -> str:
+    """The voltage design: verdict and limits, the robots, the accessible control states, M and the primitives' levels."""
+    return (_design_verdict(analysis) + _robots_table(scenario, analysis, goals) + _states_table(analysis)
+            + _control_matrix_table(analysis) + _primitive_levels_table(analysis))
 
 
 def _plan_section(plan_summary: Mapping[str, Any], plan_steps: Sequence[tuple[str, Sequence[str], float]], notes: Sequence[str],
@@ -643,6 +699,90 @@ def _events_section(events: Sequence[Mapping[str, Any]]) -> str:
     )
 
 
+def _subtitle(scenario, result: Mapping[str, Any], source: str | None) -> str:
+    """The line under the title: scenario (and its file), number of robots, outcome, plant seed."""
+    return (
+        f"scenario {_e(scenario.name)}{f' ({_e(source)})' if source else ''}: {scenario.n} robots; "
+        + ("assembled" if result.get("success") else "not assembled")
+        + f"; plant seed {_e(result.get('seed'))}"
+    )
+
+
+def _outcome_section(result: Mapping[str, Any]) -> str:
+    """The verdict banner and what the main job did to reach it."""
+    return _verdict(result) + (
+        "<p>The main job: analyse the voltage design, turn the plan's primitives into a waveform, plan the assembly, "
+        "then run it in closed loop on the simulated plant (control error, contact, compliance, noisy camera): every "
+        "replanning interval the controller measures the poses and re-plans from where the robots really are.</p>"
+    )
+
+
+def _waveform_section(w: Mapping[str, Any], figures: Mapping[str, bytes], max_V: float) -> str:
+    """The plan's waveform: picture, segment counts, duration (s) and the levels used (V) against ``[0, max_V]``.
+
+    ``w`` is :meth:`stressbots.waveform.WaveformSummary.as_dict` (plus an optional ``"excerpt"`` text
+    saying what the sampled file holds).
+    """
+    levels = ", ".join(f"{v:g}" for v in w.get("levels_V", ()))
+    return (
+        "<p>The voltage signal every robot receives while the nominal plan is executed open loop: each step is reached "
+        "with the fewest setting levels (Holds), then driven (a square wave in the drive band). The closed loop sends "
+        "the same kind of waveform, one replanning interval at a time.</p>"
+        + _img(figures, "waveform", "plan waveform")
+        + _kv([
+            ("segments", f"{_e(w.get('segments'))} ({_e(w.get('holds'))} Holds, {_e(w.get('drives'))} Drives)"),
+            ("duration", f"{_fmt(w.get('duration_s'), '.2f')} s"),
+            ("levels used", f"{_e(levels)} V (min {_fmt(w.get('min_V'), 'g')} V, max {_fmt(w.get('max_V'), 'g')} V, "
+                            f"within [0, {max_V:g}] V)"),
+            ("files", _e(w.get("excerpt", "waveform.json: every segment"))),
+        ])
+    )
+
+
+def _run_section(animation: Mapping[str, Any], figures: Mapping[str, bytes]) -> str:
+    """The closed-loop run: the animation (:func:`animation_data`), the trajectories and, for a run with the
+    image in the loop, the tracked camera frames."""
+    return (
+        "<p>The closed-loop run on the simulated plant: true poses (not the camera's), resampled at uniform times. "
+        "Grey dashed outlines: the planned slots; dotted outlines in a robot's colour: its re-targeted slot, drawn from "
+        "the moment G<sub>1</sub> formed (when the controller learnt it); faint outlines: the start poses; the thick "
+        "edge is each robot's front. Axes in um, with a scale bar. Press Play or drag the slider; the latest events "
+        "are listed under the picture.</p>"
+        + animation_html(animation, element_id="run-animation")
+        + "<h3>Trajectories</h3>"
+        + _img(figures, "run", "closed-loop trajectories")
+        + ("<h3>Camera frames (image in the loop)</h3><p>The controller saw the robots only through these rendered frames "
+           "and the tracker; outlines: the tracked poses.</p>" + _img(figures, "frames", "tracked camera frames")
+           if figures.get("frames") else "")
+    )
+
+
+def _structure_section(result: Mapping[str, Any], figures: Mapping[str, bytes]) -> str:
+    """The final bodies against the target after the best proper rigid alignment, with the shape error (um RMS)."""
+    return (
+        "<p>Final bodies (filled) against the target structure after the best proper rigid alignment (dark outlines; "
+        "success is judged on this shape, since the pair may legitimately end shifted or rotated) and the target where "
+        "it was planned (dotted).</p>" + _img(figures, "structure", "final structure against the target")
+        + f"<p>Shape error {_fmt(result.get('shape_error_rms_um'))} um RMS over the body corners, alignment rotation "
+        f"{_fmt(result.get('shape_rotation_deg'))}&deg;.</p>"
+    )
+
+
+def _files_section(files: Sequence[tuple[str, str]], provenance: Mapping[str, Any] | None) -> str:
+    """Relative links to the files written beside the report, and the provenance (versions, seed)."""
+    prov = provenance or {}
+    versions = prov.get("versions", {})
+    file_rows = [[f'<a href="{_e(name)}">{_e(name)}</a>', _e(desc)] for name, desc in files]
+    return (
+        "<p>Written beside this report (links are relative; this page needs no network).</p>"
+        + _table(["file", "content"], file_rows, left=(0, 1))
+        + "<p class=\"note\">Provenance: "
+        + _e(", ".join(f"{k} {v}" for k, v in versions.items()))
+        + (f"; seed {_e(prov.get('seed'))}" if prov.get("seed") is not None else "")
+        + "</p>"
+    )
+
+
 def build_report(
     *,
     title: str,
@@ -663,7 +803,7 @@ def build_report(
     source: str | None = None,
     coverage: Mapping[str, Any] | None = None,
 ) -> str:
-    """The report's HTML text.
+    """The report's HTML text: one section per entry of :data:`SECTIONS` (and ``coverage`` when given).
 
     Parameters
     ----------
@@ -677,7 +817,7 @@ def build_report(
     result:
         The ``result.json`` document of the closed-loop run.
     figures:
-        PNG bytes: ``"waveform"``, ``"plan"``, ``"run"``, ``"structure"``.
+        PNG bytes: ``"waveform"``, ``"plan"``, ``"run"``, ``"structure"`` (optionally ``"frames"``, ``"coverage"``).
     animation:
         :func:`animation_data` of the run.
     events:
@@ -692,75 +832,24 @@ def build_report(
         (:meth:`stressbots.coverage.ControllerCoverage.to_dict`), shown with ``figures["coverage"]`` in a
         section after the metrics.
     """
-    w = waveform_summary
-    ok = bool(result.get("success"))
-    subtitle = (
-        f"scenario {_e(scenario.name)}{f' ({_e(source)})' if source else ''}: {scenario.n} robots; "
-        + ("assembled" if ok else "not assembled")
-        + f"; plant seed {_e(result.get('seed'))}"
-    )
-    sec: dict[str, str] = {}
-    sec["verdict"] = _verdict(result) + (
-        "<p>The main job: analyse the voltage design, turn the plan's primitives into a waveform, plan the assembly, "
-        "then run it in closed loop on the simulated plant (control error, contact, compliance, noisy camera): every "
-        "replanning interval the controller measures the poses and re-plans from where the robots really are.</p>"
-    )
-    sec["design"] = _design_section(scenario, analysis, goals)
-    levels = ", ".join(f"{v:g}" for v in w.get("levels_V", ()))
-    sec["waveform"] = (
-        "<p>The voltage signal every robot receives while the nominal plan is executed open loop: each step is reached "
-        "with the fewest setting levels (Holds), then driven (a square wave in the drive band). The closed loop sends "
-        "the same kind of waveform, one replanning interval at a time.</p>"
-        + _img(figures, "waveform", "plan waveform")
-        + _kv([
-            ("segments", f"{_e(w.get('segments'))} ({_e(w.get('holds'))} Holds, {_e(w.get('drives'))} Drives)"),
-            ("duration", f"{_fmt(w.get('duration_s'), '.2f')} s"),
-            ("levels used", f"{_e(levels)} V (min {_fmt(w.get('min_V'), 'g')} V, max {_fmt(w.get('max_V'), 'g')} V, "
-                            f"within [0, {analysis.electrodes.max_V:g}] V)"),
-            ("files", _e(w.get("excerpt", "waveform.json: every segment"))),
-        ])
-    )
-    sec["plan"] = _plan_section(plan_summary, plan_steps, plan_notes, figures)
-    sec["run"] = (
-        "<p>The closed-loop run on the simulated plant: true poses (not the camera's), resampled at uniform times. "
-        "Grey dashed outlines: the planned slots; dotted outlines in a robot's colour: its re-targeted slot, drawn from "
-        "the moment G<sub>1</sub> formed (when the controller learnt it); faint outlines: the start poses; the thick "
-        "edge is each robot's front. Axes in um, with a scale bar. Press Play or drag the slider; the latest events "
-        "are listed under the picture.</p>"
-        + animation_html(animation, element_id="run-animation")
-        + "<h3>Trajectories</h3>"
-        + _img(figures, "run", "closed-loop trajectories")
-        + ("<h3>Camera frames (image in the loop)</h3><p>The controller saw the robots only through these rendered frames "
-           "and the tracker; outlines: the tracked poses.</p>" + _img(figures, "frames", "tracked camera frames")
-           if figures.get("frames") else "")
-    )
-    sec["structure"] = (
-        "<p>Final bodies (filled) against the target structure after the best proper rigid alignment (dark outlines; "
-        "success is judged on this shape, since the pair may legitimately end shifted or rotated) and the target where "
-        "it was planned (dotted).</p>" + _img(figures, "structure", "final structure against the target")
-        + f"<p>Shape error {_fmt(result.get('shape_error_rms_um'))} um RMS over the body corners, alignment rotation "
-        f"{_fmt(result.get('shape_rotation_deg'))}&deg;.</p>"
-    )
-    sec["metrics"] = _metrics_section(result, comparisons)
-    sec["events"] = _events_section(events)
-    prov = provenance or {}
-    versions = prov.get("versions", {})
-    file_rows = [[f'<a href="{_e(name)}">{_e(name)}</a>', _e(desc)] for name, desc in files]
-    sec["files"] = (
-        "<p>Written beside this report (links are relative; this page needs no network).</p>"
-        + _table(["file", "content"], file_rows, left=(0, 1))
-        + "<p class=\"note\">Provenance: "
-        + _e(", ".join(f"{k} {v}" for k, v in versions.items()))
-        + (f"; seed {_e(prov.get('seed'))}" if prov.get("seed") is not None else "")
-        + "</p>"
-    )
+    sec = {
+        "verdict": _outcome_section(result),
+        "design": _design_section(scenario, analysis, goals),
+        "waveform": _waveform_section(waveform_summary, figures, analysis.electrodes.max_V),
+        "plan": _plan_section(plan_summary, plan_steps, plan_notes, figures),
+        "run": _run_section(animation, figures),
+        "structure": _structure_section(result, figures),
+        "metrics": _metrics_section(result, comparisons),
+        "events": _events_section(events),
+        "files": _files_section(files, provenance),
+    }
     sections = SECTIONS
     if coverage is not None:
         sec["coverage"] = coverage_section(coverage, figures.get("coverage"))
         at = [sid for sid, _ in SECTIONS].index("metrics") + 1
         sections = (*SECTIONS[:at], ("coverage", "Controller regions"), *SECTIONS[at:])
     body = "\n".join(f'<section id="{sid}"><h2>{_e(head)}</h2>\n{sec[sid]}\n</section>' for sid, head in sections)
-    return _page(title, subtitle, body, nav=sections)
+    return _page(title, _subtitle(scenario, result, source), body, nav=sections)
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, NamedTuple
 
 import numpy as np
 import shapely
@@ -470,19 +470,30 @@ def _uncovered_spans(lo: np.ndarray, hi: np.ndarray, length: float) -> list[tupl
     return spans
 
 
-def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
-    """Free sides of the union of rectangles ``corners`` ``(k, 4, 2)`` (clockwise, front-left first).
+class _EdgeCover(NamedTuple):
+    """The edges of ``k`` rectangles and the stretch of each edge every other grown body covers.
 
-    Every body edge minus what the other bodies cover (grown by the tolerance, so touching counts as
-    covering), cut ends put back where the contact really is, then collinear adjacent pieces of
-    different robots merged into one side. Each grown body is a rectangle, so the covered stretch of an
-    edge is an exact interval (clipping against two slabs), vectorised over all edges and bodies.
+    Edge ``e`` of body ``j`` runs from corner ``e`` to corner ``e + 1`` (clockwise, front-left first);
+    along it, body ``i`` grown by :data:`POS_TOL_UM` covers ``[lo[j, e, i], hi[j, e, i]]`` (um from the
+    edge's start; empty when ``lo >= hi``, and always empty for ``i == j``).
     """
-    k = len(names)
-    if k == 0:
-        return ()
-    corners = np.asarray(corners, dtype=np.float64)
-    starts = corners  # (k, 4, 2) edge e runs from corner e to corner e+1
+
+    starts: np.ndarray  # (k, 4, 2) um: first corner of each edge
+    tangents: np.ndarray  # (k, 4, 2): unit direction of each edge
+    lengths: np.ndarray  # (k, 4) um
+    lo: np.ndarray  # (k, 4, k) um
+    hi: np.ndarray  # (k, 4, k) um
+
+
+def _edge_cover(corners: np.ndarray) -> _EdgeCover:
+    """Clip every edge of the rectangles ``corners`` ``(k, 4, 2)`` (um) against every grown body.
+
+    A grown body is a rectangle, so the covered stretch of an edge is an exact interval: the
+    intersection of the edge's line with two slabs (one per body axis), vectorised over all edges and
+    bodies. Growing by the tolerance makes touching count as covering.
+    """
+    k = corners.shape[0]
+    starts = corners
     d = np.roll(corners, -1, axis=1) - corners
     lens = np.hypot(d[..., 0], d[..., 1])  # (k, 4)
     t = d / lens[..., None]
@@ -508,67 +519,111 @@ def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
     hi = np.minimum(hi, lens[..., None])
     idx = np.arange(k)
     lo[idx, :, idx] = np.inf  # a body does not cover itself
+    return _EdgeCover(starts, t, lens, lo, hi)
 
-    # piece: (normal, offset n.p, u0, u1 along t = (n_y, -n_x) from the origin, robot index, edge index)
-    pieces: list[tuple[np.ndarray, float, float, float, int, int]] = []
+
+class _Piece(NamedTuple):
+    """An uncovered stretch of one body edge, on the line ``normal . p = offset_um``, from ``u0_um`` to
+    ``u1_um`` along ``t = (n_y, -n_x)`` measured from the origin (um)."""
+
+    normal: np.ndarray  # outward unit normal
+    offset_um: float
+    u0_um: float
+    u1_um: float
+    robot: int
+    edge: int
+
+
+def _free_pieces(cover: _EdgeCover) -> list[_Piece]:
+    """Every stretch of every edge that no other body covers and that is longer than twice the
+    tolerance (shorter ones are rounding at a contact, not room to dock on)."""
+    k = cover.lengths.shape[0]
+    pieces: list[_Piece] = []
     for j in range(k):
         for e in range(4):
-            spans = _uncovered_spans(lo[j, e], hi[j, e], float(lens[j, e]))
-            tt = t[j, e]
+            spans = _uncovered_spans(cover.lo[j, e], cover.hi[j, e], float(cover.lengths[j, e]))
+            tt = cover.tangents[j, e]
             nrm = np.array([-tt[1], tt[0]])  # corners run clockwise: outside is on the left
-            a_t = float(np.dot(starts[j, e], tt))
-            off = float(np.dot(nrm, starts[j, e]))
+            a_t = float(np.dot(cover.starts[j, e], tt))
+            off = float(np.dot(nrm, cover.starts[j, e]))
             for u0, u1 in spans:
                 if u1 - u0 > 2.0 * POS_TOL_UM:
-                    pieces.append((nrm, off, a_t + u0, a_t + u1, j, e))
+                    pieces.append(_Piece(nrm, off, a_t + u0, a_t + u1, j, e))
+    return pieces
 
-    # Group pieces on one line with one outward normal, then merge touching runs along it.
+
+def _collinear_groups(pieces: Sequence[_Piece]) -> list[list[int]]:
+    """Indices of ``pieces`` grouped by line: one outward normal (within twice :data:`ANG_TOL_RAD`) and
+    one offset (within :data:`POS_TOL_UM`) as the group's first piece, in order of first appearance."""
     cos_tol = math.cos(2.0 * ANG_TOL_RAD)
     groups: list[list[int]] = []
     for piece, (nrm, off, *_rest) in enumerate(pieces):
         for grp in groups:
-            n0, off0 = pieces[grp[0]][0], pieces[grp[0]][1]
+            n0, off0 = pieces[grp[0]].normal, pieces[grp[0]].offset_um
             if float(np.dot(nrm, n0)) >= cos_tol and abs(off - off0) <= POS_TOL_UM:
                 grp.append(piece)
                 break
         else:
             groups.append([piece])
+    return groups
 
+
+def _group_sides(pieces: Sequence[_Piece], grp: Sequence[int], names: Sequence[str]) -> list[tuple[tuple[int, int, float], Side]]:
+    """The sides of one line: its touching pieces (gaps up to :data:`POS_TOL_UM`) merged into runs.
+
+    The line is the first piece's normal at the length-weighted mean offset (um). Each side comes with
+    its sort key, the smallest ``(robot, edge, u0)`` of its pieces, so sides keep the order of the
+    bodies' edges.
+    """
+    n0 = pieces[grp[0]].normal
+    t0 = np.array([n0[1], -n0[0]])
+    wts = np.array([pieces[i].u1_um - pieces[i].u0_um for i in grp])
+    off = float(np.average([pieces[i].offset_um for i in grp], weights=wts))
+    # Coordinates along the group's own tangent (pieces' t are within tolerance of t0).
+    along: list[tuple[float, float, int, int]] = []
+    for i in grp:
+        nrm, _, u0, u1, j, e = pieces[i]
+        t = np.array([nrm[1], -nrm[0]])
+        p0 = u0 * t + pieces[i].offset_um * nrm
+        p1 = u1 * t + pieces[i].offset_um * nrm
+        along.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
+    along.sort()
+    runs: list[list] = []
+    for u0, u1, j, e in along:
+        if runs and u0 <= runs[-1][1] + POS_TOL_UM:
+            runs[-1][1] = max(runs[-1][1], u1)
+            runs[-1][2].append((j, e, u0, u1))
+        else:
+            runs.append([u0, u1, [(j, e, u0, u1)]])
     sides: list[tuple[tuple[int, int, float], Side]] = []
-    for grp in groups:
-        n0 = pieces[grp[0]][0]
-        t0 = np.array([n0[1], -n0[0]])
-        wts = np.array([pieces[i][3] - pieces[i][2] for i in grp])
-        off = float(np.average([pieces[i][1] for i in grp], weights=wts))
-        # Coordinates along the group's own tangent (pieces' t are within tolerance of t0).
-        along: list[tuple[float, float, int, int]] = []
-        for i in grp:
-            nrm, _, u0, u1, j, e = pieces[i]
-            t = np.array([nrm[1], -nrm[0]])
-            p0 = u0 * t + pieces[i][1] * nrm
-            p1 = u1 * t + pieces[i][1] * nrm
-            along.append((float(np.dot(p0, t0)), float(np.dot(p1, t0)), j, e))
-        along.sort()
-        runs: list[list] = []
-        for u0, u1, j, e in along:
-            if runs and u0 <= runs[-1][1] + POS_TOL_UM:
-                runs[-1][1] = max(runs[-1][1], u1)
-                runs[-1][2].append((j, e, u0, u1))
-            else:
-                runs.append([u0, u1, [(j, e, u0, u1)]])
-        for u0, u1, members in runs:
-            start = u0 * t0 + off * n0
-            end = u1 * t0 + off * n0
-            order = sorted({j for j, *_ in members})
-            side = Side(
-                start=(float(start[0]), float(start[1])),
-                end=(float(end[0]), float(end[1])),
-                normal=(float(n0[0]), float(n0[1])),
-                robots=tuple(names[j] for j in order),
-                pieces=tuple((names[j], a - u0, b - u0) for j, _, a, b in members),
-            )
-            key = min((j, e, a) for j, e, a, _ in members)
-            sides.append((key, side))
+    for u0, u1, members in runs:
+        start = u0 * t0 + off * n0
+        end = u1 * t0 + off * n0
+        order = sorted({j for j, *_ in members})
+        side = Side(
+            start=(float(start[0]), float(start[1])),
+            end=(float(end[0]), float(end[1])),
+            normal=(float(n0[0]), float(n0[1])),
+            robots=tuple(names[j] for j in order),
+            pieces=tuple((names[j], a - u0, b - u0) for j, _, a, b in members),
+        )
+        key = min((j, e, a) for j, e, a, _ in members)
+        sides.append((key, side))
+    return sides
+
+
+def _free_sides(corners: np.ndarray, names: Sequence[str]) -> tuple[Side, ...]:
+    """Free sides of the union of rectangles ``corners`` ``(k, 4, 2)`` (clockwise, front-left first).
+
+    Every body edge minus what the other bodies cover (grown by the tolerance, so touching counts as
+    covering), cut ends put back where the contact really is, then collinear adjacent pieces of
+    different robots merged into one side. Each grown body is a rectangle, so the covered stretch of an
+    edge is an exact interval (clipping against two slabs), vectorised over all edges and bodies.
+    """
+    if len(names) == 0:
+        return ()
+    pieces = _free_pieces(_edge_cover(np.asarray(corners, dtype=np.float64)))
+    sides = [ks for grp in _collinear_groups(pieces) for ks in _group_sides(pieces, grp, names)]
     sides.sort(key=lambda ks: ks[0])
     return tuple(s for _, s in sides)
 
@@ -667,16 +722,19 @@ def _check_pair(gn: _Geom, gm: _Geom, pn: np.ndarray, pm: np.ndarray) -> None:
         raise PlanningError(f"{head}: bodies overlap by {-gap:.1f} um along their axis")
 
 
-def _assemble(
-    geoms: Sequence[_Geom],
-    poses: np.ndarray,
-    approach: np.ndarray,
-    *,
-    shape: str,
-    frame: Pose | None,
-    variant: str,
-) -> Structure:
-    """Validate poses (docking order) against the docking rules and build the :class:`Structure`."""
+class _Bodies(NamedTuple):
+    """The bodies of a structure's slots in docking order, in the forms the docking rules test."""
+
+    names: list[str]
+    poses: np.ndarray  # (n, 3) um, rad (headings wrapped)
+    corners: np.ndarray  # (n, 4, 2) um, clockwise from front-left
+    heads: np.ndarray  # (n, 2) unit heading vectors
+    polys: list[Polygon]
+    shrunk: list[Polygon]  # shrunk by half the tolerance: they meet only where bodies really overlap
+
+
+def _bodies(geoms: Sequence[_Geom], poses: np.ndarray) -> _Bodies:
+    """The bodies at ``poses`` (docking order, um, rad); a non-finite pose is rejected naming its robot."""
     n = len(geoms)
     poses = np.asarray(poses, dtype=np.float64).reshape(n, 3)
     if not np.all(np.isfinite(poses)):
@@ -688,12 +746,13 @@ def _assemble(
     widths = np.array([g.width_um for g in geoms])
     corners = body_corners(poses, lengths, widths)
     heads = np.stack([np.sin(poses[:, 2]), np.cos(poses[:, 2])], axis=1)
-    names = [g.name for g in geoms]
     polys = [Polygon(c) for c in corners]
-    shrunk = [_shrunk(p) for p in polys]
+    return _Bodies([g.name for g in geoms], poses, corners, heads, polys, [_shrunk(p) for p in polys])
 
-    _check_pair(geoms[0], geoms[1], poses[0], poses[1])
-    sides_by_k: list[tuple[Side, ...]] = [(), _free_sides(corners[:1], names[:1]), _free_sides(corners[:2], names[:2])]
+
+def _pair_slots(geoms: Sequence[_Geom], b: _Bodies, approach: np.ndarray) -> list[Slot]:
+    """The slots of G_1 (D_n, D_{n-1}), once checked head-on: each one's contact is its partner's front edge."""
+    _check_pair(geoms[0], geoms[1], b.poses[0], b.poses[1])
     slots: list[Slot] = []
     for k, partner in ((0, 1), (1, 0)):
         g = geoms[k]
@@ -701,61 +760,91 @@ def _assemble(
             Slot(
                 robot=g.name,
                 index=g.index,
-                pose=Pose(*map(float, poses[k])),
+                pose=Pose(*map(float, b.poses[k])),
                 role="pair",
                 length_um=g.length_um,
                 width_um=g.width_um,
                 orbit_radius_um=g.orbit_radius_um,
-                contact=tuple(map(tuple, corners[partner, :2].tolist())),  # type: ignore[arg-type]
-                supports=(names[partner],),
-                neighbours=(names[partner],),
-                partner=names[partner],
+                contact=tuple(map(tuple, b.corners[partner, :2].tolist())),  # type: ignore[arg-type]
+                supports=(b.names[partner],),
+                neighbours=(b.names[partner],),
+                partner=b.names[partner],
                 approach_um=float(approach[k]),
             )
         )
+    return slots
 
-    for k in range(2, n):
-        g = geoms[k]
-        who = _label(g.index, g.name)
-        # 1. Body outside the structure built so far (touching allowed).
-        for j in range(k):
-            if shrunk[k].intersects(shrunk[j]):
-                area = _overlap_area(polys[k], polys[j])
-                raise PlanningError(
-                    f"{who}: body overlaps {_label(geoms[j].index, geoms[j].name)} by {area:.0f} um^2"
-                )
-        # 2. Front edge flush with a free side.
-        found = _flush_side(sides_by_k[k], corners[k], heads[k])
-        if found[0] is None:
-            raise PlanningError(f"{who}: {found[1]}")
-        side, u0, u1 = found
-        # 3. Approachable: the straight corridor behind the slot crosses nothing docked before.
-        lane = _shrunk(_corridor(corners[k], heads[k], float(approach[k])))
-        for j in range(k):
-            if lane.intersects(shrunk[j]):
-                area = _overlap_area(_corridor(corners[k], heads[k], float(approach[k])), polys[j])
-                raise PlanningError(
-                    f"{who}: approach corridor ({approach[k]:.0f} um straight back along its heading) "
-                    f"crosses {_label(geoms[j].index, geoms[j].name)}'s body ({area:.0f} um^2)"
-                )
-        touching = tuple(names[j] for j in range(k) if polys[k].distance(polys[j]) <= POS_TOL_UM)
-        slots.append(
-            Slot(
-                robot=g.name,
-                index=g.index,
-                pose=Pose(*map(float, poses[k])),
-                role="dock",
-                length_um=g.length_um,
-                width_um=g.width_um,
-                orbit_radius_um=g.orbit_radius_um,
-                contact=side.segment,
-                supports=side.supports(u0, u1),
-                neighbours=touching,
-                partner=None,
-                approach_um=float(approach[k]),
+
+def _check_outside(geoms: Sequence[_Geom], b: _Bodies, k: int) -> None:
+    """Docking rule 1 for slot ``k``: its body lies outside the structure built so far (touching allowed)."""
+    for j in range(k):
+        if b.shrunk[k].intersects(b.shrunk[j]):
+            area = _overlap_area(b.polys[k], b.polys[j])
+            raise PlanningError(
+                f"{_label(geoms[k].index, geoms[k].name)}: body overlaps {_label(geoms[j].index, geoms[j].name)} by {area:.0f} um^2"
             )
-        )
-        sides_by_k.append(_free_sides(corners[: k + 1], names[: k + 1]))
+
+
+def _check_corridor(geoms: Sequence[_Geom], b: _Bodies, k: int, approach_um: float) -> None:
+    """Docking rule 3 for slot ``k``: the straight corridor ``approach_um`` (um) back along its heading,
+    the way the robot drives in, crosses no body docked before it."""
+    lane = _shrunk(_corridor(b.corners[k], b.heads[k], approach_um))
+    for j in range(k):
+        if lane.intersects(b.shrunk[j]):
+            area = _overlap_area(_corridor(b.corners[k], b.heads[k], approach_um), b.polys[j])
+            raise PlanningError(
+                f"{_label(geoms[k].index, geoms[k].name)}: approach corridor ({approach_um:.0f} um straight back along "
+                f"its heading) crosses {_label(geoms[j].index, geoms[j].name)}'s body ({area:.0f} um^2)"
+            )
+
+
+def _dock_slot(geoms: Sequence[_Geom], b: _Bodies, k: int, sides: Sequence[Side], approach_um: float) -> Slot:
+    """The slot of the ``k``-th robot to dock (k >= 2) on the structure of the first ``k`` slots, whose free
+    sides are ``sides``, once it meets the docking rules: body outside the structure, front edge flush with
+    a free side (its contact), approach corridor clear. Its neighbours are the bodies it touches."""
+    _check_outside(geoms, b, k)
+    found = _flush_side(sides, b.corners[k], b.heads[k])
+    if found[0] is None:
+        raise PlanningError(f"{_label(geoms[k].index, geoms[k].name)}: {found[1]}")
+    side, u0, u1 = found
+    _check_corridor(geoms, b, k, approach_um)
+    g = geoms[k]
+    return Slot(
+        robot=g.name,
+        index=g.index,
+        pose=Pose(*map(float, b.poses[k])),
+        role="dock",
+        length_um=g.length_um,
+        width_um=g.width_um,
+        orbit_radius_um=g.orbit_radius_um,
+        contact=side.segment,
+        supports=side.supports(u0, u1),
+        neighbours=tuple(b.names[j] for j in range(k) if b.polys[k].distance(b.polys[j]) <= POS_TOL_UM),
+        partner=None,
+        approach_um=approach_um,
+    )
+
+
+def _assemble(
+    geoms: Sequence[_Geom],
+    poses: np.ndarray,
+    approach: np.ndarray,
+    *,
+    shape: str,
+    frame: Pose | None,
+    variant: str,
+) -> Structure:
+    """Validate poses (docking order) against the docking rules and build the :class:`Structure`.
+
+    ``approach`` holds each slot's straight approach (um). The free sides of every partial structure
+    (the first k slots, k = 0..n) are kept in the structure for the planner and the controller.
+    """
+    b = _bodies(geoms, poses)
+    slots = _pair_slots(geoms, b, approach)
+    sides_by_k: list[tuple[Side, ...]] = [(), _free_sides(b.corners[:1], b.names[:1]), _free_sides(b.corners[:2], b.names[:2])]
+    for k in range(2, len(geoms)):
+        slots.append(_dock_slot(geoms, b, k, sides_by_k[k], float(approach[k])))
+        sides_by_k.append(_free_sides(b.corners[: k + 1], b.names[: k + 1]))
     return Structure(slots=tuple(slots), shape=shape, frame=frame, variant=variant, _sides=tuple(sides_by_k))
 
 

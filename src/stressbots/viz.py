@@ -222,24 +222,9 @@ def _draw_cone(ax, cone, speed_um_s: float, radius_um: float, model, colour, *, 
     )
 
 
-def plot_bounds(scenario, report):
-    """The error bounds of a scenario (``stressbots bounds``), six panels.
-
-    Top: ``delta_xy(t)`` and ``delta_theta(t)`` of pure turning (solid) and pure straight motion
-    (dashed) per robot, with ``t_2pi`` marked (where ``C_alpha,i`` is read); the regions A_i* in the
-    arena (filled; the nominal preimage of G_i* outside C_O faint, C_O dashed, an example a_i as an
-    arrow). Bottom: the reachable cones of fine motion (seed Fig. 4) with the forward projections of
-    their extreme sequences (grey paths, corner error cases): S_2f of a docking robot, S_3f of D_{n-1}
-    and of D_n.
-
-    ``report`` is a :class:`stressbots.bounds.BoundsReport`.
-    """
-    plt = _plt()
-    cols = robot_colours(scenario.n)
-    colour = {name: cols[i] for i, name in enumerate(scenario.names)}
-    fig = plt.figure(figsize=(16, 10))
-    gs = fig.add_gridspec(2, 3, hspace=0.32, wspace=0.28)
-    ax_xy, ax_th, ax_map = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[0, 2])
+def _delta_panels(ax_xy, ax_th, report, colour: dict) -> None:
+    """``delta_xy(t)`` (um) and ``delta_theta(t)`` (deg) of pure turning (solid) and pure straight motion
+    (dashed) per robot, ``t_2pi`` dotted (where ``C_alpha,i`` is read)."""
     for rb in report.robots:
         c = colour[rb.name]
         for curve, ls in ((rb.delta_turning, "-"), (rb.delta_straight, "--")):
@@ -258,7 +243,26 @@ def plot_bounds(scenario, report):
     for ax in (ax_xy, ax_th):
         ax.grid(True, lw=0.3, alpha=0.5)
 
-    # regions A_i*
+
+def _draw_region(ax, reg, c) -> None:
+    """One robot's sampled A_i* in colour ``c``: the preimage of G_i* outside C_O faint with its outline,
+    A_i* filled, an example intermediate pose a_i as a 120 um arrow along its heading."""
+    X, Y = np.meshgrid(reg.xs_um, reg.ys_um, indexing="ij")
+    pre = reg.preimage.any(axis=2)
+    if pre.any():
+        ax.contourf(X, Y, pre.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.08)], zorder=1)
+        ax.contour(X, Y, pre.astype(float), levels=[0.5], colors=[(*c[:3], 0.5)], linewidths=0.5, zorder=1)
+    a = reg.mask.any(axis=2)
+    if a.any():
+        ax.contourf(X, Y, a.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.35)], zorder=2)
+        ex = reg.example()
+        ax.annotate("", xy=(ex[0] + 120 * math.sin(ex[2]), ex[1] + 120 * math.cos(ex[2])), xytext=(ex[0], ex[1]),
+                    arrowprops=dict(arrowstyle="->", color=c, lw=1.4), zorder=4)
+
+
+def _regions_panel(ax_map, scenario, report, colour: dict) -> None:
+    """The regions A_i* in the arena over the slots (filled bodies) with C_O dashed, zoomed to the sampled
+    grids, and every robot's verdict in the title."""
     st = report.structure
     pts = []
     for rb in report.robots:
@@ -269,17 +273,7 @@ def plot_bounds(scenario, report):
             ax_map.plot(x, y, color=c, lw=0.7, ls="--", zorder=2)
         reg = rb.region
         if reg is not None:
-            X, Y = np.meshgrid(reg.xs_um, reg.ys_um, indexing="ij")
-            pre = reg.preimage.any(axis=2)
-            if pre.any():
-                ax_map.contourf(X, Y, pre.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.08)], zorder=1)
-                ax_map.contour(X, Y, pre.astype(float), levels=[0.5], colors=[(*c[:3], 0.5)], linewidths=0.5, zorder=1)
-            a = reg.mask.any(axis=2)
-            if a.any():
-                ax_map.contourf(X, Y, a.astype(float), levels=[0.5, 1.5], colors=[(*c[:3], 0.35)], zorder=2)
-                ex = reg.example()
-                ax_map.annotate("", xy=(ex[0] + 120 * math.sin(ex[2]), ex[1] + 120 * math.cos(ex[2])), xytext=(ex[0], ex[1]),
-                                arrowprops=dict(arrowstyle="->", color=c, lw=1.4), zorder=4)
+            _draw_region(ax_map, reg, c)
             pts.append([[reg.xs_um[0], reg.ys_um[0]], [reg.xs_um[-1], reg.ys_um[-1]]])
     goals = st.goal_poses(scenario.names)
     draw_bodies(ax_map, goals, scenario.lengths_um, scenario.widths_um, [colour[n] for n in scenario.names], fill_alpha=0.6, lw=0.8)
@@ -294,7 +288,10 @@ def plot_bounds(scenario, report):
     ax_map.set_ylabel("y (um)")
     ax_map.set_title(f"A_i* (solid), preimage of G_i* outside C_O (faint), C_O (dashed)\nguaranteed: {verdicts}", fontsize=8)
 
-    # reachable cones
+
+def _cone_panels(fig, gs, scenario, report, colour: dict) -> None:
+    """The bottom row: the reachable cones S_2f, S_3f of D_n-1 and S_3f of D_n (first cone of each label;
+    an empty panel when the report has none), the partner's fixed radius named in the title."""
     by_label: dict[str, Any] = {}
     for cone in report.cones:
         by_label.setdefault(cone.label, cone)
@@ -307,6 +304,29 @@ def plot_bounds(scenario, report):
             continue
         rob = scenario.robot(cone.robot)
         _draw_cone(ax, cone, rob.speed_um_s, rob.turn_radius_um, report.model, colour[cone.robot], fixed=fixed.get(cone.label, ""))
+
+
+def plot_bounds(scenario, report):
+    """The error bounds of a scenario (``stressbots bounds``), six panels.
+
+    Top: ``delta_xy(t)`` and ``delta_theta(t)`` of pure turning (solid) and pure straight motion
+    (dashed) per robot, with ``t_2pi`` marked (where ``C_alpha,i`` is read); the regions A_i* in the
+    arena (filled; the nominal preimage of G_i* outside C_O faint, C_O dashed, an example a_i as an
+    arrow). Bottom: the reachable cones of fine motion (seed Fig. 4) with the forward projections of
+    their extreme sequences (grey paths, corner error cases): S_2f of a docking robot, S_3f of D_{n-1}
+    and of D_n.
+
+    ``report`` is a :class:`stressbots.bounds.BoundsReport`.
+    """
+    plt = _plt()
+    cols = robot_colours(scenario.n)
+    colour = {name: cols[i] for i, name in enumerate(scenario.names)}
+    fig = plt.figure(figsize=(16, 10))
+    gs = fig.add_gridspec(2, 3, hspace=0.32, wspace=0.28)
+    ax_xy, ax_th, ax_map = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[0, 2])
+    _delta_panels(ax_xy, ax_th, report, colour)
+    _regions_panel(ax_map, scenario, report, colour)
+    _cone_panels(fig, gs, scenario, report, colour)
     fig.suptitle(
         f"{report.scenario}: error bounds ({report.model.k:g} sigma: speed +-{100 * report.model.speed_rel:.1f} %, radius "
         f"+-{100 * report.model.radius_rel:.1f} %, drift +-{math.degrees(report.model.drift_rad_per_um) * 1000:.2g} deg/mm)",
@@ -383,22 +403,12 @@ def plot_sweep(sweep: Sequence[dict], *, title: str = ""):
 # The main job's report (stressbots run / demo): a plan's waveform and the final structure
 
 
-def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int = 6, label_limit: int = 40):
-    """A plan's voltage waveform, two panels.
+def _draw_segments(ax, segs: Sequence, e) -> float:
+    """Each Hold as a spike from the middle of the drive band to its level (the level that sets the arms),
+    each Drive as a band between its two levels (V); returns the waveform's duration (s)."""
+    from .waveform import Hold
 
-    Top: the whole waveform, each Hold as a spike to its level (the level that sets the arms), each
-    Drive as a band between its two levels, with the robots' snap-down (red) and release (green)
-    thresholds dotted and, when there are at most ``label_limit`` drives, the primitive of each drive.
-    Bottom: the real signal at the start, sampled: the first Holds and ``zoom_periods`` periods of the
-    first Drive's square wave.
-    """
-    from .waveform import Drive, Hold, decode, excerpt, sample
-
-    plt = _plt()
-    e = analysis.electrodes
-    fig, (ax, az) = plt.subplots(2, 1, figsize=(10, 6.2), gridspec_kw={"height_ratios": [3, 2], "hspace": 0.42})
     t = 0.0
-    segs = list(waveform)
     for seg in segs:
         t1 = t + seg.duration_s
         if isinstance(seg, Hold):
@@ -407,23 +417,37 @@ def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int
         else:
             ax.fill_between([t, t1], seg.low_V, seg.high_V, color="tab:orange", alpha=0.35, lw=0)
         t = t1
-    total = max(t, 1e-9)
+    return t
+
+
+def _label_drives(ax, segs: Sequence, analysis, total_s: float, label_limit: int) -> None:
+    """The primitive of each Drive (decoded from the waveform, the single source of truth for arm states)
+    above the drive band, when there are at most ``label_limit`` Drives; Drives shorter than 1.2 % of
+    the waveform stay unlabelled, since their labels would overlap."""
+    from .waveform import decode
+
     drives = decode(segs, analysis.snap_down_V, analysis.release_V)
     if len(drives) <= label_limit:
         for d in drives:
             prim = analysis.primitive_for_state(d.states)
-            if prim is not None and d.duration_s > 0.012 * total:
-                ax.text(d.t_start_s + 0.5 * d.duration_s, e.drive_high_V + 2, prim.name, ha="center", va="bottom", fontsize=6.5)
+            if prim is not None and d.duration_s > 0.012 * total_s:
+                ax.text(d.t_start_s + 0.5 * d.duration_s, analysis.electrodes.drive_high_V + 2, prim.name, ha="center",
+                        va="bottom", fontsize=6.5)
+
+
+def _threshold_lines(ax, analysis, total_s: float) -> None:
+    """Every robot's snap-down (red) and release (green) threshold (V), dotted and named at the right edge."""
     for i, nm in enumerate(analysis.names):
         for v, col, lab in ((analysis.snap_down_V[i], "tab:red", "V_d"), (analysis.release_V[i], "tab:green", "V_u")):
             ax.axhline(v, color=col, ls=":", lw=0.7)
-            ax.text(total * 1.005, v, f"{lab} {nm}", va="center", fontsize=6.5, color=col)
-    ax.set_xlim(0, total * 1.07)
-    ax.set_ylim(0, e.max_V * 1.03)
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("level (V)")
-    ax.set_title(title or f"Plan waveform: {len(segs)} segments, {total:.1f} s (Holds blue, Drives orange)", fontsize=10)
-    # zoom: from 0 to a few periods into the first Drive, sampled finely
+            ax.text(total_s * 1.005, v, f"{lab} {nm}", va="center", fontsize=6.5, color=col)
+
+
+def _signal_start(az, segs: Sequence, e, zoom_periods: int, total_s: float) -> None:
+    """The real signal from 0 to ``zoom_periods`` periods into the first Drive (the whole waveform when it
+    has none), sampled at 40 samples per drive period or more (at least 200 samples), time in ms."""
+    from .waveform import Drive, excerpt, sample
+
     t0 = 0.0
     end = None
     for seg in segs:
@@ -432,10 +456,9 @@ def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int
             break
         t0 += seg.duration_s
     if end is None:
-        end = total
-    head = excerpt(segs, end)
+        end = total_s
     rate = max(40.0 * e.drive_frequency_hz, 200.0 / max(end, 1e-9))
-    ts, vs = sample(head, rate_hz=rate, drive_frequency_hz=e.drive_frequency_hz, max_samples=200_000)
+    ts, vs = sample(excerpt(segs, end), rate_hz=rate, drive_frequency_hz=e.drive_frequency_hz, max_samples=200_000)
     az.step(ts * 1e3, vs, where="post", color="tab:blue", lw=1.0)
     az.axhspan(e.drive_low_V, e.drive_high_V, color="tab:orange", alpha=0.15, lw=0)
     az.set_xlim(0, end * 1e3)
@@ -447,6 +470,30 @@ def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int
         f"square wave at {e.drive_frequency_hz:g} Hz between {e.drive_low_V:g} and {e.drive_high_V:g} V",
         fontsize=8.5,
     )
+
+
+def plot_plan_waveform(waveform, analysis, *, title: str = "", zoom_periods: int = 6, label_limit: int = 40):
+    """A plan's voltage waveform, two panels.
+
+    Top: the whole waveform, each Hold as a spike to its level (the level that sets the arms), each
+    Drive as a band between its two levels, with the robots' snap-down (red) and release (green)
+    thresholds dotted and, when there are at most ``label_limit`` drives, the primitive of each drive.
+    Bottom: the real signal at the start, sampled: the first Holds and ``zoom_periods`` periods of the
+    first Drive's square wave.
+    """
+    plt = _plt()
+    e = analysis.electrodes
+    fig, (ax, az) = plt.subplots(2, 1, figsize=(10, 6.2), gridspec_kw={"height_ratios": [3, 2], "hspace": 0.42})
+    segs = list(waveform)
+    total = max(_draw_segments(ax, segs, e), 1e-9)
+    _label_drives(ax, segs, analysis, total, label_limit)
+    _threshold_lines(ax, analysis, total)
+    ax.set_xlim(0, total * 1.07)
+    ax.set_ylim(0, e.max_V * 1.03)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("level (V)")
+    ax.set_title(title or f"Plan waveform: {len(segs)} segments, {total:.1f} s (Holds blue, Drives orange)", fontsize=10)
+    _signal_start(az, segs, e, zoom_periods, total)
     for a in (ax, az):
         a.grid(True, lw=0.3, alpha=0.5)
     return fig

@@ -34,7 +34,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -135,6 +135,79 @@ def _positive(name: str, x: Any) -> float:
     return f
 
 
+class _Settings(NamedTuple):
+    """The checked settings of a compilation: the amplifier (electrode level ``gain * u + offset_V``), the
+    sample rate (Hz) and the generator's output limit (V)."""
+
+    gain: float
+    offset_V: float
+    sample_rate_hz: float
+    awg_max_V: float
+
+
+def _checked_settings(gain: Any, offset_V: Any, sample_rate_hz: Any, awg_max_V: Any, max_points: int) -> _Settings:
+    """The settings as numbers, or an :class:`AwgError` naming the first bad one (gain, sample rate,
+    generator limit, offset, then the memory size)."""
+    g = _positive("gain", gain)
+    rate = _positive("sample_rate_hz", sample_rate_hz)
+    umax = _positive("awg_max_V", awg_max_V)
+    off = float(offset_V)
+    if not math.isfinite(off):
+        raise AwgError(f"must be finite, got {off!r}", field="offset_V")
+    if int(max_points) < MIN_POINTS:
+        raise AwgError(f"must be at least {MIN_POINTS}, got {max_points}", field="max_points")
+    return _Settings(g, off, rate, umax)
+
+
+def _check_point_count(total_s: float, rate: float, max_points: int, drive_frequency_hz: float) -> None:
+    """Refuse a waveform of ``total_s`` seconds whose samples at ``rate`` (Hz) overflow the generator's
+    memory (saying how to split the plan) or are fewer than :data:`MIN_POINTS`."""
+    count = int(math.ceil(total_s * rate - 1e-9))
+    if count > max_points:
+        fit_s = max_points / rate
+        pieces = math.ceil(count / max_points)
+        raise AwgError(
+            f"{count} points ({total_s:g} s at {rate:g} Hz) exceed the generator's {int(max_points)}: split the plan into "
+            f"at least {pieces} pieces of at most {fit_s:g} s each (fewer steps per upload), or lower --sample-rate-hz "
+            f"(not below {2 * drive_frequency_hz:g} Hz, twice the drive frequency)"
+        )
+    if count < MIN_POINTS:
+        raise AwgError(
+            f"{count} points ({total_s:g} s at {rate:g} Hz) are fewer than the {MIN_POINTS} the generator needs: "
+            f"raise --sample-rate-hz or lengthen the waveform"
+        )
+
+
+def _output_range(u: np.ndarray, s: _Settings) -> tuple[float, float]:
+    """``(VOLT:LOW, VOLT:HIGH)`` (V) for the generator levels ``u``: their range, refused beyond
+    ``+-awg_max_V``, widened to :data:`MIN_SPAN_V` (inside the limit) when the waveform holds one level."""
+    lo, hi = float(u.min()), float(u.max())
+    umax = s.awg_max_V
+    if lo < -umax or hi > umax:
+        bad = lo if lo < -umax else hi
+        raise AwgError(
+            f"generator level {bad:g} V (electrode {s.gain * bad + s.offset_V:g} V at gain {s.gain:g}, offset {s.offset_V:g} V) "
+            f"is outside [-{umax:g}, {umax:g}] V: raise the amplifier gain or change the offset"
+        )
+    if hi - lo < MIN_SPAN_V:
+        if lo + MIN_SPAN_V <= umax:
+            hi = lo + MIN_SPAN_V
+        else:
+            lo = hi - MIN_SPAN_V
+    return lo, hi
+
+
+def _check_quantised(prog: AwgProgram, max_V: float) -> None:
+    """Refuse a program whose quantised codes put an electrode outside ``[0, max_V]`` (V, within
+    :data:`LEVEL_TOL_V`): rounding to the DAC's grid may push a level at the limit beyond it."""
+    ev = prog.electrode_volts()
+    if ev.min() < -LEVEL_TOL_V or ev.max() > max_V + LEVEL_TOL_V:
+        raise AwgError(
+            f"after quantisation an electrode level reaches {ev.min() if ev.min() < 0 else ev.max():g} V, outside "
+            f"[0, {max_V:g}] V (max_V): keep the waveform's levels further inside the range"
+        )
+
+
 def compile_awg(
     waveform: Sequence[Any],
     electrodes,
@@ -172,58 +245,21 @@ def compile_awg(
     """
     from ..waveform import check_limits, duration, sample
 
-    g = _positive("gain", gain)
-    rate = _positive("sample_rate_hz", sample_rate_hz)
-    umax = _positive("awg_max_V", awg_max_V)
-    off = float(offset_V)
-    if not math.isfinite(off):
-        raise AwgError(f"must be finite, got {off!r}", field="offset_V")
-    if int(max_points) < MIN_POINTS:
-        raise AwgError(f"must be at least {MIN_POINTS}, got {max_points}", field="max_points")
+    s = _checked_settings(gain, offset_V, sample_rate_hz, awg_max_V, max_points)
     segs = tuple(waveform)
     try:
         check_limits(segs, electrodes.max_V)
     except WaveformError as exc:
         raise AwgError(f"electrode level outside [0, max_V]: {exc.problem}") from None
-    total = duration(segs)
-    count = int(math.ceil(total * rate - 1e-9))
-    if count > max_points:
-        fit_s = max_points / rate
-        pieces = math.ceil(count / max_points)
-        raise AwgError(
-            f"{count} points ({total:g} s at {rate:g} Hz) exceed the generator's {int(max_points)}: split the plan into "
-            f"at least {pieces} pieces of at most {fit_s:g} s each (fewer steps per upload), or lower --sample-rate-hz "
-            f"(not below {2 * electrodes.drive_frequency_hz:g} Hz, twice the drive frequency)"
-        )
-    if count < MIN_POINTS:
-        raise AwgError(
-            f"{count} points ({total:g} s at {rate:g} Hz) are fewer than the {MIN_POINTS} the generator needs: "
-            f"raise --sample-rate-hz or lengthen the waveform"
-        )
+    _check_point_count(duration(segs), s.sample_rate_hz, max_points, electrodes.drive_frequency_hz)
     try:
-        _, v = sample(segs, rate, electrodes.drive_frequency_hz, max_samples=int(max_points))
+        _, v = sample(segs, s.sample_rate_hz, electrodes.drive_frequency_hz, max_samples=int(max_points))
     except WaveformError as exc:
         raise AwgError(exc.problem.replace("--rate-hz", "--sample-rate-hz"), field="sample_rate_hz") from None
-    u = (v - off) / g
-    lo, hi = float(u.min()), float(u.max())
-    if lo < -umax or hi > umax:
-        bad = lo if lo < -umax else hi
-        raise AwgError(
-            f"generator level {bad:g} V (electrode {g * bad + off:g} V at gain {g:g}, offset {off:g} V) is outside "
-            f"[-{umax:g}, {umax:g}] V: raise the amplifier gain or change the offset"
-        )
-    if hi - lo < MIN_SPAN_V:
-        if lo + MIN_SPAN_V <= umax:
-            hi = lo + MIN_SPAN_V
-        else:
-            lo = hi - MIN_SPAN_V
-    prog = AwgProgram(volts_to_codes(u, lo, hi), lo, hi, rate, g, off)
-    ev = prog.electrode_volts()
-    if ev.min() < -LEVEL_TOL_V or ev.max() > electrodes.max_V + LEVEL_TOL_V:
-        raise AwgError(
-            f"after quantisation an electrode level reaches {ev.min() if ev.min() < 0 else ev.max():g} V, outside "
-            f"[0, {electrodes.max_V:g}] V (max_V): keep the waveform's levels further inside the range"
-        )
+    u = (v - s.offset_V) / s.gain
+    lo, hi = _output_range(u, s)
+    prog = AwgProgram(volts_to_codes(u, lo, hi), lo, hi, s.sample_rate_hz, s.gain, s.offset_V)
+    _check_quantised(prog, electrodes.max_V)
     return prog
 
 
