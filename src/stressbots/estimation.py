@@ -5,7 +5,7 @@ robots' true speeds and turning radii differ from nominal by a few per cent (fab
 cannot undo an error, so the controller needs better numbers than one frame gives:
 
 - **Poses** are dead-reckoned between frames with the identified model and blended with each
-  measurement (a fixed-gain complementary filter: gain 0.5 on position, 0.35 on heading). A
+  measurement (a fixed-gain complementary filter: gain 0.5 on position, 0.6 on heading). A
   measurement far from the prediction (a contact stopped or turned the robot) replaces the estimate.
   A robot not seen keeps its prediction. A robot the controller holds still (docked, pushing into the
   structure) is placed at the mean of its frames since it stopped: the structure's pose sharpens with
@@ -34,7 +34,14 @@ from .robots import TWO_PI, angle_difference
 __all__ = ["Estimator"]
 
 POSITION_GAIN = 0.5
-HEADING_GAIN = 0.35
+"""Weight of a frame's position against the dead-reckoned prediction (dimensionless)."""
+HEADING_GAIN = 0.6
+"""Weight of a frame's heading against the prediction (dimensionless). The steady-state Kalman gain of a
+random walk with process variance q per frame and camera variance r is ``x / (x + r)``, ``x = (q +
+sqrt(q^2 + 4 q r)) / 2``. Measured on closed-loop runs (tuning layouts, 1x and 2x noise, t_x = 1 s), the
+prediction over one t_x adds about as much heading error as a frame carries (0.7 deg against the camera's
+0.65 deg median at 1x), so q ~ r and the gain ~0.62: the median heading error falls from 0.67 to 0.53 deg
+(1x) and from 1.31 to 1.21 deg (2x) against the former 0.35, and the estimate lags a turn less."""
 JUMP_UM = 15.0
 """A measurement this far (um) from the prediction means the robot was stopped or pushed: take it as is."""
 JUMP_RAD = math.radians(5.0)
