@@ -77,7 +77,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-SEED_SCHEME = {"max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
+SEED_SCHEME = {"overlap_pair": False, "preposition": False, "max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
 
 

@@ -53,7 +53,15 @@ from .collision import (
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
 from .kinematics import advance, move
+from .overlap import OverlapSettings, PairSchedule, joint_primitives, overlap_schedule, with_orbits
 from .plans import Plan, PlanPrimitive, PlanStep, merge_steps
+from .prepositioning import (
+    PrepositionSettings,
+    docking_costs,
+    follower_ends,
+    splice_straight,
+    straight_windows,
+)
 from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
@@ -119,6 +127,18 @@ class PlannerOptions:
         ``max_pieces`` and ``pair_schedules`` of the extended search: more, shorter pieces of D_{n-1}'s
         route with D_n re-aimed between them (``max_pieces`` = 1, the seed's scheme, stays 1), and more
         schedules per G_1 search.
+    overlap_pair:
+        Form G_1 with overlapped schedules first (:mod:`stressbots.overlap`): D_n turns toward its slot
+        while D_{n-1} turns (on its orbit and on its route's arcs), so it runs straight only while D_{n-1}
+        does. Much shorter G_1 than the seed's two stages; False keeps only the seed's scheme and its
+        pieces.
+    overlap:
+        Settings of that search.
+    preposition:
+        While a robot docks, let the next one drive straight during its straight stretches (P_{k-2}
+        instead of P_{k-1}: :mod:`stressbots.prepositioning`) when that shortens the next one's docking.
+    preposition_settings:
+        Settings of that search.
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike
@@ -143,6 +163,10 @@ class PlannerOptions:
     extended_max_pieces: int = 10
     extended_pair_schedules: int = 64
     search_budget: int | None = SEARCH_BUDGET_DEFAULT
+    overlap_pair: bool = True
+    overlap: OverlapSettings = OverlapSettings()
+    preposition: bool = True
+    preposition_settings: PrepositionSettings = PrepositionSettings()
 
 
 SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
@@ -995,7 +1019,12 @@ class _Planner:
         self.tl.apply(k, float(waits[s]))
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])
         t0 = self.tl.t
-        self.tl.apply_path(i, path, k, k - 1)
+        steps = [(k if kind == "R" else k - 1, ell / self.v[i]) for kind, ell in path.segments]
+        pre_f = self._preposition(k, 0.0, path, approach, steps) if self.opts.preposition and k >= 2 else None  # after the wait
+        if pre_f is not None:
+            steps = splice_straight(steps, k, pre_f[0], pre_f[1])
+        for kk, d in steps:
+            self.tl.apply(kk, d, counts_for=(i,))
         self.tl.phase(
             "route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints),
             path=path.then(*approach.segments).segments, path_start=tuple(float(v) for v in path.start), approach_um=approach.length,
@@ -1005,6 +1034,64 @@ class _Planner:
         self.tl.phase("approach", i, k, k - 1, t0, goal)
         self.route_lengths[i] = path.length + approach.length
         self.tl.dock(i, goal, who)
+
+    def _preposition(self, k: int, wait: float, path: pathlib.Path, approach: pathlib.Path, steps) -> tuple[float, float] | None:
+        """A straight stretch ``(t0_s, dt_s)`` (from D_k's departure wait's start) in which D_{k-1} drives
+        straight beside D_k (:mod:`stressbots.prepositioning`), or None when none saves time.
+
+        Candidates are ranked by D_{k-1}'s predicted docking (best departure phase on its new orbit, wait
+        plus shortest path); one is taken only if its straight and its new orbit clear the obstacles of
+        D_{k-1}'s step, it keeps clear of D_k, and its predicted route is clear: D_{k-1}'s docking then
+        takes no longer than predicted, which is less than its least docking from where it would be.
+        """
+        ps = self.opts.preposition_settings
+        i, f = self.by_rank[k], self.by_rank[k - 1]
+        vi, vf, rf = self.v[i], self.v[f], self.r[f]
+        total = wait + (path.length + approach.length) / vi
+        wins = [(a + wait, b + wait) for a, b in straight_windows(steps, k, ps.min_straight_s)]
+        if not wins:
+            return None
+        obst_f = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k, self.n + 1)])
+        a_f = _approach(self.struct, self.scn.names[f], self.opts)
+        a_max = float(self.struct.slot(self.scn.names[f]).approach_um)
+        try:
+            app_f = self.approach_path(f, self.goals[f], a_f, obst_f, self.lab(f), a_max=a_max)
+        except NoRoute:
+            return None
+        pre = np.array(app_f.start, dtype=np.float64)
+        cand = [(a + (b - a) * q / ps.start_steps, (b - a) * (1.0 - q / ps.start_steps) * frac)
+                for a, b in wins for q in range(ps.start_steps) for frac in ps.length_fractions]
+        taus, dts = np.array([c[0] for c in cand]), np.array([c[1] for c in cand])
+        ends = follower_ends(self.tl.poses[f], vf, rf, total, taus, dts)
+        cost, wait_f = docking_costs(ends, pre, vf, rf, self.opts.departure_phases)
+        base, _ = docking_costs(follower_ends(self.tl.poses[f], vf, rf, total, np.zeros(1), np.zeros(1)), pre, vf, rf,
+                                self.opts.departure_phases)
+        obst_s = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
+        mover = pathlib.Path(Pose(*self.tl.poses[i]), self.r[i], (("R", vi * wait),) + path.segments + approach.segments)
+        for c in np.argsort(cost, kind="stable")[: ps.checked]:
+            if cost[c] > base[0] - ps.min_gain_s:
+                break
+            if self._preposition_clear(i, f, float(taus[c]), float(dts[c]), total, float(wait_f[c]), ends[c], pre, obst_s, obst_f, mover):
+                self.notes.append(f"{self.lab(f)} drove {vf * dts[c]:.0f} um straight while {self.lab(i)} docked (P{k - 2})")
+                return float(taus[c]), float(dts[c])
+        return None
+
+    def _preposition_clear(self, i: int, f: int, tau: float, dt: float, total: float, wait_f: float, end: np.ndarray, pre: np.ndarray,
+                           obst_s: Obstacles, obst_f: Obstacles, mover: pathlib.Path) -> bool:
+        """Whether D_{k-1} (``f``) may drive straight from ``tau`` for ``dt`` s while D_k (``i``) docks."""
+        opts = self.opts
+        vf, rf, Lf, Wf = self.v[f], self.r[f], self.L[f], self.W[f]
+        follower = pathlib.Path(Pose(*self.tl.poses[f]), rf, (("R", vf * tau), ("S", vf * dt), ("R", vf * (total - tau - dt))))
+        if _path_hit(obst_s, pathlib.sub_path(follower, vf * tau, vf * (tau + dt)), Lf, Wf, opts) is not None:
+            return False
+        if _path_hit(obst_f, pathlib.Path(Pose(*end), rf, (("R", TWO_PI * rf),)), Lf, Wf, opts) is not None:
+            return False
+        t = np.append(np.arange(tau, total, opts.sample_um / max(vf, self.v[i])), total)
+        depth = penetration_depth(follower.pose_at(vf * t), Lf, Wf, mover.pose_at(self.v[i] * t), self.L[i], self.W[i])
+        if (depth > -opts.clearance_um).any():
+            return False
+        src = advance(end[None, :], np.ones(1, bool), vf, rf, wait_f)[0]
+        return _path_hit(obst_f, pathlib.shortest_path(src, pre, rf), Lf, Wf, opts) is None
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
 
@@ -1086,9 +1173,15 @@ class _Planner:
         attempts: list[str] = []
         budget = [opts.pair_schedules]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
         one_piece = [False]  # schedule only the seed's one-piece scheme
+        overlap_routes = [False]  # try overlapped schedules around the routes the roadmap finds
+        self._overlap_sched: PairSchedule | None = None
+        if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
+            return
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
+            if overlap_routes[0] and self._overlap_route(N, M, routeM, approachM, float(waits[sidx]), obst_low):
+                return None
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
             for park in parks[:1] if one_piece[0] else parks:
@@ -1124,12 +1217,114 @@ class _Planner:
             self._run_pair_schedule()
             return
         budget[0] = opts.pair_schedules
+        overlap_routes[0] = opts.overlap_pair
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
             reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
+
+    # -- overlapped G_1 schedules (stressbots.overlap) ---------------------------------------------------
+
+    def _overlap_first(self, N: int, M: int, sourcesM, waits, preM, approachM: pathlib.Path, obst_low: Obstacles) -> bool:
+        """Form G_1 with the best overlapped schedule over D_{n-1}'s direct routes; False if there is none."""
+        sched = self._overlap_best(N, M, sourcesM, waits, preM, approachM, obst_low)
+        if sched is None:
+            return False
+        self._run_overlap(sched)
+        return True
+
+    def _overlap_route(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles) -> bool:
+        """Whether an overlapped schedule fits this (roadmap) route of D_{n-1}; records it for :meth:`_run_pair_schedule`."""
+        self._overlap_sched = self._overlap_try(N, M, routeM, approachM, wait0, obst_low)
+        return self._overlap_sched is not None
+
+    def _overlap_try(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles,
+                     not_after_s: float = math.inf) -> PairSchedule | None:
+        """An overlapped G_1 schedule around this route of D_{n-1} (leaving after ``wait0`` s), or None."""
+        opts = self.opts
+        LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
+        vN, vM = self.v[N], self.v[M]
+
+        def static_ok(path: pathlib.Path) -> bool:
+            return not obst_low.hits(path.sample(opts.sample_um), LN, WN, opts.clearance_um).any()
+
+        def joint_ok(path_n: pathlib.Path, path_m: pathlib.Path) -> bool:
+            T = path_m.length / vM
+            dt = opts.sample_um / max(vN, vM)
+            t = np.append(np.arange(0.0, T, dt), T)
+            depth = penetration_depth(path_n.pose_at(vN * t), LN, WN, path_m.pose_at(vM * t), LM, WM)
+            limit = np.where(t > T - (opts.approach_um + opts.clearance_um) / min(vN, vM), 0.5, -opts.clearance_um)
+            return not (depth > limit).any()
+
+        TM = TWO_PI * self.r[M] / vM
+        orbit = TWO_PI * self.r[M]
+        for count in range(opts.overlap.max_inserted_orbits + 1):
+            for offset in opts.overlap.split_offsets if count else (0.0,):
+                routed, at = with_orbits(routeM, count, offset)
+                if count and not at:
+                    continue
+                if any(_path_hit(obst_low, pathlib.sub_path(routed, a, a + orbit), LM, WM, opts) for a in at):
+                    continue  # D_(n-1)'s inserted orbit is blocked there
+                sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
+                                         self.r[N], vM, self.r[M], static_ok, joint_ok, opts.overlap, not_after_s=not_after_s)
+                if sched is not None:
+                    return sched
+                break  # the orbits fit: another offset would not help D_n more
+        return None
+
+    def _overlap_best(self, N: int, M: int, sourcesM, waits, preM, approachM: pathlib.Path, obst_low: Obstacles) -> PairSchedule | None:
+        """The shortest overlapped schedule over D_{n-1}'s direct routes from its departure phases.
+
+        Phases are tried by a lower bound on their schedule (the wait plus D_{n-1}'s route and approach),
+        and a phase whose bound is not below the best schedule found is not searched.
+        """
+        vM, rM = self.v[M], self.r[M]
+        lengths = pathlib.shortest_path_lengths(sourcesM, np.broadcast_to(preM, sourcesM.shape), rM)
+        bound = waits + (lengths + approachM.length) / vM
+        best: PairSchedule | None = None
+        for s in np.argsort(bound, kind="stable"):
+            if best is not None and bound[s] >= best.duration_s - 1e-9:
+                break
+            p = pathlib.shortest_path(sourcesM[s], preM, rM)
+            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+                continue
+            sched = self._overlap_try(N, M, p, approachM, float(waits[s]), obst_low,
+                                      not_after_s=math.inf if best is None else best.duration_s - 1e-9)
+            if sched is not None and (best is None or sched.duration_s < best.duration_s):
+                best = sched
+        return best
+
+    def _run_overlap(self, sched: PairSchedule) -> None:
+        """Apply an overlapped G_1 schedule to the timeline, one phase per piece of D_n's path."""
+        n = self.n
+        N, M = self.by_rank[n], self.by_rank[n - 1]
+        vN, vM = self.v[N], self.v[M]
+        last = max(t1 for _, t1, free in sched.pieces if not free)
+        for t_a, t_b, free in sched.pieces:
+            if t_b - t_a <= 0.0:
+                continue
+            pn = pathlib.sub_path(sched.path_n, vN * t_a, vN * t_b)
+            pm = pathlib.sub_path(sched.path_m, vM * t_a, vM * t_b)
+            t0 = self.tl.t
+            for k, d in joint_primitives(pn, vN, pm, vM, n):
+                self.tl.apply(k, d, counts_for=(N,))
+            if free:
+                self.tl.phase("pair-A", N, n, n - 1, t0, pn.end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]),
+                              path=pn.segments, path_start=tuple(float(v) for v in pn.start))
+            else:
+                self.tl.phase("pair-B", M, n - 1, n - 2, t0, pm.end, partner=N, run=(tuple(float(v) for v in pn.start), float(pn.length)),
+                              last=t_b == last, path=pm.segments, path_start=tuple(float(v) for v in pm.start))
+        self.route_lengths[N] = sched.path_n.length
+        self.route_lengths[M] = sched.path_m.length - vM * sched.wait_s
+        windows = sum(1 for _, _, free in sched.pieces[1:] if free)
+        self.notes.append(
+            f"G_1 overlapped: {self.lab(N)} turns while {self.lab(M)} turns ({windows} window(s) on its route), "
+            f"runs straight only while it does; G_1 takes {sched.duration_s:.1f} s"
+        )
+        self.tl.dock(N, self.goals[N], self.lab(N))
+        self.tl.dock(M, self.goals[M], self.lab(M))
 
     def _best_direct_pair(self, sourcesM, preM, rM, M, obst_low, try_route):
         """The shortest G_1 schedule over D_{n-1}'s direct routes from its departure phases, or None.
@@ -1465,6 +1660,9 @@ class _Planner:
         return None
 
     def _run_pair_schedule(self) -> None:
+        if self._overlap_sched is not None:  # the search accepted an overlapped schedule around a roadmap route
+            self._run_overlap(self._overlap_sched)
+            return
         assert self._pair_schedule is not None  # set by form_pair's successful search
         N, M, fullM, wait0, durs, runs, a_paths = self._pair_schedule
         n = self.n
