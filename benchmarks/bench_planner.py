@@ -80,6 +80,9 @@ from pathlib import Path
 SEED_SCHEME = {"overlap_pair": False, "preposition": False, "max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
 
+NO_OVERLAP = {"overlap_pair": False, "preposition": False}
+"""PlannerOptions overrides for the planner as it was before the overlapped G_1 schedules and pre-positioning."""
+
 
 @dataclass(frozen=True)
 class Layout:
@@ -187,7 +190,7 @@ def run_one(lay: Layout, mode: str) -> dict:
         rec.update(status="no-layout", reason=str(exc))
         return rec
     known = PlannerOptions.__dataclass_fields__  # older planners lack some options: use those they have
-    over = {"seed": SEED_SCHEME, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
+    over = {"seed": SEED_SCHEME, "old": NO_OVERLAP, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
     opts = PlannerOptions(**{k: v for k, v in over.items() if k in known})
     t0, c0 = time.perf_counter(), time.process_time()
     try:
@@ -272,7 +275,7 @@ def _per_size(rs: list[dict]) -> list[str]:
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
-    for mode in ("full", "short", "seed"):
+    for mode in ("full", "old", "short", "seed"):
         rs = [r for r in records if r["mode"] == mode]
         if not rs:
             continue

@@ -66,6 +66,11 @@ class OverlapSettings:
     split_offsets:
         Shifts (fractions of the straight) tried for the inserted orbits when the even split's orbit is
         blocked.
+    coarse_um:
+        Spacing (um) of the quick test along every candidate run, before the exact one.
+    routed_first:
+        Run starts (nearest first) for which D_n's first path is routed around the obstacles when no
+        direct path of a fitting length is clear (a roadmap search each: the costly part).
     """
 
     window_min_s: float = 0.5
@@ -74,6 +79,8 @@ class OverlapSettings:
     extra_periods: int = 2
     max_inserted_orbits: int = 2
     split_offsets: tuple[float, ...] = (0.0, 0.15, -0.15, 0.3, -0.3)
+    coarse_um: float = 40.0
+    routed_first: int = 2
 
 
 @dataclass(frozen=True)
@@ -102,20 +109,15 @@ def backward_words(end: np.ndarray, length_um: float, radius: float, steps: int)
     ell = float(length_um)
     top = min(ell, 0.98 * 2.0 * math.pi * radius)
     grid = np.linspace(0.0, top, max(steps, 1)) if top > 0 else np.zeros(1)
-    starts, words = [], []
-    end = np.asarray(end, float)
-    for a in grid:
-        for c in grid:
-            b = ell - a - c
-            if b < -1e-9:
-                continue
-            b = max(b, 0.0)
-            p = move(end, -c, 1.0 / radius)
-            p = move(p, -b, 0.0)
-            p = move(p, -a, 1.0 / radius)
-            starts.append(p)
-            words.append((("R", float(a)), ("S", float(b)), ("R", float(c))))
-    return np.array(starts, dtype=np.float64).reshape(-1, 3), words
+    a, c = (g.ravel() for g in np.meshgrid(grid, grid, indexing="ij"))
+    keep = ell - a - c >= -1e-9
+    a, c = a[keep], c[keep]
+    b = np.maximum(ell - a - c, 0.0)
+    p = np.broadcast_to(np.asarray(end, float), (a.size, 3))
+    kappa = 1.0 / radius
+    p = move(move(move(p, -c, kappa), -b, 0.0), -a, kappa)
+    words = [(("R", float(x)), ("S", float(y)), ("R", float(z))) for x, y, z in zip(a, b, c, strict=True)]
+    return np.asarray(p, dtype=np.float64).reshape(-1, 3), words
 
 
 def joint_primitives(path_n: pathlib.Path, v_n: float, path_m: pathlib.Path, v_m: float, n: int,
@@ -218,15 +220,17 @@ def overlap_schedule(
     r_m: float,
     static_ok: Callable[[pathlib.Path], bool],
     joint_ok: Callable[[pathlib.Path, pathlib.Path], bool],
+    poses_ok: Callable[[np.ndarray], np.ndarray],
     settings: OverlapSettings = OverlapSettings(),
     not_after_s: float = math.inf,
+    first_path: Callable[[np.ndarray, float], pathlib.Path | None] | None = None,
 ) -> PairSchedule | None:
     """The shortest overlapped G_1 schedule found for one route of D_{n-1}, or None (see the module doc).
 
     ``route_m`` starts where D_{n-1} is after orbiting ``wait_s`` (plus any whole number of its periods
     ``period_m_s``) from ``start_m``; ``approach_m`` follows it into the slot. ``static_ok(path)`` tests
-    D_n's path against the lower robots' orbits and the arena; ``joint_ok(path_n, path_m)`` tests the two
-    timed paths against each other. Schedules lasting ``not_after_s`` or more are not tried.
+    D_n's path against the lower robots' orbits and the arena (``poses_ok(poses)`` the same for ``(K, 3)``
+    poses, per pose); ``joint_ok(path_n, path_m)`` tests the two timed paths against each other. Schedules lasting ``not_after_s`` or more are not tried.
     """
     lead, windows, total_m = _m_structure(route_m, approach_m, v_m, settings.window_min_s)
     ends = [w[0] for w in windows] + [total_m]
@@ -243,7 +247,7 @@ def overlap_schedule(
     beam: list[tuple[np.ndarray, tuple]] = [(s_last, tail.segments)]
     start_n = np.asarray(start_n, float)
     for j in range(len(windows) - 1, -1, -1):
-        beam = _extend_beam(beam, windows[j], runs[j], start_n, v_n, r_n, static_ok, settings)
+        beam = _extend_beam(beam, windows[j], runs[j], start_n, v_n, r_n, static_ok, poses_ok, settings)
         if not beam:
             return None
     options = []
@@ -252,16 +256,27 @@ def overlap_schedule(
         kmin = max(0, math.ceil((base / v_n - lead - wait_s) / period_m_s - 1e-9))
         for k in range(kmin, kmin + 1 + settings.extra_periods):
             options.append((wait_s + k * period_m_s, q))
-    for orbit_s, q in sorted(options):
+    tries = [(orbit_s, q, None) for orbit_s, q in sorted(options)]
+    if first_path is not None:  # then routed first paths for the nearest run starts
+        tries += [(math.nan, q, first_path) for q in range(min(settings.routed_first, len(beam)))]
+    for orbit_s, q, router in tries:
         if orbit_s + total_m >= not_after_s:
-            break
+            continue
         s1, tail_segs = beam[q]
-        try:
-            first = pathlib.path_of_length(start_n, s1, r_n, v_n * (orbit_s + lead))
-        except pathlib.InfeasibleLengthError:
-            continue
-        if not static_ok(first):
-            continue
+        if router is not None:
+            first = router(s1, wait_s + lead)
+            if first is None:
+                continue
+            orbit_s = first.length / v_n - lead
+            if orbit_s + total_m >= not_after_s:
+                continue
+        else:
+            try:
+                first = pathlib.path_of_length(start_n, s1, r_n, v_n * (orbit_s + lead))
+            except pathlib.InfeasibleLengthError:
+                continue
+            if not (poses_ok(first.sample(settings.coarse_um)).all() and static_ok(first)):
+                continue
         path_n = pathlib.Path(Pose(*start_n), r_n, first.segments + tuple(tail_segs))
         path_m = pathlib.Path(Pose(*np.asarray(start_m, float)), r_m,
                               (("R", v_m * orbit_s),) + route_m.segments + approach_m.segments)
@@ -282,19 +297,37 @@ def overlap_schedule(
 
 
 def _extend_beam(beam: Sequence[tuple[np.ndarray, tuple]], window: tuple[float, float], run_s: float, start_n: np.ndarray,
-                 v_n: float, r_n: float, static_ok: Callable[[pathlib.Path], bool], settings: OverlapSettings):
+                 v_n: float, r_n: float, static_ok: Callable[[pathlib.Path], bool], poses_ok: Callable[[np.ndarray], np.ndarray],
+                 settings: OverlapSettings):
     """One window backwards: for every partial schedule, the window's words and the run before them;
-    the ``beam`` whose run starts are nearest D_n's start and clear of the static obstacles."""
+    the ``beam`` whose run starts are nearest D_n's start and clear of the static obstacles.
+
+    ``poses_ok`` first tests, for all candidates at once, poses every ``settings.coarse_um`` along the run
+    and the word's joints; the exact test (``static_ok``) then runs on the survivors, nearest first.
+    """
     ell = v_n * (window[1] - window[0])
     run = v_n * run_s
     cands: list[tuple[float, int, np.ndarray, tuple]] = []
+    along = np.append(np.arange(0.0, run, settings.coarse_um), run)
     for s_next, segs in beam:
         qs, words = backward_words(s_next, ell, r_n, settings.turn_steps)
         heads = np.column_stack([np.sin(qs[:, 2]), np.cos(qs[:, 2])])
         ps = qs.copy()
         ps[:, :2] -= run * heads
-        score = pathlib.shortest_path_lengths(np.broadcast_to(start_n, ps.shape), ps, r_n)
-        cands.extend((float(score[c]), len(cands) + c, ps[c], (("S", run),) + words[c] + segs) for c in range(len(ps)))
+        kappa = 1.0 / r_n
+        joint1 = move(qs, np.array([w[0][1] for w in words]), kappa)
+        joint2 = move(joint1, np.array([w[1][1] for w in words]), 0.0)
+        line = np.repeat(ps, along.size, axis=0)
+        line[:, :2] += np.tile(along, len(ps))[:, None] * np.repeat(heads, along.size, axis=0)
+        probe = np.vstack([line, joint1, joint2])
+        ok = poses_ok(probe)
+        clear = ok[: line.shape[0]].reshape(len(ps), along.size).all(axis=1) & ok[line.shape[0]: line.shape[0] + len(ps)]
+        clear &= ok[line.shape[0] + len(ps):]
+        idx = np.flatnonzero(clear)
+        if not idx.size:
+            continue
+        score = pathlib.shortest_path_lengths(np.broadcast_to(start_n, (idx.size, 3)), ps[idx], r_n)
+        cands.extend((float(score[j]), len(cands) + j, ps[c], (("S", run),) + words[c] + segs) for j, c in enumerate(idx))
     cands.sort(key=lambda x: (x[0], x[1]))
     kept: list[tuple[np.ndarray, tuple]] = []
     seen: set = set()
@@ -304,7 +337,7 @@ def _extend_beam(beam: Sequence[tuple[np.ndarray, tuple]], window: tuple[float, 
             continue
         seen.add(key)
         piece = pathlib.Path(Pose(*p), r_n, segs[:4])  # the run and the window's word
-        if static_ok(piece):
+        if poses_ok(piece.sample(settings.coarse_um)).all() and static_ok(piece):
             kept.append((p, segs))
             if len(kept) >= settings.beam:
                 break

@@ -1250,6 +1250,9 @@ class _Planner:
         def static_ok(path: pathlib.Path) -> bool:
             return not obst_low.hits(path.sample(opts.sample_um), LN, WN, opts.clearance_um).any()
 
+        def poses_ok(poses: np.ndarray) -> np.ndarray:
+            return ~obst_low.hits(poses, LN, WN, opts.clearance_um)
+
         def joint_ok(path_n: pathlib.Path, path_m: pathlib.Path) -> bool:
             T = path_m.length / vM
             dt = opts.sample_um / max(vN, vM)
@@ -1260,6 +1263,10 @@ class _Planner:
 
         TM = TWO_PI * self.r[M] / vM
         orbit = TWO_PI * self.r[M]
+
+        def first_path(s1: np.ndarray, t0: float) -> pathlib.Path | None:
+            got = self._timed_path(self.tl.poses[N], s1, vN, self.r[N], LN, WN, t0, TM, obst_low)
+            return None if isinstance(got, str) else got
         for count in range(opts.overlap.max_inserted_orbits + 1):
             for offset in opts.overlap.split_offsets if count else (0.0,):
                 routed, at = with_orbits(routeM, count, offset)
@@ -1268,7 +1275,8 @@ class _Planner:
                 if any(_path_hit(obst_low, pathlib.sub_path(routed, a, a + orbit), LM, WM, opts) for a in at):
                     continue  # D_(n-1)'s inserted orbit is blocked there
                 sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
-                                         self.r[N], vM, self.r[M], static_ok, joint_ok, opts.overlap, not_after_s=not_after_s)
+                                         self.r[N], vM, self.r[M], static_ok, joint_ok, poses_ok, opts.overlap, not_after_s=not_after_s,
+                                         first_path=first_path)
                 if sched is not None:
                     return sched
                 break  # the orbits fit: another offset would not help D_n more
