@@ -102,8 +102,8 @@ def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
 
     monkeypatch.setattr(planning._Planner, "_schedule_pair", counted)
     # the piece search only: with the overlapped G_1 schedules both attempts plan this ladder at once
-    monkeypatch.setattr(planning._Planner, "_overlap_first", lambda self, *a: False)
-    monkeypatch.setattr(planning._Planner, "_overlap_route", lambda self, *a: False)
+    monkeypatch.setattr(planning._Planner, "_overlap_first", lambda *_args: False)
+    monkeypatch.setattr(planning._Planner, "_overlap_route", lambda *_args: False)
     try:
         nominal_plan(random_scenario(**_HARD))
     except PlanningError as exc:

@@ -230,7 +230,8 @@ def overlap_schedule(
     ``route_m`` starts where D_{n-1} is after orbiting ``wait_s`` (plus any whole number of its periods
     ``period_m_s``) from ``start_m``; ``approach_m`` follows it into the slot. ``static_ok(path)`` tests
     D_n's path against the lower robots' orbits and the arena (``poses_ok(poses)`` the same for ``(K, 3)``
-    poses, per pose); ``joint_ok(path_n, path_m)`` tests the two timed paths against each other. Schedules lasting ``not_after_s`` or more are not tried.
+    poses, per pose); ``joint_ok(path_n, path_m)`` tests the two timed paths against each other.
+    Schedules lasting ``not_after_s`` or more are not tried.
     """
     lead, windows, total_m = _m_structure(route_m, approach_m, v_m, settings.window_min_s)
     ends = [w[0] for w in windows] + [total_m]
@@ -250,50 +251,55 @@ def overlap_schedule(
         beam = _extend_beam(beam, windows[j], runs[j], start_n, v_n, r_n, static_ok, poses_ok, settings)
         if not beam:
             return None
-    options = []
+
+    def direct(s1: np.ndarray, orbit_s: float) -> pathlib.Path | None:
+        try:
+            first = pathlib.path_of_length(start_n, s1, r_n, v_n * (orbit_s + lead))
+        except pathlib.InfeasibleLengthError:
+            return None
+        return first if poses_ok(first.sample(settings.coarse_um)).all() and static_ok(first) else None
+
+    for orbit_s, q, first in _first_paths(beam, start_n, v_n, r_n, lead, wait_s, period_m_s, total_m, not_after_s, direct,
+                                          first_path, settings):
+        path_n = pathlib.Path(Pose(*start_n), r_n, first.segments + tuple(beam[q][1]))
+        path_m = pathlib.Path(Pose(*np.asarray(start_m, float)), r_m,
+                              (("R", v_m * orbit_s),) + route_m.segments + approach_m.segments)
+        if joint_ok(path_n, path_m):
+            return PairSchedule(path_n, path_m, orbit_s + total_m, _pieces(orbit_s + lead, runs, windows), orbit_s)
+    return None
+
+
+def _first_paths(beam, start_n, v_n, r_n, lead, wait_s, period_m_s, total_m, not_after_s, direct, routed, settings):
+    """D_n's first paths ``(orbit_s, beam index, path)``, shortest schedule first: direct paths of the
+    fitting lengths, then (``routed``) paths around the obstacles for the nearest run starts."""
+    options: list[tuple[float, int]] = []
     for q, (s1, _) in enumerate(beam):
         base = float(pathlib.shortest_path_lengths(start_n[None, :], s1[None, :], r_n)[0])
         kmin = max(0, math.ceil((base / v_n - lead - wait_s) / period_m_s - 1e-9))
-        for k in range(kmin, kmin + 1 + settings.extra_periods):
-            options.append((wait_s + k * period_m_s, q))
-    tries = [(orbit_s, q, None) for orbit_s, q in sorted(options)]
-    if first_path is not None:  # then routed first paths for the nearest run starts
-        tries += [(math.nan, q, first_path) for q in range(min(settings.routed_first, len(beam)))]
-    for orbit_s, q, router in tries:
-        if orbit_s + total_m >= not_after_s:
-            continue
-        s1, tail_segs = beam[q]
-        if router is not None:
-            first = router(s1, wait_s + lead)
-            if first is None:
-                continue
-            orbit_s = first.length / v_n - lead
-            if orbit_s + total_m >= not_after_s:
-                continue
-        else:
-            try:
-                first = pathlib.path_of_length(start_n, s1, r_n, v_n * (orbit_s + lead))
-            except pathlib.InfeasibleLengthError:
-                continue
-            if not (poses_ok(first.sample(settings.coarse_um)).all() and static_ok(first)):
-                continue
-        path_n = pathlib.Path(Pose(*start_n), r_n, first.segments + tuple(tail_segs))
-        path_m = pathlib.Path(Pose(*np.asarray(start_m, float)), r_m,
-                              (("R", v_m * orbit_s),) + route_m.segments + approach_m.segments)
-        if not joint_ok(path_n, path_m):
-            continue
-        t0 = orbit_s + lead
-        pieces = [(0.0, t0, True)]
-        t = t0
-        for j, run in enumerate(runs):
-            pieces.append((t, t + run, False))
-            t += run
-            if j < len(windows):
-                w = windows[j][1] - windows[j][0]
-                pieces.append((t, t + w, True))
-                t += w
-        return PairSchedule(path_n, path_m, orbit_s + total_m, tuple(pieces), orbit_s)
-    return None
+        options.extend((wait_s + k * period_m_s, q) for k in range(kmin, kmin + 1 + settings.extra_periods))
+    for orbit_s, q in sorted(options):
+        if orbit_s + total_m < not_after_s:
+            first = direct(beam[q][0], orbit_s)
+            if first is not None:
+                yield orbit_s, q, first
+    for q in range(min(settings.routed_first, len(beam)) if routed is not None else 0):
+        first = routed(beam[q][0], wait_s + lead)
+        if first is not None and first.length / v_n - lead + total_m < not_after_s:
+            yield first.length / v_n - lead, q, first
+
+
+def _pieces(t0: float, runs: Sequence[float], windows: Sequence[tuple[float, float]]) -> tuple[tuple[float, float, bool], ...]:
+    """D_n's pieces ``(t0_s, t1_s, free)``: F_0 until ``t0``, then runs alternating with windows."""
+    pieces = [(0.0, t0, True)]
+    t = t0
+    for j, run in enumerate(runs):
+        pieces.append((t, t + run, False))
+        t += run
+        if j < len(windows):
+            w = windows[j][1] - windows[j][0]
+            pieces.append((t, t + w, True))
+            t += w
+    return tuple(pieces)
 
 
 def _extend_beam(beam: Sequence[tuple[np.ndarray, tuple]], window: tuple[float, float], run_s: float, start_n: np.ndarray,
