@@ -224,6 +224,7 @@ def overlap_schedule(
     settings: OverlapSettings = OverlapSettings(),
     not_after_s: float = math.inf,
     first_path: Callable[[np.ndarray, float], pathlib.Path | None] | None = None,
+    first_ok: Callable[[pathlib.Path], bool] | None = None,
 ) -> PairSchedule | None:
     """The shortest overlapped G_1 schedule found for one route of D_{n-1}, or None (see the module doc).
 
@@ -231,7 +232,11 @@ def overlap_schedule(
     ``period_m_s``) from ``start_m``; ``approach_m`` follows it into the slot. ``static_ok(path)`` tests
     D_n's path against the lower robots' orbits and the arena (``poses_ok(poses)`` the same for ``(K, 3)``
     poses, per pose); ``joint_ok(path_n, path_m)`` tests the two timed paths against each other.
-    Schedules lasting ``not_after_s`` or more are not tried.
+    Schedules lasting ``not_after_s`` or more are not tried. When no direct first path of a fitting length
+    is clear, ``first_path(run_start, t0_s)`` (a clear path lasting ``t0_s`` plus whole periods of
+    D_{n-1}, or None) is asked for the ``settings.routed_first`` nearest run starts. ``first_ok(path)``
+    tests D_n's first path (default ``static_ok``): D_{n-1} is on its start orbit all that time, so its
+    orbit disc may be added as an obstacle there.
     """
     lead, windows, total_m = _m_structure(route_m, approach_m, v_m, settings.window_min_s)
     ends = [w[0] for w in windows] + [total_m]
@@ -257,7 +262,7 @@ def overlap_schedule(
             first = pathlib.path_of_length(start_n, s1, r_n, v_n * (orbit_s + lead))
         except pathlib.InfeasibleLengthError:
             return None
-        return first if poses_ok(first.sample(settings.coarse_um)).all() and static_ok(first) else None
+        return first if (first_ok or static_ok)(first) else None
 
     for orbit_s, q, first in _first_paths(beam, start_n, v_n, r_n, lead, wait_s, period_m_s, total_m, not_after_s, direct,
                                           first_path, settings):

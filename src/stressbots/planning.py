@@ -1264,8 +1264,16 @@ class _Planner:
         TM = TWO_PI * self.r[M] / vM
         orbit = TWO_PI * self.r[M]
 
+        # D_n's first path: D_(n-1) orbits at its start all that time (its first arc is on that orbit too)
+        obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], self.r[M])[0], self.rstar[M], f"the orbit of {self.lab(M)}")
+
+        def first_ok(path: pathlib.Path) -> bool:
+            coarse = path.sample(opts.overlap.coarse_um)
+            return not obst0.hits(coarse, LN, WN, opts.clearance_um).any() and not obst0.hits(path.sample(opts.sample_um), LN, WN,
+                                                                                               opts.clearance_um).any()
+
         def first_path(s1: np.ndarray, t0: float) -> pathlib.Path | None:
-            got = self._timed_path(self.tl.poses[N], s1, vN, self.r[N], LN, WN, t0, TM, obst_low)
+            got = self._timed_path(self.tl.poses[N], s1, vN, self.r[N], LN, WN, t0, TM, obst0)
             return None if isinstance(got, str) else got
         for count in range(opts.overlap.max_inserted_orbits + 1):
             for offset in opts.overlap.split_offsets if count else (0.0,):
@@ -1276,7 +1284,7 @@ class _Planner:
                     continue  # D_(n-1)'s inserted orbit is blocked there
                 sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
                                          self.r[N], vM, self.r[M], static_ok, joint_ok, poses_ok, opts.overlap, not_after_s=not_after_s,
-                                         first_path=first_path)
+                                         first_path=first_path, first_ok=first_ok)
                 if sched is not None:
                     return sched
                 break  # the orbits fit: another offset would not help D_n more
