@@ -767,12 +767,18 @@ class _Search:
     ``pair_failures`` maps what a G_1 search depends on (see :meth:`_Planner.form_pair`) to why it
     failed: variants that differ only in later slots (which side stems grow on, which tooth is first)
     would repeat the same failing search exactly, so they fail at once with the same reason.
+    ``bottlenecks`` are the ranks of robots whose docking failed in a variant: later variants check first
+    that those robots can reach their slots at all (:meth:`_Planner.dock_check`), before forming G_1.
+    ``docking_failed`` holds the variants (by id) that failed after G_1 was formed: the extended search,
+    which only widens the G_1 search, skips them.
     """
 
     def __init__(self, budget: int | None):
         self.budget = budget
         self.used = 0
         self.pair_failures: dict = {}
+        self.bottlenecks: list[int] = []
+        self.docking_failed: set[int] = set()
 
     @property
     def spent(self) -> bool:
@@ -998,6 +1004,26 @@ class _Planner:
         raise NoRoute(f"{who}: the approach into its slot is blocked by {hit}")
 
     # -- docking of single robots (steps 2..n-1) -------------------------------------------------
+
+    def dock_check(self, k: int) -> None:
+        """Raise :class:`NoRoute` unless D_k can reach its slot from its start orbit.
+
+        The quick test of a robot whose docking failed in an earlier variant: from any of
+        ``departure_phases`` points of its start orbit, around the lower robots' orbits (they orbit at
+        their starts until their own step) and the slots of the robots docked before it. Its own random
+        stream, so the plan of a variant that passes is what it would be without the test.
+        """
+        i = self.by_rank[k]
+        who = self.lab(i)
+        obst = self.obstacles([self.by_rank[j] for j in range(1, k)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
+        slot = float(self.struct.slot(self.scn.names[i]).approach_um)
+        approach = self.approach_path(i, self.goals[i], _approach(self.struct, self.scn.names[i], self.opts), obst, who, a_max=slot)
+        m = self.opts.departure_phases
+        waits = np.arange(m) * TWO_PI * self.r[i] / self.v[i] / m
+        sources = advance(np.repeat(self.scn.starts[i][None, :], m, axis=0), np.ones(m, bool), self.v[i], self.r[i], waits)
+        rng = np.random.default_rng(np.random.SeedSequence([self.opts.seed, k, 1]))
+        route(sources, waits * self.v[i], np.array(approach.start, dtype=np.float64), self.r[i], self.L[i], self.W[i], obst, self.opts,
+              rng, who)
 
     def dock_single(self, k: int) -> None:
         i = self.by_rank[k]
@@ -1731,12 +1757,20 @@ def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, ca
     t0 = time.perf_counter()
     planner = _Planner(scn, analysis, st, opts, extended=extended, search=search)
     try:
+        for k in planner.search.bottlenecks:  # fail fast where an earlier variant failed to dock
+            planner.dock_check(k)
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
         planner.form_pair()
+    except NoRoute as exc:
+        return exc.reason
+    try:
         for k in range(scn.n - 2, 0, -1):
             say(f"docking {planner.lab(planner.by_rank[k])}")
             planner.dock_single(k)
     except NoRoute as exc:
+        planner.search.docking_failed.add(id(st))
+        if k not in planner.search.bottlenecks:
+            planner.search.bottlenecks.append(k)
         return exc.reason
     steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
     from .outputs import provenance
@@ -1840,6 +1874,8 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
             break
         if best is None and search.spent:
             break
+        if extended and id(st) in search.docking_failed:
+            continue  # it formed G_1 and failed later: a wider G_1 search cannot help
         if best is None and failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
