@@ -77,7 +77,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-SEED_SCHEME = {"overlap_pair": False, "preposition": False, "max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
+SEED_SCHEME = {"overlap_pair": False, "preposition": False, "max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1,
+               "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
 
 NO_OVERLAP = {"overlap_pair": False, "preposition": False}
@@ -175,10 +176,9 @@ def make_scenario(lay: Layout):
 
 def run_one(lay: Layout, mode: str) -> dict:
     """Plan one layout in this process; the result record (JSON-able)."""
-    from stressbots import plans
+    from stressbots import planning, plans
     from stressbots.errors import PlanningError, ScenarioError
     from stressbots.outputs import versions
-    from stressbots import planning
     from stressbots.planning import PlannerOptions, lower_bound_s, plan_assembly
     from stressbots.replay import replay
 
@@ -240,19 +240,23 @@ def run_all(todo: list[tuple[Layout, str]], jobs: int, timeout: float, out: Path
                 if p.poll() is None:
                     p.kill()
                     p.wait()
-                    rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "seed": lay.seed, "mode": mode, "status": "timeout", "plan_s": timeout}
+                    rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "seed": lay.seed, "mode": mode, "status": "timeout",
+                           "plan_s": timeout}
                 else:
                     so, se = p.communicate()
                     try:
                         rec = json.loads(so.strip().splitlines()[-1])
                     except (IndexError, json.JSONDecodeError):
-                        rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "mode": mode, "status": "crashed", "reason": se.strip()[-400:]}
+                        rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "mode": mode, "status": "crashed",
+                               "reason": se.strip()[-400:]}
                 rec["wall_s"] = time.monotonic() - t_start
                 running.remove(item)
                 records.append(rec)
                 fh.write(json.dumps(rec) + "\n")
                 fh.flush()
-                extra = f"{rec.get('duration_s', 0):7.1f} s plan, lb {rec.get('lower_bound_s', 0):6.1f} s" if rec["status"] == "planned" else rec.get("reason", "")[:110]
+                planned = rec["status"] == "planned"
+                extra = (f"{rec.get('duration_s', 0):7.1f} s plan, lb {rec.get('lower_bound_s', 0):6.1f} s" if planned
+                         else rec.get("reason", "")[:110])
                 print(f"{lay.key:28s} {mode:4s} {rec['status']:8s} {rec.get('plan_s', 0):6.1f} s  {extra}", flush=True)
     return records
 
@@ -270,6 +274,19 @@ def _per_size(rs: list[dict]) -> list[str]:
                      f"max {max(t) if t else 0:5.1f} s (CPU median {statistics.median(cpu) if cpu else 0:5.1f} s, "
                      f"max {max(cpu) if cpu else 0:5.1f} s), efficiency median {statistics.median(eff) if eff else 0:.2f}")
     return lines
+
+
+def _ratios(by: dict, other: str) -> list[str]:
+    """full / ``other`` plan duration on the layouts both planned: median, range, total, and per layout."""
+    both = [(by[(k, "full")], by[(k, other)]) for k, m in by if m == "full" and (k, other) in by]
+    both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
+    if not both:
+        return []
+    ratio = [f["duration_s"] / s["duration_s"] for f, s in both]
+    total = sum(f["duration_s"] for f, _ in both) / sum(s["duration_s"] for _, s in both)
+    per = ", ".join(f"{f['layout']} {r:.2f}" for (f, _), r in zip(both, ratio, strict=True))
+    return [f"full / {other} duration on {len(both)} layouts both planned: median {statistics.median(ratio):.2f}, "
+            f"min {min(ratio):.2f}, max {max(ratio):.2f}, total {total:.2f}", f"  per layout: {per}"]
 
 
 def summarise(records: list[dict]) -> str:
@@ -291,14 +308,11 @@ def summarise(records: list[dict]) -> str:
         for lo, hi in ((2, 8), (9, 16)):
             t = [r["plan_s"] for r in ok if lo <= r["n"] <= hi]
             n_all = sum(lo <= r["n"] <= hi for r in rs)
-            lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, max {max(t) if t else 0:.1f} s")
+            lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, "
+                         f"max {max(t) if t else 0:.1f} s")
         lines.extend(_per_size(rs))
-    both = [(by[(k, "full")], by[(k, "seed")]) for k, m in by if m == "full" and (k, "seed") in by]
-    both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
-    if both:
-        ratio = [f["duration_s"] / s["duration_s"] for f, s in both]
-        lines.append(f"full / seed duration on {len(both)} layouts both planned: median {statistics.median(ratio):.2f}, "
-                     f"min {min(ratio):.2f}, max {max(ratio):.2f}, total {sum(f['duration_s'] for f, _ in both) / sum(s['duration_s'] for _, s in both):.2f}")
+    for other in ("seed", "old"):
+        lines.extend(_ratios(by, other))
     fails = [r for r in records if r["mode"] == "full" and r["status"] != "planned"]
     for r in fails:
         lines.append(f"  full {r['status']}: {r['layout']}: {r.get('reason', '')[:160]}")
