@@ -1046,7 +1046,11 @@ class _Planner:
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])
         t0 = self.tl.t
         steps = [(k if kind == "R" else k - 1, ell / self.v[i]) for kind, ell in path.segments]
-        pre_f = self._preposition(k, 0.0, path, approach, steps) if self.opts.preposition and k >= 2 else None  # after the wait
+        pre_f = None
+        if self.opts.preposition and k >= 2:  # after the wait: D_k's route and approach from here
+            mover = pathlib.Path(Pose(*self.tl.poses[i]), self.r[i], path.segments + approach.segments)
+            tail = [(k if kind == "R" else k - 1, ell / self.v[i]) for kind, ell in approach.segments]
+            pre_f = self._preposition(k, steps + tail, [(i, mover)], f"{who} docked", until=path.length / self.v[i])
         if pre_f is not None:
             steps = splice_straight(steps, k, pre_f[0], pre_f[1])
         for kk, d in steps:
@@ -1061,27 +1065,31 @@ class _Planner:
         self.route_lengths[i] = path.length + approach.length
         self.tl.dock(i, goal, who)
 
-    def _preposition(self, k: int, wait: float, path: pathlib.Path, approach: pathlib.Path, steps) -> tuple[float, float] | None:
-        """A straight stretch ``(t0_s, dt_s)`` (from D_k's departure wait's start) in which D_{k-1} drives
-        straight beside D_k (:mod:`stressbots.prepositioning`), or None when none saves time.
+    def _preposition(self, k: int, steps, movers: Sequence[tuple[int, pathlib.Path]], what: str,
+                     until: float = math.inf) -> tuple[float, float] | None:
+        """A straight stretch ``(t0_s, dt_s)`` (from now) in which D_{k-1} drives straight with P_{k-2}
+        instead of P_{k-1} (:mod:`stressbots.prepositioning`), or None when none saves time.
 
-        Candidates are ranked by D_{k-1}'s predicted docking (best departure phase on its new orbit, wait
-        plus shortest path); one is taken only if its straight and its new orbit clear the obstacles of
-        D_{k-1}'s step, it keeps clear of D_k, and its predicted route is clear: D_{k-1}'s docking then
-        takes no longer than predicted, which is less than its least docking from where it would be.
+        ``steps`` are the coming primitive steps (P_k and above turn D_{k-1}, P_{k-1} is replaced), and
+        ``movers`` the robots they move with their paths from now: D_k docking, or the G_1 pair. Candidates
+        lie in the P_{k-1} steps that end by ``until`` (s), ranked by D_{k-1}'s predicted docking (best
+        departure phase on its new orbit, wait plus shortest path); one is taken only if its straight and
+        its new orbit clear the obstacles of D_{k-1}'s step, it keeps clear of the movers, and its
+        predicted route is clear: D_{k-1}'s docking then takes no longer than predicted, which is less
+        than its least docking from where it would be.
         """
         ps = self.opts.preposition_settings
-        i, f = self.by_rank[k], self.by_rank[k - 1]
-        vi, vf, rf = self.v[i], self.v[f], self.r[f]
-        total = wait + (path.length + approach.length) / vi
-        wins = [(a + wait, b + wait) for a, b in straight_windows(steps, k, ps.min_straight_s)]
+        f = self.by_rank[k - 1]
+        vf, rf = self.v[f], self.r[f]
+        total = float(sum(d for _, d in steps))
+        wins = [w for w in straight_windows(steps, k, ps.min_straight_s) if w[1] <= until + 1e-9]
         if not wins:
             return None
         obst_f = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k, self.n + 1)])
-        a_f = _approach(self.struct, self.scn.names[f], self.opts)
         a_max = float(self.struct.slot(self.scn.names[f]).approach_um)
         try:
-            app_f = self.approach_path(f, self.goals[f], a_f, obst_f, self.lab(f), a_max=a_max)
+            app_f = self.approach_path(f, self.goals[f], _approach(self.struct, self.scn.names[f], self.opts), obst_f, self.lab(f),
+                                       a_max=a_max)
         except NoRoute:
             return None
         pre = np.array(app_f.start, dtype=np.float64)
@@ -1093,18 +1101,17 @@ class _Planner:
         base, _ = docking_costs(follower_ends(self.tl.poses[f], vf, rf, total, np.zeros(1), np.zeros(1)), pre, vf, rf,
                                 self.opts.departure_phases)
         obst_s = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
-        mover = pathlib.Path(Pose(*self.tl.poses[i]), self.r[i], (("R", vi * wait),) + path.segments + approach.segments)
         for c in np.argsort(cost, kind="stable")[: ps.checked]:
             if cost[c] > base[0] - ps.min_gain_s:
                 break
-            if self._preposition_clear(i, f, float(taus[c]), float(dts[c]), total, float(wait_f[c]), ends[c], pre, obst_s, obst_f, mover):
-                self.notes.append(f"{self.lab(f)} drove {vf * dts[c]:.0f} um straight while {self.lab(i)} docked (P{k - 2})")
+            if self._preposition_clear(f, float(taus[c]), float(dts[c]), total, float(wait_f[c]), ends[c], pre, obst_s, obst_f, movers):
+                self.notes.append(f"{self.lab(f)} drove {vf * dts[c]:.0f} um straight while {what} (P{k - 2})")
                 return float(taus[c]), float(dts[c])
         return None
 
-    def _preposition_clear(self, i: int, f: int, tau: float, dt: float, total: float, wait_f: float, end: np.ndarray, pre: np.ndarray,
-                           obst_s: Obstacles, obst_f: Obstacles, mover: pathlib.Path) -> bool:
-        """Whether D_{k-1} (``f``) may drive straight from ``tau`` for ``dt`` s while D_k (``i``) docks."""
+    def _preposition_clear(self, f: int, tau: float, dt: float, total: float, wait_f: float, end: np.ndarray, pre: np.ndarray,
+                           obst_s: Obstacles, obst_f: Obstacles, movers: Sequence[tuple[int, pathlib.Path]]) -> bool:
+        """Whether D_{k-1} (``f``) may drive straight from ``tau`` for ``dt`` s while the movers move."""
         opts = self.opts
         vf, rf, Lf, Wf = self.v[f], self.r[f], self.L[f], self.W[f]
         follower = pathlib.Path(Pose(*self.tl.poses[f]), rf, (("R", vf * tau), ("S", vf * dt), ("R", vf * (total - tau - dt))))
@@ -1112,10 +1119,11 @@ class _Planner:
             return False
         if _path_hit(obst_f, pathlib.Path(Pose(*end), rf, (("R", TWO_PI * rf),)), Lf, Wf, opts) is not None:
             return False
-        t = np.append(np.arange(tau, total, opts.sample_um / max(vf, self.v[i])), total)
-        depth = penetration_depth(follower.pose_at(vf * t), Lf, Wf, mover.pose_at(self.v[i] * t), self.L[i], self.W[i])
-        if (depth > -opts.clearance_um).any():
-            return False
+        for i, path in movers:
+            t = np.append(np.arange(tau, total, opts.sample_um / max(vf, self.v[i])), total)
+            depth = penetration_depth(follower.pose_at(vf * t), Lf, Wf, path.pose_at(self.v[i] * t), self.L[i], self.W[i])
+            if (depth > -opts.clearance_um).any():
+                return False
         src = advance(end[None, :], np.ones(1, bool), vf, rf, wait_f)[0]
         return _path_hit(obst_f, pathlib.shortest_path(src, pre, rf), Lf, Wf, opts) is None
 
@@ -1344,13 +1352,20 @@ class _Planner:
         N, M = self.by_rank[n], self.by_rank[n - 1]
         vN, vM = self.v[N], self.v[M]
         last = max(t1 for _, t1, free in sched.pieces if not free)
+        pre_f = None
+        if self.opts.preposition and n >= 3:  # D_(n-2) drives straight while both drive straight (P_(n-3))
+            steps = joint_primitives(sched.path_n, vN, sched.path_m, vM, n)
+            pre_f = self._preposition(n - 1, steps, [(N, sched.path_n), (M, sched.path_m)], "G_1 formed")
         for t_a, t_b, free in sched.pieces:
             if t_b - t_a <= 0.0:
                 continue
             pn = pathlib.sub_path(sched.path_n, vN * t_a, vN * t_b)
             pm = pathlib.sub_path(sched.path_m, vM * t_a, vM * t_b)
             t0 = self.tl.t
-            for k, d in joint_primitives(pn, vN, pm, vM, n):
+            steps = joint_primitives(pn, vN, pm, vM, n)
+            if pre_f is not None and t_a - 1e-9 <= pre_f[0] and pre_f[0] + pre_f[1] <= t_b + 1e-9:
+                steps = splice_straight(steps, n - 1, max(pre_f[0] - t_a, 0.0), pre_f[1])
+            for k, d in steps:
                 self.tl.apply(k, d, counts_for=(N,))
             if free:
                 self.tl.phase("pair-A", N, n, n - 1, t0, pn.end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]),
