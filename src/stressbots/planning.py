@@ -894,7 +894,9 @@ def lower_bound_s(scn, struct: Structure, rank: np.ndarray, phases: int = 90) ->
     """A lower bound (s) on the duration of any plan of the sequential scheme.
 
     G_1 cannot finish before both D_n and D_{n-1} have driven their shortest paths; each later robot
-    D_i cannot dock before driving the shortest path from the best point of its orbit circle.
+    D_i cannot dock before driving the shortest path from the best point of its orbit circle. A robot
+    pre-positioned before its step (:attr:`PlannerOptions.preposition`) starts its docking off that
+    circle, so a plan could in principle beat the docking part of this bound (efficiency above 1).
     """
     n = scn.n
     goals = struct.goal_poses(scn.names)
