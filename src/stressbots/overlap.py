@@ -71,6 +71,9 @@ class OverlapSettings:
     routed_first:
         Run starts (nearest first) for which D_n's first path is routed around the obstacles when no
         direct path of a fitting length is clear (a roadmap search each: the costly part).
+    roadmap_routes:
+        Roadmap routes of D_{n-1} (found by the piece scheme's route search) also tried overlapped, per
+        G_1 search, with D_n's first path not routed: the direct routes are tried in full first.
     """
 
     window_min_s: float = 0.5
@@ -81,6 +84,7 @@ class OverlapSettings:
     split_offsets: tuple[float, ...] = (0.0, 0.15, -0.15, 0.3, -0.3)
     coarse_um: float = 40.0
     routed_first: int = 2
+    roadmap_routes: int = 8
 
 
 @dataclass(frozen=True)

@@ -1211,6 +1211,7 @@ class _Planner:
         one_piece = [False]  # schedule only the seed's one-piece scheme
         overlap_routes = [False]  # try overlapped schedules around the routes the roadmap finds
         self._overlap_sched: PairSchedule | None = None
+        self._overlap_routes_tried = 0
         if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
             return
 
@@ -1272,12 +1273,19 @@ class _Planner:
         return True
 
     def _overlap_route(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles) -> bool:
-        """Whether an overlapped schedule fits this (roadmap) route of D_{n-1}; records it for :meth:`_run_pair_schedule`."""
-        self._overlap_sched = self._overlap_try(N, M, routeM, approachM, wait0, obst_low)
+        """Whether an overlapped schedule fits this (roadmap) route of D_{n-1}; records it for :meth:`_run_pair_schedule`.
+
+        Cheaper than for the direct routes: D_n's first path is not routed, and only the first
+        ``overlap.roadmap_routes`` routes of a G_1 search are tried (then only the piece scheme).
+        """
+        self._overlap_routes_tried += 1
+        if self._overlap_routes_tried > self.opts.overlap.roadmap_routes:
+            return False
+        self._overlap_sched = self._overlap_try(N, M, routeM, approachM, wait0, obst_low, route_first=False)
         return self._overlap_sched is not None
 
     def _overlap_try(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles,
-                     not_after_s: float = math.inf) -> PairSchedule | None:
+                     not_after_s: float = math.inf, route_first: bool = True) -> PairSchedule | None:
         """An overlapped G_1 schedule around this route of D_{n-1} (leaving after ``wait0`` s), or None."""
         opts = self.opts
         LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
@@ -1320,7 +1328,7 @@ class _Planner:
                     continue  # D_(n-1)'s inserted orbit is blocked there
                 sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
                                          self.r[N], vM, self.r[M], static_ok, joint_ok, poses_ok, opts.overlap, not_after_s=not_after_s,
-                                         first_path=first_path, first_ok=first_ok)
+                                         first_path=first_path if route_first else None, first_ok=first_ok)
                 if sched is not None:
                     return sched
                 break  # the orbits fit: another offset would not help D_n more
