@@ -10,7 +10,8 @@ planned twice, each in its own ``nice``-d subprocess with a wall-time limit (at 
 - ``short``: the planner with :data:`stressbots.planning.SHORTEST` (compares G_1 schedules and
   structure variants: shorter plans, longer planning);
 - ``seed``: the planner restricted to the seed's scheme (:data:`SEED_SCHEME`: D_{n-1}'s route in one
-  piece from its start, D_n on one straight run, docking robots leave their orbit where they are).
+  piece from its start, D_n on one straight run, docking robots leave their orbit where they are);
+- ``old``: the planner without the overlapped G_1 and pre-positioning (:data:`NO_OVERLAP`).
 
 Per layout it prints and writes one JSON line: planned or the failure reason, planning wall time
 (inside the worker, so without the interpreter's start-up), the plan's duration, the lower bound
@@ -60,6 +61,14 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   Final settings, n = 9-16, two at once, 120 s limit, load ~6: 27/30 planned (comb-14, gap-10/13/16
   newly; gap-16 29 s of CPU, comb-16 8.6 s), median 2.4 s of CPU, no replay failure; refused tee-10
   (G_1, 8.6 s), tee-13 and tee-14 (D1's last docking, 3.9 and 11.3 s).
+  Overlapped G_1 and pre-positioning (issue 15 goal 2; commit 6ab3846), ``--modes full,seed,old --jobs 2
+  --timeout 120`` (old only for n = 2-8), load average 8-14 from three other jobs (wall times 2-10x CPU):
+  full planned 59/62 (2-8: 32/32, tee-8 newly; 9-16: 27/30, tee-10/13/14 refused at D1's last docking in
+  2.1-4.5 s of CPU), no replay failure; full / seed duration on the 7 layouts both planned median 0.70
+  (0.58-0.79, total 0.71; on the 6 of n = 2-8 median 0.68); full / old on the 31 both planned median 0.55
+  (0.26-0.84); lower bound / duration median 0.74 (old 0.42, seed 0.56); CPU for n = 8 median 1.1 s, max
+  1.5 s; n = 16 median 4.2 s, max 6.1 s; tee-16's efficiency 1.01 (pre-positioned robots beat the bound's
+  start-orbit assumption).
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
