@@ -176,6 +176,8 @@ Not the default yet. The controller now assembles these plans as often as the de
 passes with them; 21/28 closed-loop trials either way on 14 tuning layouts of bench_generality.py), and
 they are 12 % shorter in total on bench_planner.py's layouts of 2-8 robots, but planning takes 2-13x
 longer and some plans are longer (gap-8), so the default stays the faster plan the controller was tuned on.
+Those figures predate the overlapped G_1 and pre-positioning (now default), which it does not change: its
+G_1 comparison only runs when no overlapped schedule is found. Not re-measured since.
 """
 
 
