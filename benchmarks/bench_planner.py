@@ -10,7 +10,8 @@ planned twice, each in its own ``nice``-d subprocess with a wall-time limit (at 
 - ``short``: the planner with :data:`stressbots.planning.SHORTEST` (compares G_1 schedules and
   structure variants: shorter plans, longer planning);
 - ``seed``: the planner restricted to the seed's scheme (:data:`SEED_SCHEME`: D_{n-1}'s route in one
-  piece from its start, D_n on one straight run, docking robots leave their orbit where they are).
+  piece from its start, D_n on one straight run, docking robots leave their orbit where they are);
+- ``old``: the planner without the overlapped G_1 and pre-positioning (:data:`NO_OVERLAP`).
 
 Per layout it prints and writes one JSON line: planned or the failure reason, planning wall time
 (inside the worker, so without the interpreter's start-up), the plan's duration, the lower bound
@@ -60,6 +61,14 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   Final settings, n = 9-16, two at once, 120 s limit, load ~6: 27/30 planned (comb-14, gap-10/13/16
   newly; gap-16 29 s of CPU, comb-16 8.6 s), median 2.4 s of CPU, no replay failure; refused tee-10
   (G_1, 8.6 s), tee-13 and tee-14 (D1's last docking, 3.9 and 11.3 s).
+  Overlapped G_1 and pre-positioning (issue 15 goal 2; commit 6ab3846), ``--modes full,seed,old --jobs 2
+  --timeout 120`` (old only for n = 2-8), load average 8-14 from three other jobs (wall times 2-10x CPU):
+  full planned 59/62 (2-8: 32/32, tee-8 newly; 9-16: 27/30, tee-10/13/14 refused at D1's last docking in
+  2.1-4.5 s of CPU), no replay failure; full / seed duration on the 7 layouts both planned median 0.70
+  (0.58-0.79, total 0.71; on the 6 of n = 2-8 median 0.68); full / old on the 31 both planned median 0.55
+  (0.26-0.84); lower bound / duration median 0.74 (old 0.42, seed 0.56); CPU for n = 8 median 1.1 s, max
+  1.5 s; n = 16 median 4.2 s, max 6.1 s; tee-16's efficiency 1.01 (pre-positioned robots beat the bound's
+  start-orbit assumption).
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
@@ -77,8 +86,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-SEED_SCHEME = {"max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1, "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
+SEED_SCHEME = {"overlap_pair": False, "preposition": False, "max_pieces": 1, "extended_max_pieces": 1, "departure_phases": 1,
+               "pair_candidates": 1, "variants_compared": 1, "orbit_phases": 0}
 """PlannerOptions overrides that reduce the planner to the seed's one-piece scheme (seed App. 2)."""
+
+NO_OVERLAP = {"overlap_pair": False, "preposition": False}
+"""PlannerOptions overrides for the planner as it was before the overlapped G_1 schedules and pre-positioning."""
 
 
 @dataclass(frozen=True)
@@ -172,10 +185,9 @@ def make_scenario(lay: Layout):
 
 def run_one(lay: Layout, mode: str) -> dict:
     """Plan one layout in this process; the result record (JSON-able)."""
-    from stressbots import plans
+    from stressbots import planning, plans
     from stressbots.errors import PlanningError, ScenarioError
     from stressbots.outputs import versions
-    from stressbots import planning
     from stressbots.planning import PlannerOptions, lower_bound_s, plan_assembly
     from stressbots.replay import replay
 
@@ -187,7 +199,7 @@ def run_one(lay: Layout, mode: str) -> dict:
         rec.update(status="no-layout", reason=str(exc))
         return rec
     known = PlannerOptions.__dataclass_fields__  # older planners lack some options: use those they have
-    over = {"seed": SEED_SCHEME, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
+    over = {"seed": SEED_SCHEME, "old": NO_OVERLAP, "short": getattr(planning, "SHORTEST", {})}.get(mode, {})
     opts = PlannerOptions(**{k: v for k, v in over.items() if k in known})
     t0, c0 = time.perf_counter(), time.process_time()
     try:
@@ -237,19 +249,23 @@ def run_all(todo: list[tuple[Layout, str]], jobs: int, timeout: float, out: Path
                 if p.poll() is None:
                     p.kill()
                     p.wait()
-                    rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "seed": lay.seed, "mode": mode, "status": "timeout", "plan_s": timeout}
+                    rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "seed": lay.seed, "mode": mode, "status": "timeout",
+                           "plan_s": timeout}
                 else:
                     so, se = p.communicate()
                     try:
                         rec = json.loads(so.strip().splitlines()[-1])
                     except (IndexError, json.JSONDecodeError):
-                        rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "mode": mode, "status": "crashed", "reason": se.strip()[-400:]}
+                        rec = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "mode": mode, "status": "crashed",
+                               "reason": se.strip()[-400:]}
                 rec["wall_s"] = time.monotonic() - t_start
                 running.remove(item)
                 records.append(rec)
                 fh.write(json.dumps(rec) + "\n")
                 fh.flush()
-                extra = f"{rec.get('duration_s', 0):7.1f} s plan, lb {rec.get('lower_bound_s', 0):6.1f} s" if rec["status"] == "planned" else rec.get("reason", "")[:110]
+                planned = rec["status"] == "planned"
+                extra = (f"{rec.get('duration_s', 0):7.1f} s plan, lb {rec.get('lower_bound_s', 0):6.1f} s" if planned
+                         else rec.get("reason", "")[:110])
                 print(f"{lay.key:28s} {mode:4s} {rec['status']:8s} {rec.get('plan_s', 0):6.1f} s  {extra}", flush=True)
     return records
 
@@ -269,10 +285,23 @@ def _per_size(rs: list[dict]) -> list[str]:
     return lines
 
 
+def _ratios(by: dict, other: str) -> list[str]:
+    """full / ``other`` plan duration on the layouts both planned: median, range, total, and per layout."""
+    both = [(by[(k, "full")], by[(k, other)]) for k, m in by if m == "full" and (k, other) in by]
+    both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
+    if not both:
+        return []
+    ratio = [f["duration_s"] / s["duration_s"] for f, s in both]
+    total = sum(f["duration_s"] for f, _ in both) / sum(s["duration_s"] for _, s in both)
+    per = ", ".join(f"{f['layout']} {r:.2f}" for (f, _), r in zip(both, ratio, strict=True))
+    return [f"full / {other} duration on {len(both)} layouts both planned: median {statistics.median(ratio):.2f}, "
+            f"min {min(ratio):.2f}, max {max(ratio):.2f}, total {total:.2f}", f"  per layout: {per}"]
+
+
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
-    for mode in ("full", "short", "seed"):
+    for mode in ("full", "old", "short", "seed"):
         rs = [r for r in records if r["mode"] == mode]
         if not rs:
             continue
@@ -288,14 +317,11 @@ def summarise(records: list[dict]) -> str:
         for lo, hi in ((2, 8), (9, 16)):
             t = [r["plan_s"] for r in ok if lo <= r["n"] <= hi]
             n_all = sum(lo <= r["n"] <= hi for r in rs)
-            lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, max {max(t) if t else 0:.1f} s")
+            lines.append(f"  n={lo}-{hi}: planned {len(t)}/{n_all}, planning time median {statistics.median(t) if t else 0:.1f} s, "
+                         f"max {max(t) if t else 0:.1f} s")
         lines.extend(_per_size(rs))
-    both = [(by[(k, "full")], by[(k, "seed")]) for k, m in by if m == "full" and (k, "seed") in by]
-    both = [(f, s) for f, s in both if f["status"] == s["status"] == "planned"]
-    if both:
-        ratio = [f["duration_s"] / s["duration_s"] for f, s in both]
-        lines.append(f"full / seed duration on {len(both)} layouts both planned: median {statistics.median(ratio):.2f}, "
-                     f"min {min(ratio):.2f}, max {max(ratio):.2f}, total {sum(f['duration_s'] for f, _ in both) / sum(s['duration_s'] for _, s in both):.2f}")
+    for other in ("seed", "old"):
+        lines.extend(_ratios(by, other))
     fails = [r for r in records if r["mode"] == "full" and r["status"] != "planned"]
     for r in fails:
         lines.append(f"  full {r['status']}: {r['layout']}: {r.get('reason', '')[:160]}")

@@ -30,7 +30,8 @@ def _counting(monkeypatch) -> list[int]:
     return count
 
 
-# A generated ladder whose G_1 only the extended search forms (88 G_1 schedules): D4 must loop back to a
+# A generated ladder whose G_1 only the extended search of the piece scheme forms (88 G_1 schedules; the
+# overlapped schedules, tried first by default, are turned off where these tests are about that search): D4 must loop back to a
 # parking run between the pieces of D3's route, around D1's orbit and short of the arena edge.
 _HARD: dict[str, Any] = dict(n=4, seed=1071, shape="ladder", explicit_goals=True, heterogeneous=True)
 
@@ -40,7 +41,7 @@ def test_a_search_stops_at_its_budget_and_says_what_blocks(monkeypatch, budget):
     count = _counting(monkeypatch)
     scn = random_scenario(**_HARD)
     with pytest.raises(PlanningError) as err:
-        plan_assembly(scn, PlannerOptions(search_budget=budget))
+        plan_assembly(scn, PlannerOptions(search_budget=budget, overlap_pair=False))
     assert count[0] == budget  # every schedule up to the budget, none after it
     msg = err.value.message
     assert f"search budget of {budget} G_1 schedules spent" in msg
@@ -50,8 +51,8 @@ def test_a_search_stops_at_its_budget_and_says_what_blocks(monkeypatch, budget):
 def test_the_extended_search_plans_the_hard_ladder_and_the_plan_replays():
     scn = random_scenario(**_HARD)
     with pytest.raises(PlanningError):
-        plan_assembly(scn, PlannerOptions(extended_search=False))
-    res = plan_assembly(scn, PlannerOptions(search_budget=None))
+        plan_assembly(scn, PlannerOptions(extended_search=False, overlap_pair=False))
+    res = plan_assembly(scn, PlannerOptions(search_budget=None, overlap_pair=False))
     assert replay(res.plan, scn, max_step_um=1.0).ok
 
 
@@ -59,7 +60,7 @@ def test_the_default_budget_bounds_the_search_and_its_plan_replays(monkeypatch):
     count = _counting(monkeypatch)
     scn = random_scenario(**_HARD)
     try:
-        res = plan_assembly(scn)
+        res = plan_assembly(scn, PlannerOptions(overlap_pair=False))
     except PlanningError as exc:
         assert "; to make it plannable: " in exc.message
     else:
@@ -83,8 +84,8 @@ def test_a_layout_only_the_extended_search_plans_is_planned_within_the_budget_an
     # after D_{n-1}'s wait, runs that stop short of the track's end) can, well within the default budget.
     scn = random_scenario(3, 1053, shape="comb", explicit_goals=True, heterogeneous=False)
     with pytest.raises(PlanningError):
-        plan_assembly(scn, PlannerOptions(extended_search=False))
-    res = plan_assembly(scn)
+        plan_assembly(scn, PlannerOptions(extended_search=False, overlap_pair=False))
+    res = plan_assembly(scn, PlannerOptions(overlap_pair=False))
     rep = replay(res.plan, scn, max_step_um=1.0)
     assert rep.ok, rep.problems
 
@@ -100,6 +101,9 @@ def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
         return orig(self, *args, **kwargs)
 
     monkeypatch.setattr(planning._Planner, "_schedule_pair", counted)
+    # the piece search only: with the overlapped G_1 schedules both attempts plan this ladder at once
+    monkeypatch.setattr(planning._Planner, "_overlap_first", lambda *_args: False)
+    monkeypatch.setattr(planning._Planner, "_overlap_route", lambda *_args: False)
     try:
         nominal_plan(random_scenario(**_HARD))
     except PlanningError as exc:

@@ -96,12 +96,13 @@ def test_seed_scheme_is_one_piece_and_its_failure_says_what_to_change():
     """The seed's scheme cannot stretch D_n's corridor: it fails on this pair, naming the robots, the
     obstacle (the corridor) and the change that would help; the full planner plans it in pieces."""
     scn = random_scenario(2, 501, shape="pair", explicit_goals=True)
-    seed = PlannerOptions(max_pieces=1, departure_phases=1, pair_candidates=1, variants_compared=1, orbit_phases=0)
+    seed = PlannerOptions(max_pieces=1, departure_phases=1, pair_candidates=1, variants_compared=1, orbit_phases=0, overlap_pair=False,
+                          preposition=False)
     with pytest.raises(PlanningError) as info:
         plan_assembly(scn, seed)
     msg = info.value.message
     assert "D2 ('R1')" in msg and "D1 ('R0')" in msg and "free corridor" in msg
     assert "to make it plannable:" in msg and "\n" not in msg
-    full = plan_assembly(scn)
+    full = plan_assembly(scn, PlannerOptions(overlap_pair=False))
     assert sum(ph.kind == "pair-B" for ph in full.phases) > 1
     assert replay(full.plan, scn, max_step_um=2.0).ok

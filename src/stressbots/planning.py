@@ -53,7 +53,15 @@ from .collision import (
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
 from .kinematics import advance, move
+from .overlap import OverlapSettings, PairSchedule, joint_primitives, overlap_schedule, with_orbits
 from .plans import Plan, PlanPrimitive, PlanStep, merge_steps
+from .prepositioning import (
+    PrepositionSettings,
+    docking_costs,
+    follower_ends,
+    splice_straight,
+    straight_windows,
+)
 from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
 from .structures import Structure, target_structures
@@ -119,6 +127,18 @@ class PlannerOptions:
         ``max_pieces`` and ``pair_schedules`` of the extended search: more, shorter pieces of D_{n-1}'s
         route with D_n re-aimed between them (``max_pieces`` = 1, the seed's scheme, stays 1), and more
         schedules per G_1 search.
+    overlap_pair:
+        Form G_1 with overlapped schedules first (:mod:`stressbots.overlap`): D_n turns toward its slot
+        while D_{n-1} turns (on its orbit and on its route's arcs), so it runs straight only while D_{n-1}
+        does. Much shorter G_1 than the seed's two stages; False keeps only the seed's scheme and its
+        pieces.
+    overlap:
+        Settings of that search.
+    preposition:
+        While a robot docks, let the next one drive straight during its straight stretches (P_{k-2}
+        instead of P_{k-1}: :mod:`stressbots.prepositioning`) when that shortens the next one's docking.
+    preposition_settings:
+        Settings of that search.
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike
@@ -143,6 +163,10 @@ class PlannerOptions:
     extended_max_pieces: int = 10
     extended_pair_schedules: int = 64
     search_budget: int | None = SEARCH_BUDGET_DEFAULT
+    overlap_pair: bool = True
+    overlap: OverlapSettings = OverlapSettings()
+    preposition: bool = True
+    preposition_settings: PrepositionSettings = PrepositionSettings()
 
 
 SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
@@ -152,6 +176,8 @@ Not the default yet. The controller now assembles these plans as often as the de
 passes with them; 21/28 closed-loop trials either way on 14 tuning layouts of bench_generality.py), and
 they are 12 % shorter in total on bench_planner.py's layouts of 2-8 robots, but planning takes 2-13x
 longer and some plans are longer (gap-8), so the default stays the faster plan the controller was tuned on.
+Those figures predate the overlapped G_1 and pre-positioning (now default), which it does not change: its
+G_1 comparison only runs when no overlapped schedule is found. Not re-measured since.
 """
 
 
@@ -743,12 +769,18 @@ class _Search:
     ``pair_failures`` maps what a G_1 search depends on (see :meth:`_Planner.form_pair`) to why it
     failed: variants that differ only in later slots (which side stems grow on, which tooth is first)
     would repeat the same failing search exactly, so they fail at once with the same reason.
+    ``bottlenecks`` are the ranks of robots whose docking failed in a variant: later variants check first
+    that those robots can reach their slots at all (:meth:`_Planner.dock_check`), before forming G_1.
+    ``docking_failed`` holds the variants (by id) that failed after G_1 was formed: the extended search,
+    which only widens the G_1 search, skips them.
     """
 
     def __init__(self, budget: int | None):
         self.budget = budget
         self.used = 0
         self.pair_failures: dict = {}
+        self.bottlenecks: list[int] = []
+        self.docking_failed: set[int] = set()
 
     @property
     def spent(self) -> bool:
@@ -864,7 +896,9 @@ def lower_bound_s(scn, struct: Structure, rank: np.ndarray, phases: int = 90) ->
     """A lower bound (s) on the duration of any plan of the sequential scheme.
 
     G_1 cannot finish before both D_n and D_{n-1} have driven their shortest paths; each later robot
-    D_i cannot dock before driving the shortest path from the best point of its orbit circle.
+    D_i cannot dock before driving the shortest path from the best point of its orbit circle. A robot
+    pre-positioned before its step (:attr:`PlannerOptions.preposition`) starts its docking off that
+    circle, so a plan could in principle beat the docking part of this bound (efficiency above 1).
     """
     n = scn.n
     goals = struct.goal_poses(scn.names)
@@ -975,6 +1009,26 @@ class _Planner:
 
     # -- docking of single robots (steps 2..n-1) -------------------------------------------------
 
+    def dock_check(self, k: int) -> None:
+        """Raise :class:`NoRoute` unless D_k can reach its slot from its start orbit.
+
+        The quick test of a robot whose docking failed in an earlier variant: from any of
+        ``departure_phases`` points of its start orbit, around the lower robots' orbits (they orbit at
+        their starts until their own step) and the slots of the robots docked before it. Its own random
+        stream, so the plan of a variant that passes is what it would be without the test.
+        """
+        i = self.by_rank[k]
+        who = self.lab(i)
+        obst = self.obstacles([self.by_rank[j] for j in range(1, k)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
+        slot = float(self.struct.slot(self.scn.names[i]).approach_um)
+        approach = self.approach_path(i, self.goals[i], _approach(self.struct, self.scn.names[i], self.opts), obst, who, a_max=slot)
+        m = self.opts.departure_phases
+        waits = np.arange(m) * TWO_PI * self.r[i] / self.v[i] / m
+        sources = advance(np.repeat(self.scn.starts[i][None, :], m, axis=0), np.ones(m, bool), self.v[i], self.r[i], waits)
+        rng = np.random.default_rng(np.random.SeedSequence([self.opts.seed, k, 1]))
+        route(sources, waits * self.v[i], np.array(approach.start, dtype=np.float64), self.r[i], self.L[i], self.W[i], obst, self.opts,
+              rng, who)
+
     def dock_single(self, k: int) -> None:
         i = self.by_rank[k]
         who = self.lab(i)
@@ -995,7 +1049,16 @@ class _Planner:
         self.tl.apply(k, float(waits[s]))
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])
         t0 = self.tl.t
-        self.tl.apply_path(i, path, k, k - 1)
+        steps = [(k if kind == "R" else k - 1, ell / self.v[i]) for kind, ell in path.segments]
+        pre_f = None
+        if self.opts.preposition and k >= 2:  # after the wait: D_k's route and approach from here
+            mover = pathlib.Path(Pose(*self.tl.poses[i]), self.r[i], path.segments + approach.segments)
+            tail = [(k if kind == "R" else k - 1, ell / self.v[i]) for kind, ell in approach.segments]
+            pre_f = self._preposition(k, steps + tail, [(i, mover)], f"{who} docked", until=path.length / self.v[i])
+        if pre_f is not None:
+            steps = splice_straight(steps, k, pre_f[0], pre_f[1])
+        for kk, d in steps:
+            self.tl.apply(kk, d, counts_for=(i,))
         self.tl.phase(
             "route", i, k, k - 1, t0, pre, waypoints=tuple(tuple(float(v) for v in w) for w in waypoints),
             path=path.then(*approach.segments).segments, path_start=tuple(float(v) for v in path.start), approach_um=approach.length,
@@ -1005,6 +1068,68 @@ class _Planner:
         self.tl.phase("approach", i, k, k - 1, t0, goal)
         self.route_lengths[i] = path.length + approach.length
         self.tl.dock(i, goal, who)
+
+    def _preposition(self, k: int, steps, movers: Sequence[tuple[int, pathlib.Path]], what: str,
+                     until: float = math.inf) -> tuple[float, float] | None:
+        """A straight stretch ``(t0_s, dt_s)`` (from now) in which D_{k-1} drives straight with P_{k-2}
+        instead of P_{k-1} (:mod:`stressbots.prepositioning`), or None when none saves time.
+
+        ``steps`` are the coming primitive steps (P_k and above turn D_{k-1}, P_{k-1} is replaced), and
+        ``movers`` the robots they move with their paths from now: D_k docking, or the G_1 pair. Candidates
+        lie in the P_{k-1} steps that end by ``until`` (s), ranked by D_{k-1}'s predicted docking (best
+        departure phase on its new orbit, wait plus shortest path); one is taken only if its straight and
+        its new orbit clear the obstacles of D_{k-1}'s step, it keeps clear of the movers, and its
+        predicted route is clear: D_{k-1}'s docking then takes no longer than predicted, which is less
+        than its least docking from where it would be.
+        """
+        ps = self.opts.preposition_settings
+        f = self.by_rank[k - 1]
+        vf, rf = self.v[f], self.r[f]
+        total = float(sum(d for _, d in steps))
+        wins = [w for w in straight_windows(steps, k, ps.min_straight_s) if w[1] <= until + 1e-9]
+        if not wins:
+            return None
+        obst_f = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k, self.n + 1)])
+        a_max = float(self.struct.slot(self.scn.names[f]).approach_um)
+        try:
+            app_f = self.approach_path(f, self.goals[f], _approach(self.struct, self.scn.names[f], self.opts), obst_f, self.lab(f),
+                                       a_max=a_max)
+        except NoRoute:
+            return None
+        pre = np.array(app_f.start, dtype=np.float64)
+        cand = [(a + (b - a) * q / ps.start_steps, (b - a) * (1.0 - q / ps.start_steps) * frac)
+                for a, b in wins for q in range(ps.start_steps) for frac in ps.length_fractions]
+        taus, dts = np.array([c[0] for c in cand]), np.array([c[1] for c in cand])
+        ends = follower_ends(self.tl.poses[f], vf, rf, total, taus, dts)
+        cost, wait_f = docking_costs(ends, pre, vf, rf, self.opts.departure_phases)
+        base, _ = docking_costs(follower_ends(self.tl.poses[f], vf, rf, total, np.zeros(1), np.zeros(1)), pre, vf, rf,
+                                self.opts.departure_phases)
+        obst_s = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
+        for c in np.argsort(cost, kind="stable")[: ps.checked]:
+            if cost[c] > base[0] - ps.min_gain_s:
+                break
+            if self._preposition_clear(f, float(taus[c]), float(dts[c]), total, float(wait_f[c]), ends[c], pre, obst_s, obst_f, movers):
+                self.notes.append(f"{self.lab(f)} drove {vf * dts[c]:.0f} um straight while {what} (P{k - 2})")
+                return float(taus[c]), float(dts[c])
+        return None
+
+    def _preposition_clear(self, f: int, tau: float, dt: float, total: float, wait_f: float, end: np.ndarray, pre: np.ndarray,
+                           obst_s: Obstacles, obst_f: Obstacles, movers: Sequence[tuple[int, pathlib.Path]]) -> bool:
+        """Whether D_{k-1} (``f``) may drive straight from ``tau`` for ``dt`` s while the movers move."""
+        opts = self.opts
+        vf, rf, Lf, Wf = self.v[f], self.r[f], self.L[f], self.W[f]
+        follower = pathlib.Path(Pose(*self.tl.poses[f]), rf, (("R", vf * tau), ("S", vf * dt), ("R", vf * (total - tau - dt))))
+        if _path_hit(obst_s, pathlib.sub_path(follower, vf * tau, vf * (tau + dt)), Lf, Wf, opts) is not None:
+            return False
+        if _path_hit(obst_f, pathlib.Path(Pose(*end), rf, (("R", TWO_PI * rf),)), Lf, Wf, opts) is not None:
+            return False
+        for i, path in movers:
+            t = np.append(np.arange(tau, total, opts.sample_um / max(vf, self.v[i])), total)
+            depth = penetration_depth(follower.pose_at(vf * t), Lf, Wf, path.pose_at(self.v[i] * t), self.L[i], self.W[i])
+            if (depth > -opts.clearance_um).any():
+                return False
+        src = advance(end[None, :], np.ones(1, bool), vf, rf, wait_f)[0]
+        return _path_hit(obst_f, pathlib.shortest_path(src, pre, rf), Lf, Wf, opts) is None
 
     # -- G_1 (step 1) -------------------------------------------------------------------------------
 
@@ -1086,9 +1211,16 @@ class _Planner:
         attempts: list[str] = []
         budget = [opts.pair_schedules]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
         one_piece = [False]  # schedule only the seed's one-piece scheme
+        overlap_routes = [False]  # try overlapped schedules around the routes the roadmap finds
+        self._overlap_sched: PairSchedule | None = None
+        self._overlap_routes_tried = 0
+        if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
+            return
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
+            if overlap_routes[0] and self._overlap_route(N, M, routeM, approachM, float(waits[sidx]), obst_low):
+                return None
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
             for park in parks[:1] if one_piece[0] else parks:
@@ -1124,12 +1256,144 @@ class _Planner:
             self._run_pair_schedule()
             return
         budget[0] = opts.pair_schedules
+        overlap_routes[0] = opts.overlap_pair
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
             reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
+
+    # -- overlapped G_1 schedules (stressbots.overlap) ---------------------------------------------------
+
+    def _overlap_first(self, N: int, M: int, sourcesM, waits, preM, approachM: pathlib.Path, obst_low: Obstacles) -> bool:
+        """Form G_1 with the best overlapped schedule over D_{n-1}'s direct routes; False if there is none."""
+        sched = self._overlap_best(N, M, sourcesM, waits, preM, approachM, obst_low)
+        if sched is None:
+            return False
+        self._run_overlap(sched)
+        return True
+
+    def _overlap_route(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles) -> bool:
+        """Whether an overlapped schedule fits this (roadmap) route of D_{n-1}; records it for :meth:`_run_pair_schedule`.
+
+        Cheaper than for the direct routes: D_n's first path is not routed, and only the first
+        ``overlap.roadmap_routes`` routes of a G_1 search are tried (then only the piece scheme).
+        """
+        self._overlap_routes_tried += 1
+        if self._overlap_routes_tried > self.opts.overlap.roadmap_routes:
+            return False
+        self._overlap_sched = self._overlap_try(N, M, routeM, approachM, wait0, obst_low, route_first=False)
+        return self._overlap_sched is not None
+
+    def _overlap_try(self, N: int, M: int, routeM: pathlib.Path, approachM: pathlib.Path, wait0: float, obst_low: Obstacles,
+                     not_after_s: float = math.inf, route_first: bool = True) -> PairSchedule | None:
+        """An overlapped G_1 schedule around this route of D_{n-1} (leaving after ``wait0`` s), or None."""
+        opts = self.opts
+        LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
+        vN, vM = self.v[N], self.v[M]
+
+        def static_ok(path: pathlib.Path) -> bool:
+            return not obst_low.hits(path.sample(opts.sample_um), LN, WN, opts.clearance_um).any()
+
+        def poses_ok(poses: np.ndarray) -> np.ndarray:
+            return ~obst_low.hits(poses, LN, WN, opts.clearance_um)
+
+        def joint_ok(path_n: pathlib.Path, path_m: pathlib.Path) -> bool:
+            T = path_m.length / vM
+            dt = opts.sample_um / max(vN, vM)
+            t = np.append(np.arange(0.0, T, dt), T)
+            depth = penetration_depth(path_n.pose_at(vN * t), LN, WN, path_m.pose_at(vM * t), LM, WM)
+            limit = np.where(t > T - (opts.approach_um + opts.clearance_um) / min(vN, vM), 0.5, -opts.clearance_um)
+            return not (depth > limit).any()
+
+        TM = TWO_PI * self.r[M] / vM
+        orbit = TWO_PI * self.r[M]
+
+        # D_n's first path: D_(n-1) orbits at its start all that time (its first arc is on that orbit too)
+        obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], self.r[M])[0], self.rstar[M], f"the orbit of {self.lab(M)}")
+
+        def first_ok(path: pathlib.Path) -> bool:
+            coarse = path.sample(opts.overlap.coarse_um)
+            return not obst0.hits(coarse, LN, WN, opts.clearance_um).any() and not obst0.hits(path.sample(opts.sample_um), LN, WN,
+                                                                                               opts.clearance_um).any()
+
+        def first_path(s1: np.ndarray, t0: float) -> pathlib.Path | None:
+            got = self._timed_path(self.tl.poses[N], s1, vN, self.r[N], LN, WN, t0, TM, obst0)
+            return None if isinstance(got, str) else got
+        for count in range(opts.overlap.max_inserted_orbits + 1):
+            for offset in opts.overlap.split_offsets if count else (0.0,):
+                routed, at = with_orbits(routeM, count, offset)
+                if count and not at:
+                    continue
+                if any(_path_hit(obst_low, pathlib.sub_path(routed, a, a + orbit), LM, WM, opts) for a in at):
+                    continue  # D_(n-1)'s inserted orbit is blocked there
+                sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
+                                         self.r[N], vM, self.r[M], static_ok, joint_ok, poses_ok, opts.overlap, not_after_s=not_after_s,
+                                         first_path=first_path if route_first else None, first_ok=first_ok)
+                if sched is not None:
+                    return sched
+                break  # the orbits fit: another offset would not help D_n more
+        return None
+
+    def _overlap_best(self, N: int, M: int, sourcesM, waits, preM, approachM: pathlib.Path, obst_low: Obstacles) -> PairSchedule | None:
+        """The shortest overlapped schedule over D_{n-1}'s direct routes from its departure phases.
+
+        Phases are tried by a lower bound on their schedule (the wait plus D_{n-1}'s route and approach),
+        and a phase whose bound is not below the best schedule found is not searched.
+        """
+        vM, rM = self.v[M], self.r[M]
+        lengths = pathlib.shortest_path_lengths(sourcesM, np.broadcast_to(preM, sourcesM.shape), rM)
+        bound = waits + (lengths + approachM.length) / vM
+        best: PairSchedule | None = None
+        for s in np.argsort(bound, kind="stable"):
+            if best is not None and bound[s] >= best.duration_s - 1e-9:
+                break
+            p = pathlib.shortest_path(sourcesM[s], preM, rM)
+            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+                continue
+            sched = self._overlap_try(N, M, p, approachM, float(waits[s]), obst_low,
+                                      not_after_s=math.inf if best is None else best.duration_s - 1e-9)
+            if sched is not None and (best is None or sched.duration_s < best.duration_s):
+                best = sched
+        return best
+
+    def _run_overlap(self, sched: PairSchedule) -> None:
+        """Apply an overlapped G_1 schedule to the timeline, one phase per piece of D_n's path."""
+        n = self.n
+        N, M = self.by_rank[n], self.by_rank[n - 1]
+        vN, vM = self.v[N], self.v[M]
+        last = max(t1 for _, t1, free in sched.pieces if not free)
+        pre_f = None
+        if self.opts.preposition and n >= 3:  # D_(n-2) drives straight while both drive straight (P_(n-3))
+            steps = joint_primitives(sched.path_n, vN, sched.path_m, vM, n)
+            pre_f = self._preposition(n - 1, steps, [(N, sched.path_n), (M, sched.path_m)], "G_1 formed")
+        for t_a, t_b, free in sched.pieces:
+            if t_b - t_a <= 0.0:
+                continue
+            pn = pathlib.sub_path(sched.path_n, vN * t_a, vN * t_b)
+            pm = pathlib.sub_path(sched.path_m, vM * t_a, vM * t_b)
+            t0 = self.tl.t
+            steps = joint_primitives(pn, vN, pm, vM, n)
+            if pre_f is not None and t_a - 1e-9 <= pre_f[0] and pre_f[0] + pre_f[1] <= t_b + 1e-9:
+                steps = splice_straight(steps, n - 1, max(pre_f[0] - t_a, 0.0), pre_f[1])
+            for k, d in steps:
+                self.tl.apply(k, d, counts_for=(N,))
+            if free:
+                self.tl.phase("pair-A", N, n, n - 1, t0, pn.end, partner=M, partner_end=tuple(float(v) for v in self.tl.poses[M]),
+                              path=pn.segments, path_start=tuple(float(v) for v in pn.start))
+            else:
+                self.tl.phase("pair-B", M, n - 1, n - 2, t0, pm.end, partner=N, run=(tuple(float(v) for v in pn.start), float(pn.length)),
+                              last=t_b == last, path=pm.segments, path_start=tuple(float(v) for v in pm.start))
+        self.route_lengths[N] = sched.path_n.length
+        self.route_lengths[M] = sched.path_m.length - vM * sched.wait_s
+        windows = sum(1 for _, _, free in sched.pieces[1:] if free)
+        self.notes.append(
+            f"G_1 overlapped: {self.lab(N)} turns while {self.lab(M)} turns ({windows} window(s) on its route), "
+            f"runs straight only while it does; G_1 takes {sched.duration_s:.1f} s"
+        )
+        self.tl.dock(N, self.goals[N], self.lab(N))
+        self.tl.dock(M, self.goals[M], self.lab(M))
 
     def _best_direct_pair(self, sourcesM, preM, rM, M, obst_low, try_route):
         """The shortest G_1 schedule over D_{n-1}'s direct routes from its departure phases, or None.
@@ -1465,6 +1729,9 @@ class _Planner:
         return None
 
     def _run_pair_schedule(self) -> None:
+        if self._overlap_sched is not None:  # the search accepted an overlapped schedule around a roadmap route
+            self._run_overlap(self._overlap_sched)
+            return
         assert self._pair_schedule is not None  # set by form_pair's successful search
         N, M, fullM, wait0, durs, runs, a_paths = self._pair_schedule
         n = self.n
@@ -1517,12 +1784,20 @@ def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, ca
     t0 = time.perf_counter()
     planner = _Planner(scn, analysis, st, opts, extended=extended, search=search)
     try:
+        for k in planner.search.bottlenecks:  # fail fast where an earlier variant failed to dock
+            planner.dock_check(k)
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
         planner.form_pair()
+    except NoRoute as exc:
+        return exc.reason
+    try:
         for k in range(scn.n - 2, 0, -1):
             say(f"docking {planner.lab(planner.by_rank[k])}")
             planner.dock_single(k)
     except NoRoute as exc:
+        planner.search.docking_failed.add(id(st))
+        if k not in planner.search.bottlenecks:
+            planner.search.bottlenecks.append(k)
         return exc.reason
     steps = merge_steps(planner.tl.steps, min_duration_s=1e-12)
     from .outputs import provenance
@@ -1626,6 +1901,8 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
             break
         if best is None and search.spent:
             break
+        if extended and id(st) in search.docking_failed:
+            continue  # it formed G_1 and failed later: a wider G_1 search cannot help
         if best is None and failures and time.perf_counter() - t_start > opts.time_budget_s:
             failures.append(f"no plan within the time budget of {opts.time_budget_s:g} s")
             break
