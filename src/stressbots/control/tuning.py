@@ -147,6 +147,14 @@ class Tuning:
     off_slot_um:
         ... and counts as docked off its slot up to this far along the face: its front touches the structure,
         so it can neither turn (every front point moves forward) nor reverse; recovery is impossible.
+
+    Gross-motion reachability and stall recovery (issue 12, gross motion):
+
+    approach_lead_in_radii:
+        An approach corridor counts only if its line goes on this many of the robot's turn radii beyond
+        the funnel, clear of the structure and the arena edge: a one-way robot enters the funnel from
+        behind, so a funnel backed against the edge is a target no path reaches (those robots drove on
+        along blocked paths into the edge, where turning and driving both push into it: trapped).
     """
 
     g1_clearance_um: float = 25.0
@@ -201,6 +209,8 @@ class Tuning:
     settle_fraction: float = 0.2
     flush_um: float = 15.0
     off_slot_um: float = 90.0
+    # -- gross-motion reachability and stall recovery (issue 12) --
+    approach_lead_in_radii: float = 1.0
 
 
 @dataclass(frozen=True)
