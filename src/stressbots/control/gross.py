@@ -20,12 +20,13 @@ import numpy as np
 
 from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
+from ..kinematics import sample_arclengths
 from ..robots import angle_difference, turning_centres
 from .loopview import LoopView, Steps
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["GrossLoop", "GrossMotion", "arrived", "path_steps"]
+__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "path_steps"]
 
 
 
@@ -53,6 +54,38 @@ def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit
     return out
 
 
+def clear_prefix(path: pathlib.Path, hits: Callable[[np.ndarray], bool], step_um: float = 10.0) -> float:
+    """How far (um) along ``path`` a robot drives before ``hits(samples)`` (poses (M, 3) -> bool: would
+    they meet an obstacle?) first holds: the length of the longest clear beginning, at ``step_um``.
+
+    A bisection over the path's samples (a longer beginning contains a shorter one, so clearness is
+    monotone): O(log M) calls of ``hits``. The whole length when nothing is hit, 0 when the start is.
+    """
+    s = sample_arclengths(path.lengths, step_um)
+    poses = path.pose_at(s)
+    if not hits(poses):
+        return float(path.length)
+    lo, hi = 0, len(s)  # poses[:lo] are clear (lo = 0: nothing known), poses[:hi] are not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if hits(poses[:mid]):
+            hi = mid
+        else:
+            lo = mid
+    return float(s[lo - 1]) if lo > 0 else 0.0
+
+
+def _cut(segments, length_um: float) -> tuple[tuple[str, float], ...]:
+    """The first ``length_um`` (um) of a path's ``segments``."""
+    out, left = [], length_um
+    for kind, ell in segments:
+        if left <= 0.0:
+            break
+        out.append((kind, min(ell, left)))
+        left -= ell
+    return tuple(out)
+
+
 def arrived(pose: np.ndarray, target: np.ndarray, tune: Tuning) -> bool:
     """Whether ``pose`` is inside ``target``'s region (the seed's regions instead of points): within
     ``tune.arrive_um`` (um) and ``tune.arrive_deg`` (deg)."""
@@ -68,6 +101,9 @@ class GrossMotion:
 
     def __init__(self, loop: GrossLoop):
         self.loop = loop
+        # failed roadmap searches per (robot, target, structure, orbits) (:meth:`_search_key`): each costs a full
+        # roadmap build, and failing runs spent most of their wall time asking again and again
+        self._failed: dict[tuple, int] = {}
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
                       target=None) -> bool:
@@ -105,20 +141,65 @@ class GrossMotion:
             return True
         return False
 
-    def _route_or_detour(self, i: int, target: np.ndarray, orbiting: Sequence[int], extra_discs, routed, path):
-        """The roadmap route itself when there is one (it was checked at a wider clearance), else a detour at
-        the controller's clearance, else ``path`` unchanged."""
-        if routed is not None:
-            return routed
-        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.loop.opts.clearance_um)[1]
-        return path if detour is None else detour
+    def _search_key(self, i: int, target, orbiting: Sequence[int]) -> tuple:
+        """What a roadmap search's answer depends on, coarsely: robot, target (5 um, ~3 deg), structure, orbits."""
+        t = np.asarray(target, float)
+        return (i, round(float(t[0]) / 5.0), round(float(t[1]) / 5.0), round(float(t[2]) * 20.0), int(self.loop.docked.sum()),
+                tuple(sorted(orbiting)))
+
+    def _searches_left(self, i: int, target, orbiting: Sequence[int]) -> int:
+        """Roadmap searches robot ``i`` may still spend on ``target`` (``Tuning.route_searches_max`` failed ones in all)."""
+        return self.loop.tune.route_searches_max - self._failed.get(self._search_key(i, target, orbiting), 0)
+
+    def _blocked(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs, ready,
+                 clearance, path, quiet: int):
+        """Gross motion around a blocked ``path``: ``(outcome, quiet)``.
+
+        ``outcome`` is True (``ready()`` became true on a roadmap route), None (a route's waypoints were
+        driven: re-plan), a path to drive this t_x, or False: no route and nothing clear to drive (give up
+        this target; the caller re-plans). With no route, only the clear beginning of ``path``
+        (:func:`clear_prefix`) is driven, never the blocked part: robots that drove on along blocked paths
+        ran into the arena edge or the structure and were trapped there (a one-way robot against an
+        obstacle can neither turn nor drive off it).
+        """
+        if quiet <= 0 and self._searches_left(i, target, orbiting) > 0:
+            c_eff = self.loop.opts.clearance_um if clearance is None else clearance
+            # widest clearance first; the last, Tuning.escape_clearance_um, gets a robot in a tight spot (its loop
+            # 12 um from the arena edge, say) out of it, where no route at the full clearance starts
+            for c in (max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um, self.loop.tune.escape_clearance_um):
+                points, routed = self.roadmap_route(i, target, orbiting, extra_discs, c)
+                if routed is None:
+                    continue
+                # commit to one roadmap route: steer through its waypoints (replanning every t_x between
+                # them, at the clearance it was found at), instead of a new random route every t_x
+                t_before = self.loop.t
+                for w in points[:-1]:
+                    self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
+                               clearance=min(c, c_eff))
+                    if ready is not None and ready():
+                        return True, quiet
+                return (None if self.loop.t > t_before else routed), quiet
+            key = self._search_key(i, target, orbiting)
+            self._failed[key] = self._failed.get(key, 0) + 1
+            quiet = self.loop.tune.no_route_quiet_cycles
+            self.loop.log("no-route", i, f"no way around the obstacles to its target; drives the clear part of its path, asks again "
+                                         f"in {quiet} t_x")
+        quiet -= 1
+        hit = (lambda s: self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target))  # noqa: E731
+        ahead = clear_prefix(path, hit, 10.0)
+        if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
+            self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
+            return False, quiet
+        return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
         ``ready()`` True ends the gross motion early (the robot is already in the region from which the
-        next step works: the seed's regions A_i instead of a point).
+        next step works: the seed's regions A_i instead of a point). A blocked path is routed around the
+        obstacles (:meth:`_blocked`); False when there is no way (the caller re-plans) or the robot stalled
+        (``loop.stuck``).
 
         Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
         points a little left of where it must. Clockwise is the only correction a one-way robot makes
@@ -129,35 +210,20 @@ class GrossMotion:
         quiet = 0  # cycles left before the roadmap is asked again after it found no way around
         self.loop.stuck = False
         for _ in range(max_cycles):
-            v, r = self.loop.v_hat[i], self.loop.r_hat[i]
+            v = self.loop.v_hat[i]
             p = self.loop.est[i]
             if (ready is None and arrived(p, target, self.loop.tune)) or (ready is not None and ready()):
                 return True
-            path = pathlib.shortest_path(p, target, r)
+            path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via and quiet > 0:
-                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
-                elif via:
-                    # commit to one roadmap route: steer through its waypoints (replanning every t_x
-                    # between them), instead of a new random route every t_x
-                    c_eff = self.loop.opts.clearance_um if clearance is None else clearance
-                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0))
-                    t_before = self.loop.t
-                    if len(points) > 1:
-                        for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
-                                       clearance=clearance)
-                            if ready is not None and ready():
-                                return True
-                        if self.loop.t > t_before:
-                            continue
-                    found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
-                    if found is None:
-                        quiet = self.loop.tune.no_route_quiet_cycles
-                        self.loop.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
-                    path = path if found is None else found
-                else:
+                if not via:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
+                outcome, quiet = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance, path, quiet)
+                if outcome is None:
+                    continue
+                if isinstance(outcome, bool):
+                    return outcome
+                path = outcome
             self.loop.replans += 1
             # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
             whole = path.length / v <= self.loop.tune.whole_leg_factor * self.loop.tx

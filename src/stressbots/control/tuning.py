@@ -155,6 +155,18 @@ class Tuning:
         the funnel, clear of the structure and the arena edge: a one-way robot enters the funnel from
         behind, so a funnel backed against the edge is a target no path reaches (those robots drove on
         along blocked paths into the edge, where turning and driving both push into it: trapped).
+    escape_clearance_um:
+        Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot
+        (its loop 12 um from the edge, say) has no route at 15-20 um from where it is, and the clear part
+        of a route at a few um is safer than the blocked shortest path (5 sigma of the 2 um camera error).
+    route_searches_max:
+        Failed roadmap searches (each at up to three clearances) a robot may spend on one target (same
+        structure and orbits) in a run; each costs up to six roadmap builds (0.1-0.5 s each), and failing
+        8-robot runs spent 40-80 s asking again and again.
+    min_clear_run_s:
+        With no route, a robot drives the clear beginning of its blocked path only if it is at least this
+        many seconds of travel; otherwise it gives up the target (the caller re-plans) instead of driving
+        into what blocks it.
     """
 
     g1_clearance_um: float = 25.0
@@ -211,6 +223,9 @@ class Tuning:
     off_slot_um: float = 90.0
     # -- gross-motion reachability and stall recovery (issue 12) --
     approach_lead_in_radii: float = 1.0
+    escape_clearance_um: float = 10.0
+    route_searches_max: int = 3
+    min_clear_run_s: float = 1.0
 
 
 @dataclass(frozen=True)
