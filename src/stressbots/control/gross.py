@@ -40,6 +40,8 @@ class GrossLoop(LoopView, Protocol):
     @property
     def rstar(self) -> np.ndarray: ...
 
+    def tend_orbits(self, k: int) -> None: ...
+
 
 def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None) -> Steps:
     """The first ``limit_s`` seconds of ``path`` as primitive steps (all of it when None)."""
@@ -158,7 +160,8 @@ class GrossMotion:
         ``outcome`` is True (``ready()`` became true on a roadmap route), None (a route's waypoints were
         driven: re-plan), a path to drive this t_x, or False: no route and nothing clear to drive (give up
         this target; the caller re-plans). With no route, only the clear beginning of ``path``
-        (:func:`clear_prefix`) is driven, never the blocked part: robots that drove on along blocked paths
+        (:func:`clear_prefix`, at the full clearance, else at ``Tuning.escape_clearance_um``, else short of contact) is driven,
+        never the blocked part: robots that drove on along blocked paths
         ran into the arena edge or the structure and were trapped there (a one-way robot against an
         obstacle can neither turn nor drive off it).
         """
@@ -185,8 +188,15 @@ class GrossMotion:
             self.loop.log("no-route", i, f"no way around the obstacles to its target; drives the clear part of its path, asks again "
                                          f"in {quiet} t_x")
         quiet -= 1
-        hit = (lambda s: self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target))  # noqa: E731
-        ahead = clear_prefix(path, hit, 10.0)
+        ahead = 0.0
+        # full clearance, else the escape one, else (a robot already that close) no contact
+        for c, tgt in ((clearance, target), (self.loop.tune.escape_clearance_um, None), (0.0, None)):
+            def hit(s: np.ndarray, c=c, tgt=tgt) -> bool:
+                return self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=c, target=tgt)
+
+            ahead = clear_prefix(path, hit, 10.0)
+            if ahead >= self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
+                break
         if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
             self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
             return False, quiet
@@ -243,6 +253,7 @@ class GrossMotion:
                 stalls = 0
             if whole:
                 return True
+            self.loop.tend_orbits(turn_k)  # waiting orbits drift meanwhile: move one away before it is trapped
         return False
 
     def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
