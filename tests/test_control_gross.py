@@ -23,7 +23,7 @@ from stressbots.control import ControllerOptions, Tuning
 from stressbots.control.gross import GrossMotion, arrived, clear_prefix
 from stressbots.control.single import approach_length, lead_in_clear
 from stressbots.kinematics import move
-from stressbots.robots import orbit_radii
+from stressbots.robots import Pose, orbit_radii
 
 ARENA = (2000.0, 2000.0)
 L, W, R, V = 240.0, 56.0, 210.0, 100.0
@@ -36,7 +36,7 @@ NO_BODIES = (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
 @given(st.floats(0.0, 900.0), st.floats(1.0, 20.0))
 def test_clear_prefix_of_a_straight_path_stops_short_of_a_wall(wall_x, step):
     # a straight path along +x from x = 0, 800 um long; "hit" = any sample at or beyond x = wall_x
-    path = pathlib.Path((0.0, 0.0, 0.5 * math.pi), R, (("S", 800.0),))
+    path = pathlib.Path(Pose(0.0, 0.0, 0.5 * math.pi), R, (("S", 800.0),))
     ahead = clear_prefix(path, lambda s: bool((s[:, 0] >= wall_x).any()), step)
     if wall_x > 800.0:
         assert ahead == pytest.approx(800.0)
@@ -46,14 +46,14 @@ def test_clear_prefix_of_a_straight_path_stops_short_of_a_wall(wall_x, step):
 
 
 def test_clear_prefix_whole_path_when_clear_and_zero_when_the_start_is_hit():
-    path = pathlib.Path((0.0, 0.0, 0.0), R, (("R", 300.0), ("S", 200.0)))
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("R", 300.0), ("S", 200.0)))
     assert clear_prefix(path, lambda _s: False) == pytest.approx(path.length)
     assert clear_prefix(path, lambda _s: True) == 0.0
 
 
 def test_clear_prefix_on_an_arc_stops_where_the_heading_passes_a_bound():
     # a clockwise quarter-plus arc from heading 0: the heading grows as s / R; "hit" once it exceeds 60 deg
-    path = pathlib.Path((0.0, 0.0, 0.0), R, (("R", 0.75 * math.pi * R),))
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("R", 0.75 * math.pi * R),))
     ahead = clear_prefix(path, lambda s: bool((s[:, 2] > math.radians(60.0)).any()), 5.0)
     assert math.radians(60.0) * R - 5.0 <= ahead <= math.radians(60.0) * R
 
