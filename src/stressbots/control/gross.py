@@ -18,6 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
+from .. import kinematics
 from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
 from ..kinematics import sample_arclengths
@@ -26,7 +27,7 @@ from .loopview import LoopView, Steps
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "path_steps"]
+__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "contact_clearance", "escape_moves", "escape_sweep", "path_steps"]
 
 
 
@@ -75,6 +76,37 @@ def clear_prefix(path: pathlib.Path, hits: Callable[[np.ndarray], bool], step_um
         else:
             lo = mid
     return float(s[lo - 1]) if lo > 0 else 0.0
+
+
+def escape_moves(v: float, r: float, length: float, turn_fractions: Sequence[float],
+                 straight_lengths: Sequence[float]) -> list[tuple[float, float]]:
+    """Candidate escapes of a one-way robot from a contact, cheapest first: ``(turn_s, straight_s)``, turn
+    clockwise for a fraction of a loop (radius ``r`` um at ``v`` um/s), then drive straight so many body
+    lengths (``length`` um). A robot cannot reverse, so every way off an obstacle is one of these."""
+    moves = {(2.0 * math.pi * r * f / v, length * b / v) for f in turn_fractions for b in straight_lengths}
+    return sorted(moves, key=lambda m: (m[0] + m[1], m[0]))
+
+
+def escape_sweep(pose: np.ndarray, move_: tuple[float, float], v: float, r: float, step_um: float = 10.0) -> np.ndarray:
+    """The poses (M, 3) a robot at ``pose`` passes on the escape ``move_`` (:func:`escape_moves`), ``step_um`` apart."""
+    turn = v * move_[0]
+    a = kinematics.move(pose, np.linspace(0.0, turn, max(2, int(turn / step_um) + 1)), 1.0 / r)
+    b = kinematics.move(a[-1], np.linspace(0.0, v * move_[1], max(2, int(v * move_[1] / step_um) + 1)), 0.0)
+    return np.vstack([a, b[1:]])
+
+
+def contact_clearance(hits: Callable[[float], bool], low: float = -80.0, high: float = 0.0, tol: float = 0.5) -> float:
+    """The largest clearance ``c`` (um, in ``[low, high]``) at which ``hits(c)`` is still False: how far a body
+    is from its nearest obstacle (negative: overlapping, as measured). ``hits`` must be monotone in ``c``."""
+    if not hits(low):
+        lo, hi = low, high
+        if not hits(hi):
+            return high
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if not hits(mid) else (lo, mid)
+        return lo
+    return low
 
 
 def _cut(segments, length_um: float) -> tuple[tuple[str, float], ...]:
@@ -154,12 +186,13 @@ class GrossMotion:
         return self.loop.tune.route_searches_max - self._failed.get(self._search_key(i, target, orbiting), 0)
 
     def _blocked(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs, ready,
-                 clearance, path, quiet: int):
-        """Gross motion around a blocked ``path``: ``(outcome, quiet)``.
+                 clearance, path, quiet: int, escapes: int):
+        """Gross motion around a blocked ``path``: ``(outcome, quiet, escapes)`` (the t_x left before the roadmap is
+        asked again, the escapes left to this gross motion).
 
         ``outcome`` is True (``ready()`` became true on a roadmap route), None (a route's waypoints were
         driven: re-plan), a path to drive this t_x, or False: no route and nothing clear to drive (give up
-        this target; the caller re-plans). With no route, only the clear beginning of ``path``
+        this target; the caller re-plans) after an :meth:`escape` was tried. With no route, only the clear beginning of ``path``
         (:func:`clear_prefix`, at the full clearance, else at ``Tuning.escape_clearance_um``, else short of contact) is driven,
         never the blocked part: robots that drove on along blocked paths
         ran into the arena edge or the structure and were trapped there (a one-way robot against an
@@ -180,8 +213,8 @@ class GrossMotion:
                     self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
                                clearance=min(c, c_eff))
                     if ready is not None and ready():
-                        return True, quiet
-                return (None if self.loop.t > t_before else routed), quiet
+                        return True, quiet, escapes
+                return (None if self.loop.t > t_before else routed), quiet, escapes
             key = self._search_key(i, target, orbiting)
             self._failed[key] = self._failed.get(key, 0) + 1
             quiet = self.loop.tune.no_route_quiet_cycles
@@ -198,9 +231,12 @@ class GrossMotion:
             if ahead >= self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
                 break
         if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
+            if escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
+                return None, quiet, escapes - 1  # off the obstacle: re-plan from there
             self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
-            return False, quiet
-        return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet
+            self.loop.stuck = True  # failure region H: the caller's recovery (backing off) takes over
+            return False, quiet, escapes
+        return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
@@ -217,6 +253,7 @@ class GrossMotion:
         next replan, a turn cut short costs a slight turn.
         """
         stalls = 0
+        escapes = self.loop.tune.escapes_per_steer
         quiet = 0  # cycles left before the roadmap is asked again after it found no way around
         self.loop.stuck = False
         for _ in range(max_cycles):
@@ -228,7 +265,8 @@ class GrossMotion:
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
                 if not via:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
-                outcome, quiet = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance, path, quiet)
+                outcome, quiet, escapes = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance, path,
+                                                        quiet, escapes)
                 if outcome is None:
                     continue
                 if isinstance(outcome, bool):
@@ -245,7 +283,9 @@ class GrossMotion:
             self.loop.drive(steps)
             if float(np.hypot(*(self.loop.est[i, :2] - before[:2]))) < self.loop.tune.stall_fraction * v * sum(d for _, d in steps):
                 stalls += 1
-                if stalls >= self.loop.tune.stall_count:
+                if stalls >= self.loop.tune.stall_count and escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
+                    stalls, escapes = 0, escapes - 1
+                elif stalls >= self.loop.tune.stall_count:
                     self.loop.log("stuck", i, "stopped during gross motion (failure region H)")
                     self.loop.stuck = True
                     return False
@@ -254,6 +294,30 @@ class GrossMotion:
             if whole:
                 return True
             self.loop.tend_orbits(turn_k)  # waiting orbits drift meanwhile: move one away before it is trapped
+        return False
+
+    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs=()) -> bool:
+        """Recovery from a contact (or a pose that close): drive robot ``i`` off what blocks it; True if it moved.
+
+        How close it is to its nearest obstacle is measured (:func:`contact_clearance`, the orbits, the
+        structure and the arena edge as obstacles); the cheapest escape (:func:`escape_moves`) that never
+        goes deeper than that and ends ``Tuning.escape_clearance_um`` clear is driven. Backing off blindly
+        (a quarter turn, then straight) turned into the obstacle as often as away from it.
+        """
+        lp = self.loop
+        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
+        p = lp.est[i].copy()
+
+        def hit(samples: np.ndarray, c: float) -> bool:
+            return self.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=c)
+
+        now = contact_clearance(lambda c: hit(p[None, :], c), high=lp.tune.escape_clearance_um)
+        for m in escape_moves(v, r, float(lp.L[i]), lp.tune.escape_turns, lp.tune.escape_straights):
+            sweep = escape_sweep(p, m, v, r)
+            if not hit(sweep[1:], now - 0.5) and not hit(sweep[-1:], lp.tune.escape_clearance_um):
+                lp.log("escape", i, f"{now:.0f} um from an obstacle: turns {m[0]:.1f} s, then {m[1]:.1f} s straight off it")
+                lp.drive([(k, d) for k, d in ((turn_k, m[0]), (straight_k, m[1])) if d > 0.0])
+                return True
         return False
 
     def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):

@@ -175,10 +175,11 @@ class _Runner(PlantLoop):
         (:meth:`stressbots.control.gross.GrossMotion.obstacles_hit`)."""
         return self.gross.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target)
 
-    def park_orbits(self, k: int) -> None:
+    def park_orbits(self, k: int, top: int | None = None) -> None:
         """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
-        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each."""
-        waiting = [self.by_rank[j] for j in range(1, k + 1)]
+        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each.
+        Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k moves: it has no orbit then)."""
+        waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
         docked = np.flatnonzero(self.docked)
         gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
                           self.est[docked], self.L[docked], self.W[docked])
@@ -212,7 +213,7 @@ class _Runner(PlantLoop):
         edge within one phase, trapping its robot); checked only before each phase, that was too late.
         Nothing during G_1 (k of the pair: its timing is the pair phase's own)."""
         if 1 <= k <= self.n - 2:
-            self.park_orbits(k)
+            self.park_orbits(k, top=k - 1)
 
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]

@@ -167,6 +167,13 @@ class Tuning:
         With no route, a robot drives the clear beginning of its blocked path only if it is at least this
         many seconds of travel; otherwise it gives up the target (the caller re-plans) instead of driving
         into what blocks it.
+    escapes_per_steer:
+        Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact
+        or a stall before it reports the robot stuck (each is a turn and a straight: a few seconds).
+    escape_turns:
+        Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse).
+    escape_straights:
+        Lengths of an escape's straight, in body lengths (one clears a body it touched end to end).
     """
 
     g1_clearance_um: float = 25.0
@@ -226,6 +233,9 @@ class Tuning:
     escape_clearance_um: float = 10.0
     route_searches_max: int = 3
     min_clear_run_s: float = 1.0
+    escapes_per_steer: int = 2
+    escape_turns: tuple[float, ...] = (0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
+    escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
 
 
 @dataclass(frozen=True)
