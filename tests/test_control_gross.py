@@ -20,7 +20,14 @@ from stressbots import paths as pathlib
 from stressbots import planning
 from stressbots.collision import arena_gap
 from stressbots.control import ControllerOptions, Tuning
-from stressbots.control.gross import GrossMotion, arrived, clear_prefix
+from stressbots.control.gross import (
+    GrossMotion,
+    arrived,
+    clear_prefix,
+    contact_clearance,
+    escape_moves,
+    escape_sweep,
+)
 from stressbots.control.single import approach_length, lead_in_clear
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
@@ -189,3 +196,55 @@ def test_failed_route_searches_are_capped_per_target(monkeypatch):
     assert 0 < calls["n"] <= 3 * tune.route_searches_max
     assert any(kind == "no-route" for kind, _ in loop.events)
     assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0  # and it never drove into the wall
+
+
+# -- escape from a contact ----------------------------------------------------------------------------
+
+def test_escape_moves_are_cheapest_first_and_end_where_the_closed_form_says():
+    moves = escape_moves(V, R, L, (0.0, 0.25, 0.5), (0.5, 1.0))
+    totals = [a + b for a, b in moves]
+    assert totals == sorted(totals) and len(moves) == 6
+    # a quarter loop then one body length straight: heading +pi/2, centre of the turn to the right of the start
+    quarter = next(m for m in moves if m[0] > 0 and abs(m[0] - 0.5 * math.pi * R / V) < 1e-9 and abs(m[1] - L / V) < 1e-9)
+    end = escape_sweep(np.array([0.0, 0.0, 0.0]), quarter, V, R)[-1]
+    assert end == pytest.approx([R + L, R, 0.5 * math.pi], abs=1e-6)  # (sin, cos) headings: 0 = +y, clockwise
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-70.0, 9.0))
+def test_contact_clearance_finds_the_threshold_of_a_monotone_test(gap):
+    c = contact_clearance(lambda c: c > gap, high=10.0)
+    assert gap - 0.5 <= c <= gap + 1e-9
+
+
+def _against_left_wall(theta: float, gap: float = 2.0) -> np.ndarray:
+    """A pose heading ``theta`` whose body is ``gap`` um from the left wall."""
+    x = gap - float(arena_gap(np.array([[0.0, 1000.0, theta]]), L, W, ARENA)[0])
+    return np.array([x, 1000.0, theta])
+
+
+def _corner_drift_x(theta: float) -> float:
+    """Independent: x-velocity (per unit turn rate) of the front-left corner when the robot starts to turn
+    clockwise about the centre R to its right: forward * (R + W/2) + right * (L/2) (negative: into the wall)."""
+    return math.sin(theta) * (R + 0.5 * W) + math.cos(theta) * (0.5 * L)
+
+
+def test_a_robot_pressed_against_the_wall_turns_off_it_without_touching_it():
+    # pointing 11 deg into the left wall, 2 um from it: straight on pushes into it, turning pulls the corner away
+    start = _against_left_wall(-0.2)
+    assert math.sin(start[2]) < 0.0 < _corner_drift_x(start[2])
+    loop = KinematicLoop(start)
+    assert GrossMotion(loop).escape(0, 1, 0, [])
+    trail = np.array(loop.trail)
+    assert float(arena_gap(trail, L, W, ARENA).min()) > 0.0  # never into the wall
+    assert float(arena_gap(trail[-1:], L, W, ARENA)[0]) >= loop.tune.escape_clearance_um  # and clear of it
+    assert loop.events and loop.events[-1][0] == "escape"
+
+
+def test_a_robot_trapped_against_the_wall_does_not_try_an_escape():
+    # pointing 34 deg into the wall: turning and driving both push into it (a one-way robot is trapped)
+    start = _against_left_wall(-0.6)
+    assert math.sin(start[2]) < 0.0 and _corner_drift_x(start[2]) < 0.0
+    loop = KinematicLoop(start)
+    assert not GrossMotion(loop).escape(0, 1, 0, [])
+    assert len(loop.trail) == 1  # it did not move

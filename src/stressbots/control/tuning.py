@@ -171,7 +171,9 @@ class Tuning:
         Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact
         or a stall before it reports the robot stuck (each is a turn and a straight: a few seconds).
     escape_turns:
-        Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse).
+        Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse). Fine
+        steps first (1/32 = 11 deg): a robot beside a wall swings its rear corner out by tens of um when it
+        turns further, so the way off is often a slight turn, then straight.
     escape_straights:
         Lengths of an escape's straight, in body lengths (one clears a body it touched end to end).
     """
@@ -234,7 +236,7 @@ class Tuning:
     route_searches_max: int = 3
     min_clear_run_s: float = 1.0
     escapes_per_steer: int = 2
-    escape_turns: tuple[float, ...] = (0.0, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
+    escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
     escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
 
 
