@@ -283,12 +283,12 @@ class GrossMotion:
             self.loop.drive(steps)
             if float(np.hypot(*(self.loop.est[i, :2] - before[:2]))) < self.loop.tune.stall_fraction * v * sum(d for _, d in steps):
                 stalls += 1
-                if stalls >= self.loop.tune.stall_count and escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
-                    stalls, escapes = 0, escapes - 1
-                elif stalls >= self.loop.tune.stall_count:
+                if stalls >= self.loop.tune.stall_count:
                     self.loop.log("stuck", i, "stopped during gross motion (failure region H)")
-                    self.loop.stuck = True
-                    return False
+                    if not (escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs)):
+                        self.loop.stuck = True
+                        return False
+                    stalls, escapes = 0, escapes - 1
             else:
                 stalls = 0
             if whole:
