@@ -173,6 +173,9 @@ def test_detects_an_orbit_drifting_toward_a_collision(example):
     b = scn.names.index("B")  # D_1: orbits about (800, 600) until it docks last; its disc is 336 um above the edge
     plant = DriftingCamera(SimulatedPlant(scn, seed=0), b, start_s=10.0, stop_s=60.0, um_per_frame=8.0)
     result = assemble(scn, plant, seed=0, plan=plan)
-    drift = [e for e in result.events if e["kind"] == "orbit-drift" and e["robot"] == "B"]
-    assert drift and "arena edge" in drift[0]["detail"], [e for e in result.events if e["kind"] == "orbit-drift"]
+    # detected: logged by the orbit watch, or (during another robot's gross motion, runner.tend_orbits) acted
+    # on at once, the orbit moved away from the edge before the watch's 10 um
+    drift = [e for e in result.events if e["robot"] == "B" and (e["kind"] == "park" or (e["kind"] == "orbit-drift"
+                                                                                     and "arena edge" in e["detail"]))]
+    assert drift, [e for e in result.events if e["kind"] in ("orbit-drift", "park")]
     assert drift[0]["t_s"] >= 10.0

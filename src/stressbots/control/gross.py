@@ -18,14 +18,16 @@ from typing import Protocol
 
 import numpy as np
 
+from .. import kinematics
 from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
+from ..kinematics import sample_arclengths
 from ..robots import angle_difference, turning_centres
 from .loopview import LoopView, Steps
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["GrossLoop", "GrossMotion", "arrived", "path_steps"]
+__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "contact_clearance", "escape_moves", "escape_sweep", "path_steps"]
 
 
 
@@ -39,6 +41,8 @@ class GrossLoop(LoopView, Protocol):
     @property
     def rstar(self) -> np.ndarray: ...
 
+    def tend_orbits(self, k: int) -> None: ...
+
 
 def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None) -> Steps:
     """The first ``limit_s`` seconds of ``path`` as primitive steps (all of it when None)."""
@@ -51,6 +55,69 @@ def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit
         if left <= 1e-12:
             break
     return out
+
+
+def clear_prefix(path: pathlib.Path, hits: Callable[[np.ndarray], bool], step_um: float = 10.0) -> float:
+    """How far (um) along ``path`` a robot drives before ``hits(samples)`` (poses (M, 3) -> bool: would
+    they meet an obstacle?) first holds: the length of the longest clear beginning, at ``step_um``.
+
+    A bisection over the path's samples (a longer beginning contains a shorter one, so clearness is
+    monotone): O(log M) calls of ``hits``. The whole length when nothing is hit, 0 when the start is.
+    """
+    s = sample_arclengths(path.lengths, step_um)
+    poses = path.pose_at(s)
+    if not hits(poses):
+        return float(path.length)
+    lo, hi = 0, len(s)  # poses[:lo] are clear (lo = 0: nothing known), poses[:hi] are not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if hits(poses[:mid]):
+            hi = mid
+        else:
+            lo = mid
+    return float(s[lo - 1]) if lo > 0 else 0.0
+
+
+def escape_moves(v: float, r: float, length: float, turn_fractions: Sequence[float],
+                 straight_lengths: Sequence[float]) -> list[tuple[float, float]]:
+    """Candidate escapes of a one-way robot from a contact, cheapest first: ``(turn_s, straight_s)``, turn
+    clockwise for a fraction of a loop (radius ``r`` um at ``v`` um/s), then drive straight so many body
+    lengths (``length`` um). A robot cannot reverse, so every way off an obstacle is one of these."""
+    moves = {(2.0 * math.pi * r * f / v, length * b / v) for f in turn_fractions for b in straight_lengths}
+    return sorted(moves, key=lambda m: (m[0] + m[1], m[0]))
+
+
+def escape_sweep(pose: np.ndarray, move_: tuple[float, float], v: float, r: float, step_um: float = 10.0) -> np.ndarray:
+    """The poses (M, 3) a robot at ``pose`` passes on the escape ``move_`` (:func:`escape_moves`), ``step_um`` apart."""
+    turn = v * move_[0]
+    a = kinematics.move(pose, np.linspace(0.0, turn, max(2, int(turn / step_um) + 1)), 1.0 / r)
+    b = kinematics.move(a[-1], np.linspace(0.0, v * move_[1], max(2, int(v * move_[1] / step_um) + 1)), 0.0)
+    return np.vstack([a, b[1:]])
+
+
+def contact_clearance(hits: Callable[[float], bool], low: float = -80.0, high: float = 0.0, tol: float = 0.5) -> float:
+    """The largest clearance ``c`` (um, in ``[low, high]``) at which ``hits(c)`` is still False: how far a body
+    is from its nearest obstacle (negative: overlapping, as measured). ``hits`` must be monotone in ``c``."""
+    if not hits(low):
+        lo, hi = low, high
+        if not hits(hi):
+            return high
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if not hits(mid) else (lo, mid)
+        return lo
+    return low
+
+
+def _cut(segments, length_um: float) -> tuple[tuple[str, float], ...]:
+    """The first ``length_um`` (um) of a path's ``segments``."""
+    out, left = [], length_um
+    for kind, ell in segments:
+        if left <= 0.0:
+            break
+        out.append((kind, min(ell, left)))
+        left -= ell
+    return tuple(out)
 
 
 def arrived(pose: np.ndarray, target: np.ndarray, tune: Tuning) -> bool:
@@ -68,6 +135,9 @@ class GrossMotion:
 
     def __init__(self, loop: GrossLoop):
         self.loop = loop
+        # failed roadmap searches per (robot, target, structure, orbits) (:meth:`_search_key`): each costs a full
+        # roadmap build, and failing runs spent most of their wall time asking again and again
+        self._failed: dict[tuple, int] = {}
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
                       target=None) -> bool:
@@ -105,20 +175,77 @@ class GrossMotion:
             return True
         return False
 
-    def _route_or_detour(self, i: int, target: np.ndarray, orbiting: Sequence[int], extra_discs, routed, path):
-        """The roadmap route itself when there is one (it was checked at a wider clearance), else a detour at
-        the controller's clearance, else ``path`` unchanged."""
-        if routed is not None:
-            return routed
-        detour = self.roadmap_route(i, target, orbiting, extra_discs, self.loop.opts.clearance_um)[1]
-        return path if detour is None else detour
+    def _search_key(self, i: int, target, orbiting: Sequence[int]) -> tuple:
+        """What a roadmap search's answer depends on, coarsely: robot, target (5 um, ~3 deg), structure, orbits."""
+        t = np.asarray(target, float)
+        return (i, round(float(t[0]) / 5.0), round(float(t[1]) / 5.0), round(float(t[2]) * 20.0), int(self.loop.docked.sum()),
+                tuple(sorted(orbiting)))
+
+    def _searches_left(self, i: int, target, orbiting: Sequence[int]) -> int:
+        """Roadmap searches robot ``i`` may still spend on ``target`` (``Tuning.route_searches_max`` failed ones in all)."""
+        return self.loop.tune.route_searches_max - self._failed.get(self._search_key(i, target, orbiting), 0)
+
+    def _blocked(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs, ready,
+                 clearance, path, quiet: int, escapes: int):
+        """Gross motion around a blocked ``path``: ``(outcome, quiet, escapes)`` (the t_x left before the roadmap is
+        asked again, the escapes left to this gross motion).
+
+        ``outcome`` is True (``ready()`` became true on a roadmap route), None (a route's waypoints were
+        driven: re-plan), a path to drive this t_x, or False: no route and nothing clear to drive (give up
+        this target; the caller re-plans) after an :meth:`escape` was tried. With no route, only the clear beginning of ``path``
+        (:func:`clear_prefix`, at the full clearance, else at ``Tuning.escape_clearance_um``, else short of contact) is driven,
+        never the blocked part: robots that drove on along blocked paths
+        ran into the arena edge or the structure and were trapped there (a one-way robot against an
+        obstacle can neither turn nor drive off it).
+        """
+        if quiet <= 0 and self._searches_left(i, target, orbiting) > 0:
+            c_eff = self.loop.opts.clearance_um if clearance is None else clearance
+            # widest clearance first; the last, Tuning.escape_clearance_um, gets a robot in a tight spot (its loop
+            # 12 um from the arena edge, say) out of it, where no route at the full clearance starts
+            for c in (max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um, self.loop.tune.escape_clearance_um):
+                points, routed = self.roadmap_route(i, target, orbiting, extra_discs, c)
+                if routed is None:
+                    continue
+                # commit to one roadmap route: steer through its waypoints (replanning every t_x between
+                # them, at the clearance it was found at), instead of a new random route every t_x
+                t_before = self.loop.t
+                for w in points[:-1]:
+                    self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
+                               clearance=min(c, c_eff))
+                    if ready is not None and ready():
+                        return True, quiet, escapes
+                return (None if self.loop.t > t_before else routed), quiet, escapes
+            key = self._search_key(i, target, orbiting)
+            self._failed[key] = self._failed.get(key, 0) + 1
+            quiet = self.loop.tune.no_route_quiet_cycles
+            self.loop.log("no-route", i, f"no way around the obstacles to its target; drives the clear part of its path, asks again "
+                                         f"in {quiet} t_x")
+        quiet -= 1
+        ahead = 0.0
+        # full clearance, else the escape one, else (a robot already that close) no contact
+        for c, tgt in ((clearance, target), (self.loop.tune.escape_clearance_um, None), (0.0, None)):
+            def hit(s: np.ndarray, c=c, tgt=tgt) -> bool:
+                return self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=c, target=tgt)
+
+            ahead = clear_prefix(path, hit, 10.0)
+            if ahead >= self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
+                break
+        if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
+            if escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
+                return None, quiet, escapes - 1  # off the obstacle: re-plan from there
+            self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
+            self.loop.stuck = True  # failure region H: the caller's recovery (backing off) takes over
+            return False, quiet, escapes
+        return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
 
         ``ready()`` True ends the gross motion early (the robot is already in the region from which the
-        next step works: the seed's regions A_i instead of a point).
+        next step works: the seed's regions A_i instead of a point). A blocked path is routed around the
+        obstacles (:meth:`_blocked`); False when there is no way (the caller re-plans) or the robot stalled
+        (``loop.stuck``).
 
         Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
         points a little left of where it must. Clockwise is the only correction a one-way robot makes
@@ -126,38 +253,25 @@ class GrossMotion:
         next replan, a turn cut short costs a slight turn.
         """
         stalls = 0
+        escapes = self.loop.tune.escapes_per_steer
         quiet = 0  # cycles left before the roadmap is asked again after it found no way around
         self.loop.stuck = False
         for _ in range(max_cycles):
-            v, r = self.loop.v_hat[i], self.loop.r_hat[i]
+            v = self.loop.v_hat[i]
             p = self.loop.est[i]
             if (ready is None and arrived(p, target, self.loop.tune)) or (ready is not None and ready()):
                 return True
-            path = pathlib.shortest_path(p, target, r)
+            path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
-                if via and quiet > 0:
-                    quiet -= 1  # the roadmap found nothing a moment ago: asking every t_x only costs time
-                elif via:
-                    # commit to one roadmap route: steer through its waypoints (replanning every t_x
-                    # between them), instead of a new random route every t_x
-                    c_eff = self.loop.opts.clearance_um if clearance is None else clearance
-                    points, routed = self.roadmap_route(i, target, orbiting, extra_discs, max(c_eff + 5.0, 20.0))
-                    t_before = self.loop.t
-                    if len(points) > 1:
-                        for w in points[:-1]:
-                            self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
-                                       clearance=clearance)
-                            if ready is not None and ready():
-                                return True
-                        if self.loop.t > t_before:
-                            continue
-                    found = self._route_or_detour(i, target, orbiting, extra_discs, routed, None)
-                    if found is None:
-                        quiet = self.loop.tune.no_route_quiet_cycles
-                        self.loop.log("no-route", i, f"no way around the obstacles to its target; drives on, asks again in {quiet} t_x")
-                    path = path if found is None else found
-                else:
+                if not via:
                     return False  # a waypoint of a committed route is out of reach: the caller re-plans
+                outcome, quiet, escapes = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance, path,
+                                                        quiet, escapes)
+                if outcome is None:
+                    continue
+                if isinstance(outcome, bool):
+                    return outcome
+                path = outcome
             self.loop.replans += 1
             # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
             whole = path.length / v <= self.loop.tune.whole_leg_factor * self.loop.tx
@@ -171,11 +285,38 @@ class GrossMotion:
                 stalls += 1
                 if stalls >= self.loop.tune.stall_count:
                     self.loop.log("stuck", i, "stopped during gross motion (failure region H)")
-                    self.loop.stuck = True
-                    return False
+                    if not (escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs)):
+                        self.loop.stuck = True
+                        return False
+                    stalls, escapes = 0, escapes - 1
             else:
                 stalls = 0
             if whole:
+                return True
+            self.loop.tend_orbits(turn_k)  # waiting orbits drift meanwhile: move one away before it is trapped
+        return False
+
+    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs=()) -> bool:
+        """Recovery from a contact (or a pose that close): drive robot ``i`` off what blocks it; True if it moved.
+
+        How close it is to its nearest obstacle is measured (:func:`contact_clearance`, the orbits, the
+        structure and the arena edge as obstacles); the cheapest escape (:func:`escape_moves`) that never
+        goes deeper than that and ends ``Tuning.escape_clearance_um`` clear is driven. Backing off blindly
+        (a quarter turn, then straight) turned into the obstacle as often as away from it.
+        """
+        lp = self.loop
+        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
+        p = lp.est[i].copy()
+
+        def hit(samples: np.ndarray, c: float) -> bool:
+            return self.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=c)
+
+        now = contact_clearance(lambda c: hit(p[None, :], c), high=lp.tune.escape_clearance_um)
+        for m in escape_moves(v, r, float(lp.L[i]), lp.tune.escape_turns, lp.tune.escape_straights):
+            sweep = escape_sweep(p, m, v, r)
+            if not hit(sweep[1:], now - 0.5) and not hit(sweep[-1:], lp.tune.escape_clearance_um):
+                lp.log("escape", i, f"{now:.0f} um from an obstacle: turns {m[0]:.1f} s, then {m[1]:.1f} s straight off it")
+                lp.drive([(k, d) for k, d in ((turn_k, m[0]), (straight_k, m[1])) if d > 0.0])
                 return True
         return False
 

@@ -114,6 +114,7 @@ class _Runner(PlantLoop):
         self.goals = self.nominal_goals.copy()
         self.stuck = False
         self._warned: set = set()
+        self._parked: set[tuple[int, int]] = set()  # (robot, phase k) of every park move (parking)
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
         # gross motion sigma_1 (:mod:`stressbots.control.gross`), G_1 (:mod:`stressbots.control.pair`) and the single
@@ -174,17 +175,18 @@ class _Runner(PlantLoop):
         (:meth:`stressbots.control.gross.GrossMotion.obstacles_hit`)."""
         return self.gross.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target)
 
-    def park_orbits(self, k: int) -> None:
+    def park_orbits(self, k: int, top: int | None = None) -> None:
         """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
-        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each."""
-        waiting = [self.by_rank[j] for j in range(1, k + 1)]
+        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each.
+        Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k moves: it has no orbit then)."""
+        waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
         docked = np.flatnonzero(self.docked)
         gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
                           self.est[docked], self.L[docked], self.W[docked])
         for idx in np.argsort(gaps):
             i = waiting[int(idx)]
             j = int(self.rank[i])
-            if gaps[idx] >= self.tune.park_margin_um or j == k:
+            if gaps[idx] >= self.tune.park_margin_um or j == k or (i, k) in self._parked:
                 continue
             movers = [self.by_rank[m] for m in range(j, k + 1)]
             still = [self.by_rank[m] for m in range(1, j)]
@@ -192,12 +194,26 @@ class _Runner(PlantLoop):
                               self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
                               clearance_um=self.tune.park_clearance_um)
             if move_ is None:
-                self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble and no clear move takes it away")
+                if (i, "park") not in self._warned:  # once: tend_orbits asks every t_x
+                    self._warned.add((i, "park"))
+                    self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble and no clear move "
+                                        "takes it away")
                 continue
+            self._warned.discard((i, "park"))
             self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
                                 f"{self.tune.park_shift_um:.0f} um away")
             self.replans += 1
+            self._parked.add((i, k))  # once per phase: a move that did not help (a trapped robot) is not repeated
             self.drive([(k, move_.wait_s), (j - 1, move_.straight_s)])
+
+    def tend_orbits(self, k: int) -> None:
+        """During D_k's gross motion (every t_x): :meth:`park_orbits` for the orbits waiting below it.
+
+        Orbits drift in a random walk while others move (an orbit went from 10 um to -6 um from the arena
+        edge within one phase, trapping its robot); checked only before each phase, that was too late.
+        Nothing during G_1 (k of the pair: its timing is the pair phase's own)."""
+        if 1 <= k <= self.n - 2:
+            self.park_orbits(k, top=k - 1)
 
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]

@@ -24,7 +24,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from .. import paths as pathlib
-from ..collision import outside_arena, penetration_depth
+from ..collision import arena_gap, outside_arena, penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
 from . import docking
@@ -94,14 +94,18 @@ def approach_start_on_route(ph, r: float, fine_distance_um: float) -> np.ndarray
 
 
 def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: Sequence[float], bodies: Bodies,
-                    arena_um: tuple[float, float] | None) -> float | None:
+                    arena_um: tuple[float, float] | None, lead_in_um: float = 0.0, r: float = 0.0, wall_um: float = 0.0) -> float | None:
     """How far behind the slot ``goal`` its approach line is clear, or None.
 
     The first of ``lengths_um`` (longest first, e.g. 450 down to 150 um) for which a ``length`` x
     ``width`` body along the line, and along a line fanning out to 60 um right at its far end, keeps
     over 3 um from every docked body and stays in the arena: the corridor the funnel merge and the
-    straight run need.
+    straight run need. With ``lead_in_um`` (and the robot's turn radius ``r``, um) the longest corridor
+    whose funnel a one-way robot can reach (:func:`lead_in_clear`) is preferred: it enters the funnel
+    from behind, so a corridor that ends at the arena edge has a funnel no path reaches. When no clear
+    corridor is reachable so, the longest clear one (as without ``lead_in_um``).
     """
+    first = None
     for back in lengths_um:
         ok = True
         for right in (0.0, 60.0):
@@ -112,8 +116,40 @@ def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: S
             if arena_um is not None and (outside_arena(line, length, width, arena_um) > 0).any():
                 ok = False
         if ok:
-            return back
-    return None
+            first = back if first is None else first
+            if lead_in_clear(goal, back, lead_in_um, r, length, width, bodies, arena_um, wall_um):
+                return back
+    return first
+
+
+def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, length: float, width: float, bodies: Bodies,
+                  arena_um: tuple[float, float] | None, wall_um: float) -> bool:
+    """Whether a one-way robot can get onto the approach line of slot ``goal`` at ``back`` um behind it.
+
+    True when some pose on the line between ``back`` and ``back + lead_in_um`` behind the slot (um) is
+    joined to ``back`` by a clear stretch of line and has a clear clockwise loop (radius ``r``): a robot
+    reaches such a loop tangentially from the open arena and leaves it onto the line. Clear means a
+    ``length`` x ``width`` body keeps over 3 um from the docked ``bodies`` and over ``wall_um`` from the
+    arena edge. A funnel backed against the arena edge fails this (every way onto it comes from outside).
+    True when ``lead_in_um`` is 0.
+    """
+    if lead_in_um <= 0.0:
+        return True
+
+    def clear(poses: np.ndarray) -> bool:
+        for pj, lj, wj in zip(*bodies, strict=True):
+            if (penetration_depth(poses, length, width, pj, lj, wj) > -3.0).any():
+                return False
+        return not (arena_um is not None and (arena_gap(poses, length, width, arena_um) < wall_um).any())
+
+    arc = np.linspace(0.0, TWO_PI * r, 72)
+    for b in np.linspace(back, back + lead_in_um, 5):
+        pose = line_pose(goal, float(b), 0.0, 0.0)
+        if not clear(move(pose, arc, 1.0 / r)):
+            continue
+        if b == back or clear(np.stack([line_pose(goal, float(q), 0.0, 0.0) for q in np.linspace(back, b, 12)])):
+            return True
+    return False
 
 
 def retarget(pose: np.ndarray, motion: tuple[float, np.ndarray, np.ndarray] | None) -> np.ndarray:
@@ -225,7 +261,8 @@ class SingleDocking:
     def approach_length(self, i: int) -> float | None:
         """How far behind robot ``i``'s slot the approach line is clear of the structure (:func:`approach_length`)."""
         lp = self.loop
-        return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self._bodies(), lp.scn.arena_um)
+        return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self._bodies(), lp.scn.arena_um,
+                               lp.tune.approach_lead_in_radii * float(lp.r_hat[i]), float(lp.r_hat[i]), lp.opts.clearance_um)
 
     def line_coords(self, i: int) -> tuple[float, float, float]:
         """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""

@@ -147,6 +147,35 @@ class Tuning:
     off_slot_um:
         ... and counts as docked off its slot up to this far along the face: its front touches the structure,
         so it can neither turn (every front point moves forward) nor reverse; recovery is impossible.
+
+    Gross-motion reachability and stall recovery (issue 12, gross motion):
+
+    approach_lead_in_radii:
+        An approach corridor counts only if its line goes on this many of the robot's turn radii beyond
+        the funnel, clear of the structure and the arena edge: a one-way robot enters the funnel from
+        behind, so a funnel backed against the edge is a target no path reaches (those robots drove on
+        along blocked paths into the edge, where turning and driving both push into it: trapped).
+    escape_clearance_um:
+        Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot
+        (its loop 12 um from the edge, say) has no route at 15-20 um from where it is, and the clear part
+        of a route at a few um is safer than the blocked shortest path (5 sigma of the 2 um camera error).
+    route_searches_max:
+        Failed roadmap searches (each at up to three clearances) a robot may spend on one target (same
+        structure and orbits) in a run; each costs up to six roadmap builds (0.1-0.5 s each), and failing
+        8-robot runs spent 40-80 s asking again and again.
+    min_clear_run_s:
+        With no route, a robot drives the clear beginning of its blocked path only if it is at least this
+        many seconds of travel; otherwise it gives up the target (the caller re-plans) instead of driving
+        into what blocks it.
+    escapes_per_steer:
+        Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact
+        or a stall before it reports the robot stuck (each is a turn and a straight: a few seconds).
+    escape_turns:
+        Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse). Fine
+        steps first (1/32 = 11 deg): a robot beside a wall swings its rear corner out by tens of um when it
+        turns further, so the way off is often a slight turn, then straight.
+    escape_straights:
+        Lengths of an escape's straight, in body lengths (one clears a body it touched end to end).
     """
 
     g1_clearance_um: float = 25.0
@@ -201,6 +230,14 @@ class Tuning:
     settle_fraction: float = 0.2
     flush_um: float = 15.0
     off_slot_um: float = 90.0
+    # -- gross-motion reachability and stall recovery (issue 12) --
+    approach_lead_in_radii: float = 1.0
+    escape_clearance_um: float = 10.0
+    route_searches_max: int = 3
+    min_clear_run_s: float = 1.0
+    escapes_per_steer: int = 2
+    escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
+    escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
 
 
 @dataclass(frozen=True)

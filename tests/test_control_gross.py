@@ -1,0 +1,250 @@
+"""Gross motion sigma_1 (stressbots.control.gross) and the approach corridor's reachability (control.single):
+pure queries on hand-built poses, and the gross motion driven through a loop written here whose ``drive``
+moves the robot by the exact kinematics (independent of the controller's own geometry).
+
+Independent truth: straight-line and circle geometry by hand, :func:`stressbots.kinematics.move` for the
+motion, :func:`stressbots.collision.arena_gap` on the poses the robot really passed.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stressbots import paths as pathlib
+from stressbots import planning
+from stressbots.collision import arena_gap
+from stressbots.control import ControllerOptions, Tuning
+from stressbots.control.gross import (
+    GrossMotion,
+    arrived,
+    clear_prefix,
+    contact_clearance,
+    escape_moves,
+    escape_sweep,
+)
+from stressbots.control.single import approach_length, lead_in_clear
+from stressbots.kinematics import move
+from stressbots.robots import Pose, orbit_radii
+
+ARENA = (2000.0, 2000.0)
+L, W, R, V = 240.0, 56.0, 210.0, 100.0
+NO_BODIES = (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+
+
+# -- clear_prefix ------------------------------------------------------------------------------------
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.0, 900.0), st.floats(1.0, 20.0))
+def test_clear_prefix_of_a_straight_path_stops_short_of_a_wall(wall_x, step):
+    # a straight path along +x from x = 0, 800 um long; "hit" = any sample at or beyond x = wall_x
+    path = pathlib.Path(Pose(0.0, 0.0, 0.5 * math.pi), R, (("S", 800.0),))
+    ahead = clear_prefix(path, lambda s: bool((s[:, 0] >= wall_x).any()), step)
+    if wall_x > 800.0:
+        assert ahead == pytest.approx(800.0)
+    else:
+        assert ahead <= wall_x + 1e-9  # never into the wall
+        assert ahead >= wall_x - step - 1e-9  # and at most one sample short of it
+
+
+def test_clear_prefix_whole_path_when_clear_and_zero_when_the_start_is_hit():
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("R", 300.0), ("S", 200.0)))
+    assert clear_prefix(path, lambda _s: False) == pytest.approx(path.length)
+    assert clear_prefix(path, lambda _s: True) == 0.0
+
+
+def test_clear_prefix_on_an_arc_stops_where_the_heading_passes_a_bound():
+    # a clockwise quarter-plus arc from heading 0: the heading grows as s / R; "hit" once it exceeds 60 deg
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("R", 0.75 * math.pi * R),))
+    ahead = clear_prefix(path, lambda s: bool((s[:, 2] > math.radians(60.0)).any()), 5.0)
+    assert math.radians(60.0) * R - 5.0 <= ahead <= math.radians(60.0) * R
+
+
+# -- approach corridor reachability -------------------------------------------------------------------
+
+def _slot(x: float) -> np.ndarray:
+    """A slot at ``(x, 1000)`` heading +x: its approach line runs back toward the left arena wall."""
+    return np.array([x, 1000.0, 0.5 * math.pi])
+
+
+def _loop_leaves_arena(x: float) -> bool:
+    """Independent: whether the clockwise loop (radius R) of a robot at ``(x, 1000)`` heading +x leaves the arena."""
+    pose = np.array([x, 1000.0, 0.5 * math.pi])
+    loop = move(pose, np.linspace(0.0, 2.0 * math.pi * R, 144), 1.0 / R)
+    return bool((arena_gap(loop, L, W, ARENA) < 15.0).any())
+
+
+def test_a_funnel_backed_against_the_wall_gives_way_to_a_shorter_reachable_corridor():
+    goal = _slot(700.0)
+    lengths = (450.0, 350.0, 250.0, 150.0)
+    # without the lead-in the longest corridor is clear (it ends 250 um from the wall) ...
+    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA) == 450.0
+    # ... but no pose on its line from 250 um out to the wall has a loop inside the arena: unreachable
+    assert all(_loop_leaves_arena(x) for x in np.linspace(250.0 - R, 250.0, 5))
+    assert not lead_in_clear(goal, 450.0, R, R, L, W, NO_BODIES, ARENA, 15.0)
+    # the next corridor's funnel, 350 um out, has a free loop at its end: it is the one chosen
+    assert not _loop_leaves_arena(350.0)
+    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA, R, R, 15.0) == 350.0
+
+
+def test_lead_in_falls_back_to_the_longest_clear_corridor_when_none_is_reachable():
+    goal = _slot(420.0)  # every funnel is backed against the wall
+    lengths = (250.0, 150.0)
+    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA, R, R, 15.0) == approach_length(goal, L, W, lengths, NO_BODIES, ARENA)
+
+
+# -- gross motion through a kinematic loop ------------------------------------------------------------
+
+class KinematicLoop:
+    """A closed loop for one free robot (index 0) with exact kinematics: turns under ``turn_k``, straight
+    otherwise, camera = truth. Records every pose the robot passes (``trail``) and the events."""
+
+    def __init__(self, pose, tune: Tuning | None = None):
+        self.scn = SimpleNamespace(arena_um=ARENA, names=("R0",))
+        self.L, self.W = np.array([L]), np.array([W])
+        self.docked = np.zeros(1, bool)
+        self.tx = 1.0
+        self.tune = tune or Tuning()
+        self.opts = ControllerOptions(tuning=self.tune)
+        self.stuck = False
+        self.t = 0.0
+        self.replans = 0
+        self.routes_rng = np.random.default_rng(7)
+        self._est = np.array([pose], float)
+        self.trail = [self._est[0].copy()]
+        self.events: list[tuple[str, str]] = []
+
+    @property
+    def est(self) -> np.ndarray:
+        return self._est
+
+    @property
+    def v_hat(self) -> np.ndarray:
+        return np.full(1, V)
+
+    @property
+    def r_hat(self) -> np.ndarray:
+        return np.full(1, R)
+
+    @property
+    def rstar(self) -> np.ndarray:
+        return np.full(1, orbit_radii(L, W, R))
+
+    def log(self, kind: str, robot=None, detail: str = "") -> None:
+        self.events.append((kind, detail))
+
+    def drive(self, steps) -> None:
+        for k, d in steps:
+            s = np.linspace(0.0, V * d, max(2, int(V * d / 5.0) + 1))
+            along = move(self._est[0], s, 1.0 / R if k == self.turn_k else 0.0)
+            self.trail.extend(along[1:])
+            self._est[0] = along[-1]
+            self.t += d
+
+    def tend_orbits(self, k: int) -> None:
+        pass
+
+    turn_k = 1
+
+
+def _route_exists(start, target, clearance: float) -> bool:
+    """Independent of gross motion: whether the planner's roadmap finds a route with only the arena as obstacle."""
+    walls = planning.Obstacles(np.zeros((0, 2)), np.zeros(0), (), np.zeros((0, 3)), np.zeros(0), np.zeros(0), (), ARENA)
+    try:
+        planning.route(start[None], np.zeros(1), target, R, L, W, walls, planning.PlannerOptions(clearance_um=clearance,
+                       roadmap_nodes=(60, 200)), np.random.default_rng(0), "test")
+    except planning.NoRoute:
+        return False
+    return True
+
+
+def test_a_robot_in_a_tight_spot_by_the_wall_escapes_on_a_tight_route_and_arrives():
+    # 75 um from the left wall, pointing 17 deg toward it: every way out passes within 15 um of the wall, so
+    # no route at the controller's 15 um (or the wider 20 um) starts here; the escape clearance (10 um) does
+    start = np.array([75.0, 1000.0, -0.3])
+    target = np.array([1500.0, 1200.0, 0.5 * math.pi])
+    assert not _route_exists(start, target, 15.0) and _route_exists(start, target, 10.0)  # the premise
+    loop = KinematicLoop(start)
+    assert GrossMotion(loop).steer(0, target, 1, 0, [])
+    assert arrived(loop.est[0], target, loop.tune)
+    assert any(kind == "detour" for kind, _ in loop.events)  # it was routed, not driven along a blocked path
+    assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0  # never touched the wall
+
+
+def test_failed_route_searches_are_capped_per_target(monkeypatch):
+    # a target heading +x 150 um from the left wall: only reachable from outside the arena
+    calls = {"n": 0}
+    original = planning.route
+
+    def counting(*a, **k):
+        calls["n"] += 1
+        return original(*a, **k)
+
+    monkeypatch.setattr(planning, "route", counting)
+    tune = Tuning()
+    loop = KinematicLoop(np.array([1000.0, 1000.0, 0.0]), tune)
+    gm = GrossMotion(loop)
+    target = np.array([150.0, 1400.0, 0.5 * math.pi])
+    for _ in range(6):  # the caller's docking attempts
+        gm.steer(0, target, 1, 0, [], max_cycles=40)
+    # each failed search asks at three clearances; after route_searches_max failures it asks no more
+    assert 0 < calls["n"] <= 3 * tune.route_searches_max
+    assert any(kind == "no-route" for kind, _ in loop.events)
+    assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0  # and it never drove into the wall
+
+
+# -- escape from a contact ----------------------------------------------------------------------------
+
+def test_escape_moves_are_cheapest_first_and_end_where_the_closed_form_says():
+    moves = escape_moves(V, R, L, (0.0, 0.25, 0.5), (0.5, 1.0))
+    totals = [a + b for a, b in moves]
+    assert totals == sorted(totals) and len(moves) == 6
+    # a quarter loop then one body length straight: heading +pi/2, centre of the turn to the right of the start
+    quarter = next(m for m in moves if m[0] > 0 and abs(m[0] - 0.5 * math.pi * R / V) < 1e-9 and abs(m[1] - L / V) < 1e-9)
+    end = escape_sweep(np.array([0.0, 0.0, 0.0]), quarter, V, R)[-1]
+    assert end == pytest.approx([R + L, R, 0.5 * math.pi], abs=1e-6)  # (sin, cos) headings: 0 = +y, clockwise
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(-70.0, 9.0))
+def test_contact_clearance_finds_the_threshold_of_a_monotone_test(gap):
+    c = contact_clearance(lambda c: c > gap, high=10.0)
+    assert gap - 0.5 <= c <= gap + 1e-9
+
+
+def _against_left_wall(theta: float, gap: float = 2.0) -> np.ndarray:
+    """A pose heading ``theta`` whose body is ``gap`` um from the left wall."""
+    x = gap - float(arena_gap(np.array([[0.0, 1000.0, theta]]), L, W, ARENA)[0])
+    return np.array([x, 1000.0, theta])
+
+
+def _corner_drift_x(theta: float) -> float:
+    """Independent: x-velocity (per unit turn rate) of the front-left corner when the robot starts to turn
+    clockwise about the centre R to its right: forward * (R + W/2) + right * (L/2) (negative: into the wall)."""
+    return math.sin(theta) * (R + 0.5 * W) + math.cos(theta) * (0.5 * L)
+
+
+def test_a_robot_pressed_against_the_wall_turns_off_it_without_touching_it():
+    # pointing 11 deg into the left wall, 2 um from it: straight on pushes into it, turning pulls the corner away
+    start = _against_left_wall(-0.2)
+    assert math.sin(start[2]) < 0.0 < _corner_drift_x(start[2])
+    loop = KinematicLoop(start)
+    assert GrossMotion(loop).escape(0, 1, 0, [])
+    trail = np.array(loop.trail)
+    assert float(arena_gap(trail, L, W, ARENA).min()) > 0.0  # never into the wall
+    assert float(arena_gap(trail[-1:], L, W, ARENA)[0]) >= loop.tune.escape_clearance_um  # and clear of it
+    assert loop.events and loop.events[-1][0] == "escape"
+
+
+def test_a_robot_trapped_against_the_wall_does_not_try_an_escape():
+    # pointing 34 deg into the wall: turning and driving both push into it (a one-way robot is trapped)
+    start = _against_left_wall(-0.6)
+    assert math.sin(start[2]) < 0.0 and _corner_drift_x(start[2]) < 0.0
+    loop = KinematicLoop(start)
+    assert not GrossMotion(loop).escape(0, 1, 0, [])
+    assert len(loop.trail) == 1  # it did not move
