@@ -40,7 +40,7 @@ from ..robots import TWO_PI, angle_difference, front_midpoints, turning_centres
 from .gross import path_steps
 from .loopview import DockingLoop
 from .queries import best_departure, pose_on_orbit
-from .station import orbit_route
+from .station import orbit_room, orbit_route
 
 __all__ = ["PairLoop", "PairPhase", "Rendezvous", "Replan", "StationTransfer", "approach_pose", "framed_goals", "frames_apart",
            "meet_distance", "station_centre", "tight_discs"]
@@ -339,6 +339,8 @@ class StationTransfer:
                 break
             dt = left if left <= 1.6 * self.loop.tx else self.loop.tx
             a = min(dt, max((n_turn - n_turned) / self.loop.omega_hat[N], 0.0))
+            if dt - a > 1e-9 and not self.keeps_room(N, (dt - a) * self.loop.v_hat[N], self.loop.orbiting_below(n - 1)):
+                a = dt  # D_n would run out of room to orbit: it turns with D_{n-1} instead (same turn for D_{n-1})
             th0, thN0 = self.loop.est[M, 2], self.loop.est[N, 2]
             self.loop.drive([(n, a), (n - 1, dt - a)])
             n_turned += float(np.mod(self.loop.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
@@ -464,7 +466,8 @@ class StationTransfer:
             if dt > 1.6 * self.loop.tx:
                 dt = self.loop.tx
             steps.append((n - 2, dt))
-            if not self.track_clear(N, sum(d for _, d in steps) * self.loop.v_hat[N] + 40.0, lower):
+            run = sum(d for _, d in steps) * self.loop.v_hat[N]
+            if not self.track_clear(N, run + 40.0, lower) or not self.keeps_room(N, run, lower):
                 self.loop.log("transfer", N, f"{self.loop.scn.names[N]}'s track runs out; {self.loop.scn.names[M]} stops short and moves "
                                              "on from there")
                 return
@@ -600,6 +603,23 @@ class StationTransfer:
     def _blocked(self, samples: np.ndarray, i: int, lower, clearance: float, discs=()) -> bool:
         """Like the loop's ``obstacles_hit``, but ``discs`` are kept clear of by their own radius, without ``clearance``."""
         return self.loop.obstacles_hit(samples, i, lower, extra_discs=[(c, r - clearance) for c, r in discs], clearance=clearance)
+
+    def keeps_room(self, N: int, run_um: float, lower) -> bool:
+        """Whether D_n, driving ``run_um`` straight on from its measured pose, still has room to orbit
+        (:func:`~stressbots.control.station.orbit_room`) clear of the arena edge and the lower orbits.
+
+        The end is predicted ``Tuning.track_overshoot`` long (the speed error) and must keep
+        ``Tuning.orbit_room_um``; a robot with less room than that already may go on only while its room
+        grows. Checked before every straight frame of the transfer, it stops D_n (and D_{n-1} with it)
+        where a one-way robot can still wait or turn away, whatever the planned track assumed: at 2x the
+        literature's noise D_n's tracks ended against the arena edge, and it was trapped there for good.
+        """
+        tune = self.loop.tune
+        ends = move(self.loop.est[N], np.array([0.0, run_um * (1.0 + tune.track_overshoot)]), 0.0)
+        cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
+        rs = self.loop.rstar[lower] if lower else np.zeros(0)
+        now, end = orbit_room(ends, float(self.loop.r_hat[N]), float(self.loop.rstar[N]), self.loop.scn.arena_um, cs, rs)
+        return bool(end >= tune.orbit_room_um or (now < tune.orbit_room_um and end > now))
 
     def track_clear(self, N: int, length: float, lower) -> bool:
         track = move(self.loop.est[N], np.linspace(0.0, max(length, 1.0), 30), 0.0)
@@ -802,14 +822,26 @@ class Rendezvous:
                                                    rN) + pathlib.shortest_path_lengths(
             poses, np.broadcast_to(np.asarray(q, float), poses.shape), rN, approach_um=60.0
         )
-        order = np.argsort(cost)[:12]
-        onward = [j for j in order
-                  if not self.loop.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower,
-                                                 extra_discs=self._tight(disc), clearance=self.loop.tune.wall_clearance_um)]
-        hold = poses[onward[0] if onward else order[0]]
+        # only holds D_n reaches by a clear shortest path, with a clear way on preferred: gross motion that
+        # finds no way around drives on regardless, and took D_n into the arena edge or D_{n-1}'s orbit
+        # (trapped for good); without a clear hold the caller re-plans G_1 instead
+        hold, onward = None, False
+        for j in np.argsort(cost)[:self.loop.tune.hold_candidates]:
+            there = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
+            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=tune.wall_clearance_um):
+                continue
+            on = not self.loop.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower,
+                                             extra_discs=self._tight(disc), clearance=tune.wall_clearance_um)
+            if hold is None or (on and not onward):
+                hold, onward = poses[j], on
+            if onward:
+                break
+        if hold is None:
+            self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no clear way to a free orbit near its target")
+            return False
         self.loop.log("hold", N,
                  f"{self.loop.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
-        self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=self.loop.tune.g1_clearance_um)
+        self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=tune.g1_clearance_um, via=False)
         return not self.loop.stuck
 
     def depart_and_meet(self, N: int, M: int) -> bool:

@@ -202,6 +202,16 @@ class Tuning:
     flush_um: float = 15.0
     off_slot_um: float = 90.0
 
+    # -- G_1 (control/pair.py): room to orbit and safe holding (issue 12, 2x noise) ------------------------
+    orbit_room_um: float = 15.0
+    """um. Room to orbit (gap of its orbit disc to the arena edge and the lower orbits) D_n keeps at the
+    predicted end of every straight frame of a station transfer: a one-way robot that loses it while the
+    edge lies ahead is trapped for good. Beyond the predicted end (which already runs ``track_overshoot``
+    long), a few camera sigmas at 2x noise."""
+    hold_candidates: int = 24
+    """Free orbits near its target (cheapest first) D_n considers when it has no timed path and goes to
+    wait: the first with a clear shortest path there (and, preferably, on to the target) is taken."""
+
 
 @dataclass(frozen=True)
 class ControllerOptions:
