@@ -276,6 +276,22 @@ class PairPhase:
             ok &= point_rectangle_distance(c, self.loop.est[j][None, :], self.loop.L[j], self.loop.W[j])[0] >= rs + clearance
         return ok
 
+    def clearance_shortfall(self, N: int, lower, disc) -> float:
+        """How much (um, >= 0) D_n's own orbit, as measured, falls short of the G_1 clearances: of
+        ``Tuning.wall_clearance_um`` from the arena edge and the lower orbits, of ``Tuning.g1_clearance_um``
+        from D_{n-1}'s orbit ``disc``. Every path starts along that orbit or straight on, so checking paths
+        from here at the full clearances finds none (D_n sat still while every frame was re-planned); they
+        are checked at the clearances less this shortfall (never below zero)."""
+        tune = self.loop.tune
+        cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
+        rs = self.loop.rstar[lower] if lower else np.zeros(0)
+        r, rstar, arena = float(self.loop.r_hat[N]), float(self.loop.rstar[N]), self.loop.scn.arena_um
+        walls = float(orbit_room(self.loop.est[N][None], r, rstar, arena, cs, rs)[0])
+        dc = np.array([c for c, _ in disc]).reshape(-1, 2)
+        near = float(orbit_room(self.loop.est[N][None], r, rstar, None, dc, [float(rr) for _, rr in disc])[0])
+        short = max(tune.wall_clearance_um - walls, tune.g1_clearance_um - near, 0.0)
+        return float(min(short, tune.g1_clearance_um))
+
     def free_orbits(self, i: int, discs, lower, clearance: float = 15.0) -> np.ndarray:
         """Centres (K, 2) on a 100 um grid where robot ``i`` can orbit without meeting anything."""
         rs = float(self.loop.rstar[i])
@@ -400,7 +416,8 @@ class StationTransfer:
                 except Replan as exc:  # D_{n-1}'s own track is blocked this far: a shorter leg may clear
                     why = exc.reason
                     continue
-                if opt is not None and opt[1] < 1e4:
+                if opt is not None and (opt[1] < 1e4 or failed_runs):
+                    # after a timed run failed, a tight turn option too: keeps_room stops D_n where it can orbit
                     plan = ("turn", opt[0], leg, c_next)
                     break
                 start = self.transfer_run(N, M, leg, th_dep, lower, c_next, q_next)
@@ -423,11 +440,13 @@ class StationTransfer:
             else:
                 self.loop.log("transfer", M, f"{self.loop.scn.names[M]} moves its orbit {leg:.0f} um; {self.loop.scn.names[N]} first takes "
                                              "a clear track")
+                t0 = self.loop.t
                 if not self.pair.meeting.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower):
                     # D_{n-1} still orbits where it was: choose again from where D_n is now
                     self.loop.log("retry", N, f"{self.loop.scn.names[N]} could not reach its track in time; the leg is planned again")
                     failed_runs += 1
-                    if failed_runs >= 4:
+                    # a second failure with nothing moved would repeat itself (same poses, same plan)
+                    if failed_runs >= 4 or (failed_runs >= 2 and self.loop.t == t0):
                         raise Replan(f"{self.loop.scn.names[N]} cannot reach a clear track in time for {self.loop.scn.names[M]}'s move")
                     continue
                 self.wait_straight(M, th_dep)
@@ -825,10 +844,13 @@ class Rendezvous:
         # only holds D_n reaches by a clear shortest path, with a clear way on preferred: gross motion that
         # finds no way around drives on regardless, and took D_n into the arena edge or D_{n-1}'s orbit
         # (trapped for good); without a clear hold the caller re-plans G_1 instead
+        # a D_n already closer than the clearances (its own orbit grazes them) may leave at what it has
+        short = self.pair.clearance_shortfall(N, lower, disc)
         hold, onward = None, False
         for j in np.argsort(cost)[:self.loop.tune.hold_candidates]:
             there = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
-            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=self._tight(disc), clearance=tune.wall_clearance_um):
+            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=self._tight(disc, tune.g1_clearance_um - short),
+                                       clearance=tune.wall_clearance_um - short):
                 continue
             on = not self.loop.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower,
                                              extra_discs=self._tight(disc), clearance=tune.wall_clearance_um)
@@ -841,7 +863,7 @@ class Rendezvous:
             return False
         self.loop.log("hold", N,
                  f"{self.loop.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
-        self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=tune.g1_clearance_um, via=False)
+        self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=tune.g1_clearance_um - short, via=False)
         return not self.loop.stuck
 
     def depart_and_meet(self, N: int, M: int) -> bool:
