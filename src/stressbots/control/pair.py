@@ -624,7 +624,7 @@ class StationTransfer:
         return self.loop.obstacles_hit(samples, i, lower, extra_discs=[(c, r - clearance) for c, r in discs], clearance=clearance)
 
     def keeps_room(self, N: int, run_um: float, lower) -> bool:
-        """Whether D_n, driving ``run_um`` straight on from its measured pose, still has room to orbit
+        """Whether robot ``N`` (D_n), driving ``run_um`` straight on from its measured pose, still has room to orbit
         (:func:`~stressbots.control.station.orbit_room`) clear of the arena edge and the lower orbits.
 
         The end is predicted ``Tuning.track_overshoot`` long (the speed error) and must keep
@@ -823,8 +823,9 @@ class Rendezvous:
                 return True
         return False
 
-    def to_holding(self, N: int, q, lower, disc) -> bool:
-        """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away."""
+    def to_holding(self, N: int, q, lower, disc, escaped: bool = True) -> bool:
+        """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away; when
+        no free orbit has a clear way there, D_n first gets clear of D_{n-1}'s orbit (:meth:`escape`, once)."""
         n = self.loop.n
         # the same clearances as the timed paths' checks, so that waiting there passes them
         tune = self.loop.tune
@@ -846,11 +847,11 @@ class Rendezvous:
         # (trapped for good); without a clear hold the caller re-plans G_1 instead
         # a D_n already closer than the clearances (its own orbit grazes them) may leave at what it has
         short = self.pair.clearance_shortfall(N, lower, disc)
+        tight = tight_discs(disc, tune.wall_clearance_um - short, tune.g1_clearance_um - short)
         hold, onward = None, False
         for j in np.argsort(cost)[:self.loop.tune.hold_candidates]:
             there = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
-            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=self._tight(disc, tune.g1_clearance_um - short),
-                                       clearance=tune.wall_clearance_um - short):
+            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=tight, clearance=tune.wall_clearance_um - short):
                 continue
             on = not self.loop.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower,
                                              extra_discs=self._tight(disc), clearance=tune.wall_clearance_um)
@@ -860,7 +861,7 @@ class Rendezvous:
                 break
         if hold is None:
             self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no clear way to a free orbit near its target")
-            return False
+            return escaped and self.escape(N, lower) and self.to_holding(N, q, lower, disc, escaped=False)
         self.loop.log("hold", N,
                  f"{self.loop.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
         self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=tune.g1_clearance_um - short, via=False)
@@ -896,9 +897,62 @@ class Rendezvous:
                     self.loop.log("G_1", N, f"formed with {self.loop.scn.names[M]} (front edges {gap:.1f} um apart)")
                     self.pair.retarget(N, M)
                     return True
-                self.loop.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H)")
-                raise self.loop.abort(f"the G_1 pair stopped {gap:.0f} um apart (failure region H)")
-        raise self.loop.abort("G_1 did not form: the pair drove past each other")
+                # outside the self-alignment limits (failure region H): both turn away, D_n approaches again
+                self.loop.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H); both turn away and "
+                                          f"{self.loop.scn.names[N]} approaches again")
+                self.separate(N, M)
+                return False
+        self.loop.log("miss", N, "the pair drove past each other; both turn away and the rendezvous is planned again")
+        self.separate(N, M)
+        return False
+
+    def escape(self, N: int, lower) -> bool:
+        """D_n gets its orbit ``Tuning.g1_clearance_um`` clear of D_{n-1}'s: it turns (P_n) until it heads
+        within 60 deg of straight away from D_{n-1}'s turning centre, then runs straight (P_{n-1}, D_{n-1}
+        orbiting in place) while it keeps room to orbit; at most ``Tuning.separate_frames`` t_x. True when clear.
+
+        A D_n whose orbit overlaps D_{n-1}'s (after a failed meeting, or a hold path cut short) finds no
+        clear path at any of G_1's clearances: every pair frame then failed at once, with nothing moved.
+        """
+        n, tune = self.loop.n, self.loop.tune
+        M = self.loop.by_rank[n - 1]
+        for _ in range(tune.separate_frames):
+            p, cM = self.loop.est[N], self.pair.centre(M)
+            gap = orbit_room(p[None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None, cM[None], [float(self.loop.rstar[M])])[0]
+            if gap >= tune.g1_clearance_um:
+                return True
+            away = math.atan2(p[0] - cM[0], p[1] - cM[1])
+            turn = float(np.mod(away - math.radians(60.0) - p[2], TWO_PI))  # clockwise to the edge of the cone
+            if turn > math.radians(120.0):  # heading within 60 deg of away: run straight out
+                if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower):
+                    return False
+                self.loop.drive([(n - 1, self.loop.tx)])
+            else:
+                self.loop.drive([(n, min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N])])
+        return False
+
+    def separate(self, N: int, M: int) -> None:
+        """After a failed meeting: both turn a quarter of D_n's turn away (P_n), then drive straight apart
+        (P_{n-2}) until D_n's orbit keeps ``Tuning.g1_clearance_um`` from D_{n-1}'s, at most
+        ``Tuning.separate_frames`` t_x, and only while both keep room to orbit.
+
+        Face to face, a clockwise quarter turn leaves them side by side heading opposite ways, so driving
+        straight takes them apart. Without it D_n stayed inside D_{n-1}'s orbit disc: no path from there is
+        clear, and every later pair frame failed at once.
+        """
+        n, tune = self.loop.n, self.loop.tune
+        self.loop.drive([(n, 0.5 * math.pi / self.loop.omega_hat[N])])
+        lower = self.loop.orbiting_below(n - 1)
+        tr = self.pair.transfer
+        for _ in range(tune.separate_frames):
+            gap = orbit_room(self.loop.est[N][None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None,
+                             self.pair.centre(M)[None], [float(self.loop.rstar[M])])[0]
+            if gap >= tune.g1_clearance_um:
+                return
+            tx = self.loop.tx
+            if not (tr.keeps_room(N, self.loop.v_hat[N] * tx, lower) and tr.keeps_room(M, self.loop.v_hat[M] * tx, lower)):
+                return
+            self.loop.drive([(n - 2, self.loop.tx)])
 
     def best_departure(self, N: int, M: int):
         """``(wait_s, cost)`` of D_{n-1}'s best departure toward D_n as measured (:func:`~stressbots.control.queries.best_departure`)."""

@@ -211,6 +211,9 @@ class Tuning:
     hold_candidates: int = 24
     """Free orbits near its target (cheapest first) D_n considers when it has no timed path and goes to
     wait: the first with a clear shortest path there (and, preferably, on to the target) is taken."""
+    separate_frames: int = 8
+    """t_x. After a failed meeting the G_1 pair drives straight apart for at most this long (until D_n's
+    orbit clears D_{n-1}'s): at the literature's speeds about 1.5 mm between them, beyond any orbit disc."""
 
 
 @dataclass(frozen=True)
