@@ -202,7 +202,7 @@ class Tuning:
     flush_um: float = 15.0
     off_slot_um: float = 90.0
 
-    # -- G_1 (control/pair.py): room to orbit and safe holding (issue 12, 2x noise) ------------------------
+    # -- G_1 (control/transfer.py, pair_recovery.py): room to orbit, safe holding (issue 12, 2x noise) ----
     orbit_room_um: float = 15.0
     """um. Room to orbit (gap of its orbit disc to the arena edge and the lower orbits) D_n keeps at the
     predicted end of every straight frame of a station transfer: a one-way robot that loses it while the

@@ -1,0 +1,138 @@
+"""Recoveries of the G_1 pair phase: D_n waits on a holding orbit when it has no timed way, gets its orbit
+clear of D_{n-1}'s, and the pair separates after a failed meeting (seed App. 3.3: re-plan, never give up
+while the time budget lasts). Each keeps D_n where a one-way robot can still orbit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .. import paths as pathlib
+from ..robots import TWO_PI, turning_centres
+from .pair_geometry import tight_discs
+from .station import orbit_room
+
+if TYPE_CHECKING:
+    from .pair import PairPhase
+
+__all__ = ["PairRecovery"]
+
+
+class PairRecovery:
+    """D_n's holding orbit, its escape from D_{n-1}'s orbit, and the pair's separation after a failed meeting."""
+
+    def __init__(self, pair: PairPhase):
+        self.pair = pair
+        self.loop = pair.loop
+
+    def clearance_shortfall(self, N: int, lower, disc) -> float:
+        """How much (um, >= 0) D_n's own orbit, as measured, falls short of the G_1 clearances: of
+        ``Tuning.wall_clearance_um`` from the arena edge and the lower orbits, of ``Tuning.g1_clearance_um``
+        from D_{n-1}'s orbit ``disc``. Every path starts along that orbit or straight on, so checking paths
+        from here at the full clearances finds none (D_n sat still while every frame was re-planned); they
+        are checked at the clearances less this shortfall (never below zero)."""
+        tune = self.loop.tune
+        cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
+        rs = self.loop.rstar[lower] if lower else np.zeros(0)
+        r, rstar, arena = float(self.loop.r_hat[N]), float(self.loop.rstar[N]), self.loop.scn.arena_um
+        walls = float(orbit_room(self.loop.est[N][None], r, rstar, arena, cs, rs)[0])
+        dc = np.array([c for c, _ in disc]).reshape(-1, 2)
+        near = float(orbit_room(self.loop.est[N][None], r, rstar, None, dc, [float(rr) for _, rr in disc])[0])
+        short = max(tune.wall_clearance_um - walls, tune.g1_clearance_um - near, 0.0)
+        return float(min(short, tune.g1_clearance_um))
+
+    def to_holding(self, N: int, q, lower, disc, escaped: bool = True) -> bool:
+        """Take D_n (untimed) onto a free orbit near ``q``, from which any arrival time is a wait away; when
+        no free orbit has a clear way there, D_n first gets clear of D_{n-1}'s orbit (:meth:`escape`, once)."""
+        n = self.loop.n
+        # the same clearances as the timed paths' checks, so that waiting there passes them
+        tune = self.loop.tune
+        free = self.pair.free_orbits(N, [(c, r + tune.g1_clearance_um - tune.wall_clearance_um - 5.0) for c, r in disc], lower,
+                                clearance=self.loop.tune.wall_clearance_um + 5.0)
+        if len(free) == 0:
+            return False
+        rN = self.loop.r_hat[N]
+        heads = np.radians(np.arange(0.0, 360.0, 30.0))
+        poses = np.concatenate([np.stack([free[:, 0] - rN * math.cos(t), free[:, 1] + rN * math.sin(t), np.full(len(free), t)],
+                                         axis=1) for t in heads])
+        # near the target, with a clear way on to it (the way there may be routed around obstacles)
+        cost = 0.3 * pathlib.shortest_path_lengths(np.broadcast_to(self.loop.est[N], poses.shape), poses,
+                                                   rN) + pathlib.shortest_path_lengths(
+            poses, np.broadcast_to(np.asarray(q, float), poses.shape), rN, approach_um=60.0
+        )
+        # only holds D_n reaches by a clear shortest path, with a clear way on preferred: gross motion that
+        # finds no way around drives on regardless, and took D_n into the arena edge or D_{n-1}'s orbit
+        # (trapped for good); without a clear hold the caller re-plans G_1 instead
+        # a D_n already closer than the clearances (its own orbit grazes them) may leave at what it has
+        short = self.clearance_shortfall(N, lower, disc)
+        tight = tight_discs(disc, tune.wall_clearance_um - short, tune.g1_clearance_um - short)
+        hold, onward = None, False
+        for j in np.argsort(cost)[:self.loop.tune.hold_candidates]:
+            there = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
+            if self.loop.obstacles_hit(there.sample(10.0), N, lower, extra_discs=tight, clearance=tune.wall_clearance_um - short):
+                continue
+            on = not self.loop.obstacles_hit(pathlib.shortest_path(poses[j], q, rN, approach_um=60.0).sample(10.0), N, lower,
+                                             extra_discs=tight_discs(disc, tune.wall_clearance_um, tune.g1_clearance_um),
+                                             clearance=tune.wall_clearance_um)
+            if hold is None or (on and not onward):
+                hold, onward = poses[j], on
+            if onward:
+                break
+        if hold is None:
+            self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no clear way to a free orbit near its target")
+            return escaped and self.escape(N, lower) and self.to_holding(N, q, lower, disc, escaped=False)
+        self.loop.log("hold", N,
+                 f"{self.loop.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
+        self.loop.steer(N, hold, n, n - 1, lower, extra_discs=disc, max_cycles=120, clearance=tune.g1_clearance_um - short, via=False)
+        return not self.loop.stuck
+
+    def escape(self, N: int, lower) -> bool:
+        """D_n gets its orbit ``Tuning.g1_clearance_um`` clear of D_{n-1}'s: it turns (P_n) until it heads
+        within 60 deg of straight away from D_{n-1}'s turning centre, then runs straight (P_{n-1}, D_{n-1}
+        orbiting in place) while it keeps room to orbit; at most ``Tuning.separate_frames`` t_x. True when clear.
+
+        A D_n whose orbit overlaps D_{n-1}'s (after a failed meeting, or a hold path cut short) finds no
+        clear path at any of G_1's clearances: every pair frame then failed at once, with nothing moved.
+        """
+        n, tune = self.loop.n, self.loop.tune
+        M = self.loop.by_rank[n - 1]
+        for _ in range(tune.separate_frames):
+            p, cM = self.loop.est[N], self.pair.centre(M)
+            gap = orbit_room(p[None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None, cM[None], [float(self.loop.rstar[M])])[0]
+            if gap >= tune.g1_clearance_um:
+                return True
+            away = math.atan2(p[0] - cM[0], p[1] - cM[1])
+            turn = float(np.mod(away - math.radians(60.0) - p[2], TWO_PI))  # clockwise to the edge of the cone
+            if turn > math.radians(120.0):  # heading within 60 deg of away: run straight out
+                if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower):
+                    return False
+                self.loop.drive([(n - 1, self.loop.tx)])
+            else:
+                self.loop.drive([(n, min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N])])
+        return False
+
+    def separate(self, N: int, M: int) -> None:
+        """After a failed meeting: both turn a quarter of D_n's turn away (P_n), then drive straight apart
+        (P_{n-2}) until D_n's orbit keeps ``Tuning.g1_clearance_um`` from D_{n-1}'s, at most
+        ``Tuning.separate_frames`` t_x, and only while both keep room to orbit.
+
+        Face to face, a clockwise quarter turn leaves them side by side heading opposite ways, so driving
+        straight takes them apart. Without it D_n stayed inside D_{n-1}'s orbit disc: no path from there is
+        clear, and every later pair frame failed at once.
+        """
+        n, tune = self.loop.n, self.loop.tune
+        self.loop.drive([(n, 0.5 * math.pi / self.loop.omega_hat[N])])
+        lower = self.loop.orbiting_below(n - 1)
+        tr = self.pair.transfer
+        for _ in range(tune.separate_frames):
+            gap = orbit_room(self.loop.est[N][None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None,
+                             self.pair.centre(M)[None], [float(self.loop.rstar[M])])[0]
+            if gap >= tune.g1_clearance_um:
+                return
+            tx = self.loop.tx
+            if not (tr.keeps_room(N, self.loop.v_hat[N] * tx, lower) and tr.keeps_room(M, self.loop.v_hat[M] * tx, lower)):
+                return
+            self.loop.drive([(n - 2, self.loop.tx)])
