@@ -90,20 +90,30 @@ class PairRecovery:
         return not self.loop.stuck
 
     def escape(self, N: int, lower) -> bool:
-        """D_n gets its orbit ``Tuning.g1_clearance_um`` clear of D_{n-1}'s: it turns (P_n) until it heads
-        within 60 deg of straight away from D_{n-1}'s turning centre, then runs straight (P_{n-1}, D_{n-1}
-        orbiting in place) while it keeps room to orbit; at most ``Tuning.separate_frames`` t_x. True when clear.
+        """D_n gets its orbit clear of the orbits around it: ``Tuning.g1_clearance_um`` from D_{n-1}'s,
+        ``Tuning.wall_clearance_um`` from the lower robots'. It turns (P_n) until it heads within 60 deg of
+        straight away from the turning centre of the orbit it lacks most clearance from, then runs straight
+        (P_{n-1}: the others orbit in place) while it keeps room to orbit; at most ``Tuning.separate_frames``
+        t_x. True when clear.
 
-        A D_n whose orbit overlaps D_{n-1}'s (after a failed meeting, or a hold path cut short) finds no
-        clear path at any of G_1's clearances: every pair frame then failed at once, with nothing moved.
+        A D_n whose orbit overlaps another (after a failed meeting, or a transfer track ending beside a
+        lower orbit at 2x noise) finds no clear path at any of G_1's clearances: every pair frame then
+        failed at once, with nothing moved.
         """
         n, tune = self.loop.n, self.loop.tune
         M = self.loop.by_rank[n - 1]
+        others = [M, *lower]
+        need = np.array([tune.g1_clearance_um] + [tune.wall_clearance_um] * len(lower))
         for _ in range(tune.separate_frames):
-            p, cM = self.loop.est[N], self.pair.centre(M)
-            gap = orbit_room(p[None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None, cM[None], [float(self.loop.rstar[M])])[0]
-            if gap >= tune.g1_clearance_um:
+            p = self.loop.est[N]
+            cs = turning_centres(self.loop.est[others], self.loop.r_hat[others])
+            cs[0] = self.pair.centre(M)
+            gaps = np.array([orbit_room(p[None], float(self.loop.r_hat[N]), float(self.loop.rstar[N]), None, c[None],
+                                        [float(self.loop.rstar[j])])[0] for c, j in zip(cs, others, strict=True)])
+            worst = int(np.argmax(need - gaps))
+            if gaps[worst] >= need[worst]:
                 return True
+            cM = cs[worst]
             away = math.atan2(p[0] - cM[0], p[1] - cM[1])
             turn = float(np.mod(away - math.radians(60.0) - p[2], TWO_PI))  # clockwise to the edge of the cone
             if turn > math.radians(120.0):  # heading within 60 deg of away: run straight out

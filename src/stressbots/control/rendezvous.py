@@ -186,7 +186,7 @@ class Rendezvous:
         early = self.loop.tune.early_s if early is None else early
         n = self.loop.n
         self._plan = None
-        holds = 0
+        holds = loops = 0
         prev = None
         for _ in range(600):
             vN = self.loop.v_hat[N]
@@ -212,6 +212,12 @@ class Rendezvous:
                 self._plan = None if found is None else (found[1], found[2], self.loop.t + found[3])
                 loop = None if found is None else found[4]
             if loop is not None:
+                loops += 1
+                if loops > self.loop.tune.timing_loops_max:
+                    # each loop came back off time (at 2x noise an interpolated loop's period is seconds off):
+                    # another would too; the caller falls back (another leg option, a holding orbit, a new frame)
+                    self.loop.log("retry", N, f"{self.loop.scn.names[N]} missed its time after {loops - 1} timing loops")
+                    return False
                 R, m = loop
                 self.loop.log("loop", N, f"{self.loop.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
                 self.loop.replans += 1

@@ -214,6 +214,10 @@ class Tuning:
     separate_frames: int = 8
     """t_x. After a failed meeting the G_1 pair drives straight apart for at most this long (until D_n's
     orbit clears D_{n-1}'s): at the literature's speeds about 1.5 mm between them, beyond any orbit disc."""
+    timing_loops_max: int = 3
+    """Interpolated timing loops one timed arrival of D_n may drive before it counts as having no timed way
+    (the caller falls back). A loop that comes back off time is followed by another, just as far off: at
+    2x noise D_n looped 45 times (700 s simulated, 100 s wall) without arriving."""
 
 
 @dataclass(frozen=True)
