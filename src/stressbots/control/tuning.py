@@ -218,6 +218,8 @@ class Tuning:
     """Interpolated timing loops one timed arrival of D_n may drive before it counts as having no timed way
     (the caller falls back). A loop that comes back off time is followed by another, just as far off: at
     2x noise D_n looped 45 times (700 s simulated, 100 s wall) without arriving."""
+    hold_frames: int = 120
+    """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
 
 
 @dataclass(frozen=True)
