@@ -149,7 +149,7 @@ class PairRecovery:
                 return True
             away = away_from[worst][1]
             turn = float(np.mod(away - math.radians(60.0) - p[2], TWO_PI))  # clockwise to the edge of the cone
-            if turn > math.radians(120.0):  # heading within 60 deg of away: run straight out
+            if turn >= math.radians(240.0) or turn < 1e-9:  # heading within 60 deg of away: run straight out
                 if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower):
                     return False
                 self.loop.drive([(n - 1, self.loop.tx)])
