@@ -94,10 +94,39 @@ class PairRecovery:
                 break
         if hold is None:
             self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no clear way to a free orbit near its target")
-            return escaped and self.escape(N, lower) and self.to_holding(N, q, lower, disc, escaped=False)
+            # a way around the obstacles by the planner's roadmap: gross motion follows it (as before); no
+            # such way (where gross motion "drove on" into the edge or an orbit): D_n escapes what hems it in
+            if not escaped:
+                return False
+            if self.steer_to_hold(N, q, lower, disc):
+                return True
+            return self.escape(N, lower) and self.to_holding(N, q, lower, disc, escaped=False)
         self.loop.log("hold", N,
                  f"{self.loop.scn.names[N]} heads for a free orbit {np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
         return self.drive_to_hold(N, hold, lower, disc, short)
+
+    def steer_to_hold(self, N: int, q, lower, disc) -> bool:
+        """Gross motion (the loop's ``steer``, roadmap detours) to the free orbit nearest ``q``, when the planner's
+        roadmap has a route there (False, nothing driven, when it has none): the way the phase went to wait
+        before it drove its own clear ways, for a D_n hemmed in so that no shortest path is clear."""
+        tune = self.loop.tune
+        free = self.pair.free_orbits(N, [(c, r + tune.g1_clearance_um - tune.wall_clearance_um - 5.0) for c, r in disc], lower,
+                                     clearance=tune.wall_clearance_um + 5.0)
+        if len(free) == 0:
+            return False
+        rN = self.loop.r_hat[N]
+        poses = np.stack([free[:, 0] - rN, free[:, 1], np.zeros(len(free))], axis=1)
+        cost = 0.3 * pathlib.shortest_path_lengths(np.broadcast_to(self.loop.est[N], poses.shape), poses, rN) + \
+            pathlib.shortest_path_lengths(poses, np.broadcast_to(np.asarray(q, float), poses.shape), rN, approach_um=60.0)
+        hold = poses[int(np.argmin(cost))]
+        _, routed = self.loop.gross.roadmap_route(N, hold, lower, disc, max(tune.g1_clearance_um + 5.0, 20.0))
+        if routed is None:
+            return False
+        self.loop.log("hold", N, f"{self.loop.scn.names[N]} steers around the obstacles to a free orbit "
+                                 f"{np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
+        self.loop.steer(N, hold, self.loop.n, self.loop.n - 1, lower, extra_discs=disc, max_cycles=tune.hold_frames,
+                        clearance=tune.g1_clearance_um)
+        return not self.loop.stuck
 
     def drive_to_hold(self, N: int, hold, lower, disc, short: float) -> bool:
         """D_n drives its shortest path to ``hold``, re-planned every t_x while it stays clear
@@ -150,11 +179,31 @@ class PairRecovery:
             away = away_from[worst][1]
             turn = float(np.mod(away - math.radians(60.0) - p[2], TWO_PI))  # clockwise to the edge of the cone
             if turn >= math.radians(240.0) or turn < 1e-9:  # heading within 60 deg of away: run straight out
-                if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower):
+                if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower) or self.meets_others(N, others, 0.0,
+                                                                                                                    self.loop.tx):
                     return False
                 self.loop.drive([(n - 1, self.loop.tx)])
             else:
-                self.loop.drive([(n, min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N])])
+                dt = min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N]
+                if self.meets_others(N, others, 1.0 / float(self.loop.r_hat[N]), dt):
+                    return False  # turning here would sweep D_n into a robot orbiting beside it
+                self.loop.drive([(n, dt)])
+        return False
+
+    def meets_others(self, N: int, others, curvature: float, dt: float) -> bool:
+        """Whether D_n, driving ``dt`` s at ``curvature`` (1/um; 0 straight) from its measured pose, would come
+        within ``Tuning.g1_clearance_um`` of the body of one of ``others`` orbiting meanwhile (P_n and P_{n-1}
+        turn them all): bodies compared at the same instants, not orbit discs."""
+        from ..collision import penetration_depth
+        from ..kinematics import move
+
+        ts = np.linspace(0.0, dt, 12)
+        mine = move(self.loop.est[N], self.loop.v_hat[N] * ts, curvature)
+        for j in others:
+            theirs = move(self.loop.est[j], self.loop.v_hat[j] * ts, 1.0 / float(self.loop.r_hat[j]))
+            if (penetration_depth(mine, self.loop.L[N], self.loop.W[N], theirs, self.loop.L[j], self.loop.W[j])
+                    > -self.loop.tune.g1_clearance_um).any():
+                return True
         return False
 
     def escape_gaps(self, N: int, others) -> list[tuple[float, float]]:

@@ -7,7 +7,7 @@ Shared by :mod:`~stressbots.control.pair` and its stages (:mod:`~stressbots.cont
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -32,6 +32,8 @@ class PairLoop(DockingLoop, Protocol):
     t: float
     replans: int
     nominal_goals: np.ndarray
+    gross: Any
+    """The loop's gross motion (:class:`~stressbots.control.gross.GrossMotion`): its roadmap routes."""
 
     @property
     def rstar(self) -> np.ndarray: ...
