@@ -95,3 +95,25 @@ def test_escape_gaps_measure_orbits_and_edges_and_point_away():
         moved = loop.est[0] + np.array([10.0 * math.sin(away), 10.0 * math.cos(away), 0.0])
         rec2, _ = fake_pair([moved, loop.est[1], loop.est[2]], [100.0] * 3, [150.0] * 3)
         assert rec2.escape_gaps(0, [1, 2])[gaps.index((g, away))][0] > g
+
+
+def test_meets_others_compares_bodies_at_the_same_instants():
+    """Robots side by side, heading the same way, 50 um wide. By hand: 60 um centre to centre is a 10 um gap,
+    inside g1_clearance already; 1500 um apart nothing meets; D_n straight while the robot 110 um to its
+    right turns away (clockwise) only gains room; both turning clockwise with the other 110 um to the left,
+    the gap between their long sides is 110 cos(turn) - 50 um: under 25 um once they have turned 48 deg."""
+    from stressbots.control.tuning import Tuning
+
+    def made(dx):
+        rec, loop = fake_pair([[1000.0, 1000.0, 0.0], [1000.0 + dx, 1000.0, 0.0]], [150.0, 150.0], [200.0, 200.0])
+        loop.v_hat, loop.L, loop.W, loop.tune = np.array([100.0, 100.0]), np.array([200.0, 200.0]), np.array([50.0, 50.0]), Tuning()
+        return rec
+
+    near, far = made(60.0), made(1500.0)
+    assert near.meets_others(0, [1], 1.0 / 150.0, 1.0)
+    assert not far.meets_others(0, [1], 1.0 / 150.0, 2.0)
+    wide = made(110.0)
+    assert not wide.meets_others(0, [1], 0.0, 1.0)
+    left = made(-110.0)
+    assert left.meets_others(0, [1], 1.0 / 150.0, 1.5)  # 1.5 s at 100 um/s on r = 150 um: 57 deg
+    assert not left.meets_others(0, [1], 1.0 / 150.0, 0.9)  # 34 deg: 41 um apart
