@@ -83,6 +83,43 @@ def test_g1_is_replanned_in_another_frame_when_the_nominal_one_fails(pair, monke
     assert result.shape_error_rms_um <= 10.0
 
 
+class Jam(ProtocolOnly):
+    """Fault injection: the first time the G_1 pair's front edges come within ``near_um`` of each other,
+    the plant swallows the next ``frames`` command(s) (the pair stays where it is, as if jammed corner to
+    corner outside the self-alignment limits: failure region H). Then it obeys again."""
+
+    def __init__(self, inner, near_um: float, frames: int = 1):
+        super().__init__(inner)
+        self.near_um, self.left, self.jammed = near_um, frames, False
+
+    def apply(self, waveform):
+        from stressbots.robots import front_midpoints
+
+        sim = self._inner
+        if not self.jammed:
+            ends = front_midpoints(sim.true_poses(), sim.scenario.lengths_um)
+            self.jammed = bool(np.hypot(*(ends[0] - ends[1])) < self.near_um)
+        if self.jammed and self.left > 0:
+            self.left -= 1
+            return
+        super().apply(waveform)
+
+
+def test_a_g1_pair_stopped_apart_turns_away_and_meets_again(pair):
+    """A pair that stops short of each other (region H) is not the end of the run: both turn away (P_n),
+    D_n approaches again, and the simulator itself records G_1 formed."""
+    scn = pair.with_noise(Noise())
+    sim = SimulatedPlant(scn, seed=1)
+    plant = Jam(sim, near_um=300.0)
+    result = assemble(scn, plant, seed=1, plan=structure_targets(scn))
+    assert plant.jammed and plant.left == 0
+    apart = [e for e in result.events if e["kind"] == "stuck" and "approaches again" in e["detail"]]
+    assert apart, result.events[-6:]
+    assert result.success, (result.failure, result.events[-5:])
+    assert any(e.kind == "self_align" for e in sim.events)
+    assert sim.docked.all()
+
+
 class Shove(ProtocolOnly):
     """Fault injection: once ``mover`` starts its own gross motion, the orbiting ``victim`` is displaced
     (as by an orbit drifting with accumulated error) so that its orbit disc covers the straight line from

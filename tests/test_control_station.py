@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stressbots.control.station import legs_clear, orbit_route, segment_disc_gaps
+from stressbots.control.station import legs_clear, orbit_room, orbit_route, segment_disc_gaps
 
 ARENA = (3000.0, 3000.0)
 
@@ -77,3 +77,29 @@ def test_every_route_found_is_clear(discs, gx, gy):
     if route is not None:
         assert np.allclose(route[-1], [gx, gy])
         assert route_is_clear(start, route, 200.0, centres, radii, 25.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(300.0, 2700.0), st.floats(300.0, 2700.0), st.floats(0.0, 6.28), st.floats(80.0, 300.0), st.floats(150.0, 300.0),
+       st.floats(30.0, 60.0))
+def test_orbit_room_is_the_arena_gap_of_the_body_over_a_whole_orbit(x, y, th, r, L, W):
+    """Against brute force: the body's gap to the arena edge, sampled along one whole clockwise orbit."""
+    from stressbots.collision import arena_gap
+    from stressbots.kinematics import move
+    from stressbots.robots import orbit_radii
+
+    pose = np.array([x, y, th])
+    rstar = float(orbit_radii(L, W, r))
+    room = orbit_room(pose[None], r, rstar, ARENA, np.zeros((0, 2)), [])[0]
+    orbit = move(pose, np.linspace(0.0, 2.0 * np.pi * r, 1441), 1.0 / r)
+    brute = float(arena_gap(orbit, L, W, ARENA).min())
+    # the outer corner sweeps the orbit disc; sampling misses at most the chord's sagitta
+    assert brute - 0.5 <= room <= brute + 1e-6
+
+
+def test_orbit_room_counts_the_other_orbits():
+    pose = np.array([[1000.0, 1000.0, 0.0]])  # heading +y: turning centre 100 um to the right
+    free = orbit_room(pose, 100.0, 150.0, None, np.zeros((0, 2)), [])[0]
+    near = orbit_room(pose, 100.0, 150.0, None, np.array([[1500.0, 1000.0]]), [200.0])[0]
+    assert free == np.inf
+    assert near == 400.0 - 150.0 - 200.0

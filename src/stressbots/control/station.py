@@ -17,7 +17,9 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-__all__ = ["segment_disc_gaps", "legs_clear", "orbit_route"]
+from ..robots import turning_centres
+
+__all__ = ["segment_disc_gaps", "legs_clear", "orbit_route", "orbit_room"]
 
 
 def segment_disc_gaps(a, b, centres, radii) -> np.ndarray:
@@ -37,6 +39,30 @@ def segment_disc_gaps(a, b, centres, radii) -> np.ndarray:
     t = np.clip(t, 0.0, 1.0)
     p = a[:, None, :] + t[:, :, None] * d[:, None, :]
     return np.hypot(*(p - c[None, :, :]).transpose(2, 0, 1)) - r[None, :]
+
+
+def orbit_room(poses, r: float, rstar: float, arena_um, centres, radii) -> np.ndarray:
+    """Room (um, (K,)) each pose in ``poses`` (K, 3) leaves its robot to orbit in place: the gap of the orbit
+    disc (turning radius ``r``, disc radius ``rstar``) to the arena edge ``(w, h)`` (None: unbounded) and to
+    the discs ``(centres, radii)``; negative when the orbit would meet one.
+
+    A one-way robot whose orbit meets the arena edge, while the edge also lies ahead of it, is trapped for
+    good: it can neither pivot off the edge nor drive through it. A robot that keeps room to orbit can
+    always wait (P_n) or turn away; the pair phase keeps D_n there whenever it stops.
+
+    >>> float(orbit_room(np.array([[500.0, 500.0, 0.0]]), 100.0, 150.0, (1000.0, 1000.0), np.zeros((0, 2)), [])[0])
+    250.0
+    """
+    c = turning_centres(poses, r)
+    room = np.full(len(c), np.inf)
+    if arena_um is not None:
+        w, h = arena_um
+        room = np.min(np.stack([c[:, 0], w - c[:, 0], c[:, 1], h - c[:, 1]], axis=1), axis=1) - rstar
+    rr = np.asarray(radii, float).reshape(-1)
+    if len(rr):
+        d = np.hypot(*(c[:, None, :] - np.atleast_2d(np.asarray(centres, float))[None]).transpose(2, 0, 1)) - rr[None, :] - rstar
+        room = np.minimum(room, d.min(axis=1))
+    return room
 
 
 def _inside(p, arena_um, m: float) -> np.ndarray:

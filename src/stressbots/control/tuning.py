@@ -239,6 +239,25 @@ class Tuning:
     escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
     escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
 
+    # -- G_1 (control/transfer.py, pair_recovery.py): room to orbit, safe holding (issue 12, 2x noise) ----
+    orbit_room_um: float = 15.0
+    """um. Room to orbit (gap of its orbit disc to the arena edge and the lower orbits) D_n keeps at the
+    predicted end of every straight frame of a station transfer: a one-way robot that loses it while the
+    edge lies ahead is trapped for good. Beyond the predicted end (which already runs ``track_overshoot``
+    long), a few camera sigmas at 2x noise."""
+    hold_candidates: int = 24
+    """Free orbits near its target (cheapest first) D_n considers when it has no timed path and goes to
+    wait: the first with a clear shortest path there (and, preferably, on to the target) is taken."""
+    separate_frames: int = 8
+    """t_x. After a failed meeting the G_1 pair drives straight apart for at most this long (until D_n's
+    orbit clears D_{n-1}'s): at the literature's speeds about 1.5 mm between them, beyond any orbit disc."""
+    timing_loops_max: int = 3
+    """Interpolated timing loops one timed arrival of D_n may drive before it counts as having no timed way
+    (the caller falls back). A loop that comes back off time is followed by another, just as far off: at
+    2x noise D_n looped 45 times (700 s simulated, 100 s wall) without arriving."""
+    hold_frames: int = 120
+    """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
+
 
 @dataclass(frozen=True)
 class ControllerOptions:

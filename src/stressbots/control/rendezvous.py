@@ -1,0 +1,290 @@
+"""Stages 2 and 3 of G_1 (seed App. 3.3): D_n arrives on the tangent of D_{n-1}'s orbit in time, D_{n-1}
+departs toward it as measured, and both drive straight into each other (self-aligning compliance).
+
+D_n's timed arrival waits on its own orbit or loops at an interpolated radius (:meth:`Rendezvous.loiter_path`),
+re-planned every t_x (:meth:`Rendezvous.arrive_timed`); D_{n-1}'s departure is timed from its measured
+heading (:meth:`Rendezvous.depart_and_meet`). When no timed way exists or the meeting fails, the
+recoveries of :mod:`~stressbots.control.pair_recovery` take over.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .. import paths as pathlib
+from ..kinematics import move
+from ..robots import TWO_PI, front_midpoints
+from .gross import path_steps
+from .pair_geometry import tight_discs
+from .pairloop import Replan
+from .queries import best_departure
+
+if TYPE_CHECKING:
+    from .pair import PairPhase
+
+__all__ = ["Rendezvous"]
+
+
+def arrival_region(target, v_um_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The region D_n may arrive in instead of the pose ``target``: ``(goals (K, 3), offset_s (K,), penalty (K,))``.
+
+    Poses up to 100 um along ``target``'s line (``offset_s`` later or earlier at ``v_um_s``), up to 40 um
+    right or 20 um left of it and 6 deg either way; ``penalty`` grows with each departure from ``target``
+    (1 at 100 um along, 40 um aside or 6 deg).
+
+    >>> goals, offset, penalty = arrival_region(np.array([0.0, 0.0, 0.0]), 100.0)
+    >>> goals.shape, float(penalty[0]), float(offset.max())
+    ((100, 3), 0.0, 1.0)
+    """
+    q = np.asarray(target, float)
+    hq = np.array([math.sin(q[2]), math.cos(q[2])])
+    rq = np.array([math.cos(q[2]), -math.sin(q[2])])
+    grid = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]),
+                       indexing="ij")
+    s, e, d = (g.ravel() for g in grid)
+    goals = np.stack([q[0] + s * hq[0] + e * rq[0], q[1] + s * hq[1] + e * rq[1], np.mod(q[2] + d, TWO_PI)], axis=1)
+    offset = s / v_um_s  # further along the line: arrive correspondingly later
+    penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)
+    return goals, offset, penalty
+
+
+class Rendezvous:
+    """Stages 2 and 3 of G_1: D_n arrives on D_{n-1}'s tangent in time, D_{n-1} departs, both meet."""
+
+    def __init__(self, pair: PairPhase):
+        self.pair = pair
+        self.loop = pair.loop
+        self._plan: tuple[Any, Any, float] | None = None
+
+    def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3):
+        """D_n waits on its own orbit, then takes its shortest path into the region around ``target``.
+
+        Waiting on its own orbit (P_n: D_{n-1} orbits too) is the compact way for a one-way robot to
+        arrive later: every arrival time from the shortest path's on to a period later is (almost always)
+        available, and the path stays near where the robot is. The goal is a region, not a pose: any
+        pose up to 100 um along D_n's approach line (timed accordingly), up to 40 um right or 20 um left
+        of it and 6 deg either way will do, because D_{n-1}'s departure is fitted to the line D_n really
+        ends on. A pose target would turn a small error to the left into a full loop. The first of
+        ``arrivals`` (s from now, for ``target`` itself) that some wait meets within ``tol_s`` with a
+        clear path wins; of those, the one nearest ``target``. Returns ``(path, goal, offset_s, arrival_s,
+        loop)`` (``loop`` = (radius_um, count) of interpolated loops to drive first, or None) or None.
+        """
+        vN = self.loop.v_hat[N]
+        goals, offset, penalty = arrival_region(target, vN)
+        found = self._wait_then_go(N, goals, offset, penalty, arrivals, lower, disc, tol_s)
+        return found if found is not None else self._loop_then_go(N, goals, offset, penalty, arrivals, lower, disc, tol_s)
+
+    def _wait_then_go(self, N: int, goals, offset, penalty, arrivals: Sequence[float], lower, disc, tol_s: float):
+        """:meth:`loiter_path` by a straight of 0-500 um and a wait on D_n's own orbit, then the shortest path."""
+        vN, rN = self.loop.v_hat[N], self.loop.r_hat[N]
+        period = TWO_PI * rN / vN
+        # a straight of a um first, then a wait of tw s on the orbit: the shortest path's length jumps by a
+        # loop as the wait passes its first turn, and the straights fill those gaps in arrival time
+        pre = np.array([0.0, 100.0, 200.0, 350.0, 500.0])
+        tw = np.arange(0.0, period, 0.05)
+        A, Tw = np.meshgrid(pre, tw, indexing="ij")
+        A, Tw = A.ravel(), Tw.ravel()
+        waits = move(move(self.loop.est[N], A, 0.0), vN * Tw, 1.0 / rN)
+        W, K = len(Tw), len(goals)
+        ell = pathlib.shortest_path_lengths(np.repeat(waits, K, axis=0), np.tile(goals, (W, 1)), rN, approach_um=60.0).reshape(W, K)
+        arr = (A / vN + Tw)[:, None] + ell / vN - offset[None, :]
+        for want in arrivals:
+            err = np.abs(arr - want)
+            score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.002 * A[:, None] / vN, np.inf).ravel()
+            for flat in np.argsort(score)[:10]:
+                if not np.isfinite(score[flat]):
+                    break
+                j, kk = divmod(int(flat), K)
+                tail = pathlib.shortest_path(waits[j], goals[kk], rN, approach_um=60.0)
+                segs = tuple(tail.segments)
+                if Tw[j] > 0:
+                    if segs and segs[0][0] == "R":
+                        segs = (("R", segs[0][1] + vN * Tw[j]),) + segs[1:]
+                    else:
+                        segs = (("R", vN * Tw[j]),) + segs
+                if A[j] > 0:
+                    segs = (("S", float(A[j])),) + segs
+                path = pathlib.Path(self.loop.est[N], rN, segs)
+                if not self.loop.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc),
+                                          clearance=self.loop.tune.wall_clearance_um):
+                    return path, goals[kk], float(offset[kk]), float(want), None
+        return None
+
+    def _loop_then_go(self, N: int, goals, offset, penalty, arrivals: Sequence[float], lower, disc, tol_s: float):
+        """:meth:`loiter_path` by one or two interpolated loops first, then the shortest path.
+
+        Waiting on the orbit only shifts arrival times in steps (it eats into the path's first turn, then
+        costs a whole loop). One or two interpolated loops of radius R in [r, 1.6 r] (P_n / P_{n-1}
+        alternating) end where they began after 2 pi R / v: every arrival time in a window wider than
+        D_{n-1}'s period, continuously.
+        """
+        vN, rN = self.loop.v_hat[N], self.loop.r_hat[N]
+        K = len(goals)
+        ell0 = pathlib.shortest_path_lengths(np.broadcast_to(self.loop.est[N], goals.shape), goals, rN, approach_um=60.0)
+        radii = np.linspace(rN, 1.6 * rN, 61)
+        for want in arrivals:
+            for m in (1, 2):
+                arr = m * TWO_PI * radii[:, None] / vN + ell0[None, :] / vN - offset[None, :]
+                err = np.abs(arr - want)
+                score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.01 * radii[:, None] / rN, np.inf).ravel()
+                for flat in np.argsort(score)[:6]:
+                    if not np.isfinite(score[flat]):
+                        break
+                    jr, kk = divmod(int(flat), K)
+                    R = float(radii[jr])
+                    loop = move(self.loop.est[N], np.linspace(0.0, TWO_PI * R, 72), 1.0 / R)
+                    tail = pathlib.shortest_path(self.loop.est[N], goals[kk], rN, approach_um=60.0)
+                    if self.loop.obstacles_hit(np.vstack([loop, tail.sample(10.0)]), N, lower, extra_discs=self._tight(disc),
+                                          clearance=self.loop.tune.wall_clearance_um):
+                        continue
+                    return tail, goals[kk], float(offset[kk]), float(want), (R, m)
+        return None
+
+    def _tight(self, disc, clearance: float | None = None):
+        """D_{n-1}'s orbit disc(s) shrunk so that checks at ``Tuning.wall_clearance_um`` keep ``clearance``
+        (default ``Tuning.g1_clearance_um``) from them."""
+        clearance = self.loop.tune.g1_clearance_um if clearance is None else clearance
+        return tight_discs(disc, self.loop.tune.wall_clearance_um, clearance)
+
+    def continued(self, N: int, arrivals: Sequence[float], lower, disc) -> pathlib.Path | None:
+        """The last plan's goal, re-planned from the measured pose, if its timing still holds (plans persist).
+
+        Without this, a plan that becomes marginally infeasible (a graze with an orbit, an arrival just
+        outside the tolerance) would be replaced by a different one every t_x.
+        """
+        if self._plan is None:
+            return None
+        goal, offset, t_abs = self._plan
+        vN, rN = self.loop.v_hat[N], self.loop.r_hat[N]
+        want = min(arrivals, key=lambda a: abs(self.loop.t + a - t_abs)) if arrivals else None
+        if want is None or abs(self.loop.t + want - t_abs) > 1.0:
+            return None
+        path = pathlib.shortest_path(self.loop.est[N], goal, rN, approach_um=60.0)
+        if abs(path.length / vN - offset - want) > 0.5:
+            return None
+        if self.loop.obstacles_hit(path.sample(10.0), N, lower, extra_discs=self._tight(disc, 0.0),
+                                   clearance=self.loop.tune.wall_clearance_um - 5.0):
+            return None
+        self._plan = (goal, offset, self.loop.t + want)
+        return path
+
+    def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
+        th_dep = float(self.loop.goals[M, 2])
+        if not self.arrive_timed(N, M, lambda: self.pair.approach_pose(N, M, self.pair.centre(M), D), th_dep, lower):
+            raise Replan(f"{self.loop.scn.names[N]} found no timed path to its approach line")
+        return self.depart_and_meet(N, M)
+
+    def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float | None = None) -> bool:
+        """D_n drives to ``target_fn()`` (a pose on a line it then runs straight along), arriving ``early``
+        seconds before D_{n-1}, orbiting, reaches heading ``th_dep``. Replanned every t_x; the last leg
+        runs whole. False if no timed way exists even from a holding orbit.
+        """
+        early = self.loop.tune.early_s if early is None else early
+        n = self.loop.n
+        self._plan = None
+        holds = loops = 0
+        prev = None
+        for _ in range(600):
+            vN = self.loop.v_hat[N]
+            q = target_fn()
+            disc = [(self.pair.centre(M), self.loop.rstar[M])]
+            t_dep = float(np.mod(th_dep - self.loop.est[M, 2], TWO_PI)) / self.loop.omega_hat[M]
+            period = TWO_PI / self.loop.omega_hat[M]
+            arrivals = [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
+            path = self.continued(N, arrivals, lower, disc)
+            if path is None and prev is not None and prev.length - vN * self.loop.tx <= self.loop.tune.final_leg_s * vN:
+                # the final seconds: a small error can make the replanned path a loop (one-way robot);
+                # the rest of the plan, driven open loop, misses by a few um at most
+                rest = pathlib.sub_path(prev, min(vN * self.loop.tx, prev.length), prev.length)
+                self.loop.log("final", N, f"{self.loop.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
+                self.loop.drive(path_steps(rest, vN, n, n - 1, None))
+                return True
+            loop = None
+            for tol in (0.3, 0.7):
+                if path is not None:
+                    break
+                found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
+                path = None if found is None else found[0]
+                self._plan = None if found is None else (found[1], found[2], self.loop.t + found[3])
+                loop = None if found is None else found[4]
+            if loop is not None:
+                loops += 1
+                if loops > self.loop.tune.timing_loops_max:
+                    # each loop came back off time (at 2x noise an interpolated loop's period is seconds off):
+                    # another would too; the caller falls back (another leg option, a holding orbit, a new frame)
+                    self.loop.log("retry", N, f"{self.loop.scn.names[N]} missed its time after {loops - 1} timing loops")
+                    return False
+                R, m = loop
+                self.loop.log("loop", N, f"{self.loop.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
+                self.loop.replans += 1
+                total = m * TWO_PI * R / vN
+                while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
+                    d = min(self.loop.tx, total)
+                    self.loop.drive(self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1))
+                    total -= d
+                prev = None
+                continue
+            prev = path
+            if path is None:
+                # no timed way from here: go where D_n can wait on its orbit near the target, then retry
+                holds += 1
+                if holds > 3 or not self.pair.recovery.to_holding(N, q, lower, disc):
+                    return False
+                continue
+            self.loop.replans += 1
+            whole = path.length / vN <= 1.6 * self.loop.tx
+            self.loop.drive(path_steps(path, vN, n, n - 1, None if whole else self.loop.tx))
+            if whole:
+                return True
+        return False
+
+    def depart_and_meet(self, N: int, M: int) -> bool:
+        """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
+        n = self.loop.n
+        for _ in range(40):
+            best = self.best_departure(N, M)
+            if best is None:
+                self.loop.log("miss", N, f"{self.loop.scn.names[N]} is not on a line {self.loop.scn.names[M]} can leave its orbit along")
+                self.loop.drive([(n, 0.5 * math.pi / self.loop.omega_hat[N])])  # turn away from the orbit
+                return False
+            t_wait, cost = best
+            if t_wait <= 1.6 * self.loop.tx:
+                self.loop.drive([(n - 1, t_wait)])
+                break
+            self.loop.drive([(n - 1, self.loop.tx)])
+        self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        for _ in range(60):
+            before = self.loop.est[[N, M]].copy()
+            self.loop.drive([(n - 2, self.loop.tx)])
+            moved = np.hypot(*(self.loop.est[[N, M], :2] - before[:, :2]).T)
+            if (moved < 0.2 * self.loop.v[[N, M]] * self.loop.tx).all():
+                ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
+                gap = float(np.hypot(*(ends[0] - ends[1])))
+                if gap < self.loop.tune.meet_gap_um:
+                    self.loop.drive([(n - 2, self.loop.opts.push_s)])
+                    self.loop.docked[[N, M]] = True
+                    for _ in range(4):  # frames of the still pair: its pose estimate is their mean
+                        self.loop.drive([(n - 2, 0.5)])
+                    self.loop.log("G_1", N, f"formed with {self.loop.scn.names[M]} (front edges {gap:.1f} um apart)")
+                    self.pair.retarget(N, M)
+                    return True
+                # outside the self-alignment limits (failure region H): both turn away, D_n approaches again
+                self.loop.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H); both turn away and "
+                                          f"{self.loop.scn.names[N]} approaches again")
+                self.pair.recovery.separate(N, M)
+                return False
+        self.loop.log("miss", N, "the pair drove past each other; both turn away and the rendezvous is planned again")
+        self.pair.recovery.separate(N, M)
+        return False
+
+    def best_departure(self, N: int, M: int):
+        """``(wait_s, cost)`` of D_{n-1}'s best departure toward D_n as measured (:func:`~stressbots.control.queries.best_departure`)."""
+        return best_departure(
+            self.loop.est[N], self.loop.v_hat[N], self.loop.L[N], self.pair.centre(M), self.loop.r_hat[M], self.loop.est[M, 2],
+            self.loop.omega_hat[M],
+            self.loop.v_hat[M], self.loop.L[M], self.loop.rstar[M], self.loop.tune.departure_cost_max,
+        )
