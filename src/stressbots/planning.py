@@ -34,11 +34,8 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra as csgraph_dijkstra
 
 from . import paths as pathlib
 from .collision import (
@@ -48,167 +45,22 @@ from .collision import (
     pairwise_overlaps,
     penetration_depth,
     point_rectangle_distance,
-    point_rectangle_distance_rows,
 )
 from .electrostatics import ControlAnalysis, analyse_scenario
 from .errors import PlanningError
 from .kinematics import advance, move
-from .overlap import OverlapSettings, PairSchedule, joint_primitives, overlap_schedule, with_orbits
-from .plans import Plan, PlanPrimitive, PlanStep, merge_steps
-from .prepositioning import (
-    PrepositionSettings,
-    docking_costs,
-    follower_ends,
-    splice_straight,
-    straight_windows,
-)
+from .overlap import PairSchedule, joint_primitives, overlap_schedule, with_orbits
+from .planner_options import SEARCH_BUDGET_DEFAULT as SEARCH_BUDGET_DEFAULT
+from .planner_options import SHORTEST, PlannerOptions
+from .plans import Plan, PlanPrimitive, merge_steps
+from .prepositioning import docking_costs, follower_ends, splice_straight, straight_windows
 from .replay import ReplayReport, replay
 from .robots import TWO_PI, Pose, orbit_radii, turning_centres
+from .routing import NoRoute, Obstacles, SearchSpent, path_hit, route
 from .structures import Structure, target_structures
+from .timeline import Phase, Timeline
 
 __all__ = ["SHORTEST", "PlannerOptions", "PlanResult", "Phase", "plan_assembly", "lower_bound_s", "Obstacles", "NoRoute", "route"]
-
-
-SEARCH_BUDGET_DEFAULT = 128
-"""Default :attr:`PlannerOptions.search_budget` (G_1 schedules, ~25-70 ms each). Of
-``benchmarks/bench_planner.py``'s layouts of 2-8 robots, the ones that plan use at most 97 (cross-8, by
-the extended search); tee-8 needs 232 (14 s of CPU) and is refused after 128 (~8 s) instead. Before
-variants with the same G_1 slots shared their failure, tee-8 searched 288 (12 G_1 searches of 24, ~22 s
-of CPU) and failed."""
-
-
-@dataclass(frozen=True)
-class PlannerOptions:
-    """Planner settings (um, s).
-
-    Attributes
-    ----------
-    clearance_um:
-        Distance kept from orbit discs, the structure and the arena edge (room for control error).
-    approach_um:
-        Length of the final approach into every slot (capped by the slot's clear corridor): a gentle
-        interpolated clockwise arc that arrives at the slot's heading, then a short straight push. The
-        closed-loop controller flies the same arc as its fine motion, correcting its radius.
-    sample_um:
-        Spacing of the collision-check samples along routes.
-    departure_phases:
-        How many departure phases on its orbit a docking robot tries.
-    roadmap_nodes:
-        Sizes of the successive waypoint roadmaps tried when no direct route is clear.
-    max_pieces:
-        Largest number of pieces D_{n-1}'s route may be cut into while forming G_1.
-    seed:
-        Seed of the roadmap's random waypoints (the plan is a deterministic function of it).
-    time_budget_s:
-        Wall time after which no further structure variant is tried.
-    max_candidates:
-        Most structure variants tried (None: all). A deterministic budget: unlike ``time_budget_s`` it
-        gives the same result on a loaded machine, so tests use it.
-    pair_candidates:
-        How many schedulable direct departures of D_{n-1} are compared when forming G_1 (the shortest
-        schedule is kept, and one-piece schedules around roadmap routes are tried too); 1 takes the
-        first schedulable route, as the seed does. Default 1 for now: see :data:`SHORTEST`.
-    variants_compared:
-        How many plannable structure variants (a named shape's mirror images and assignments) are
-        planned in full, cheapest lower bound first; the shortest plan is returned. A variant whose
-        lower bound is already longer than the best plan is skipped. 1 returns the first plan found
-        (default for now: see :data:`SHORTEST`).
-    orbit_phases:
-        When D_n's whole-period path between two runs of G_1 is blocked, how many phases of its own
-        orbit it may first orbit to before leaving (0: never, as in the seed's scheme).
-    extended_search:
-        When no variant is plannable, search again with the wider G_1 search: routed whole-period paths
-        stretched in one leg, ``orbit_phases``, and parking-track runs that stop short of the track's end
-        or fit after D_{n-1}'s wait (False: the standard search only).
-    pair_schedules:
-        G_1 schedules tried per G_1 search (each plans D_n around one cut of one route of D_{n-1}, the
-        expensive step); when they are spent, the search ends: a hopeless pair costs at most this many.
-    extended_max_pieces, extended_pair_schedules:
-        ``max_pieces`` and ``pair_schedules`` of the extended search: more, shorter pieces of D_{n-1}'s
-        route with D_n re-aimed between them (``max_pieces`` = 1, the seed's scheme, stays 1), and more
-        schedules per G_1 search.
-    overlap_pair:
-        Form G_1 with overlapped schedules first (:mod:`stressbots.overlap`): D_n turns toward its slot
-        while D_{n-1} turns (on its orbit and on its route's arcs), so it runs straight only while D_{n-1}
-        does. Much shorter G_1 than the seed's two stages; False keeps only the seed's scheme and its
-        pieces.
-    overlap:
-        Settings of that search.
-    preposition:
-        While a robot docks, let the next one drive straight during its straight stretches (P_{k-2}
-        instead of P_{k-1}: :mod:`stressbots.prepositioning`) when that shortens the next one's docking.
-    preposition_settings:
-        Settings of that search.
-    search_budget:
-        G_1 schedules tried over the whole search (every structure variant, standard and extended): a
-        deterministic bound on the time spent on a layout that cannot be planned (unlike
-        ``time_budget_s``, the same on a loaded machine). When it is spent no further variant is tried and
-        the failure names the most common obstacle. None: no bound.
-    """
-
-    clearance_um: float = 10.0
-    approach_um: float = 160.0
-    sample_um: float = 5.0
-    departure_phases: int = 12
-    roadmap_nodes: tuple[int, ...] = (80, 250, 700)
-    max_pieces: int = 6
-    seed: int = 0
-    time_budget_s: float = 120.0
-    max_candidates: int | None = None
-    pair_candidates: int = 1
-    variants_compared: int = 1
-    orbit_phases: int = 16
-    extended_search: bool = True
-    pair_schedules: int = 24
-    extended_max_pieces: int = 10
-    extended_pair_schedules: int = 64
-    search_budget: int | None = SEARCH_BUDGET_DEFAULT
-    overlap_pair: bool = True
-    overlap: OverlapSettings = OverlapSettings()
-    preposition: bool = True
-    preposition_settings: PrepositionSettings = PrepositionSettings()
-
-
-SHORTEST = {"pair_candidates": 4, "variants_compared": 3}
-"""PlannerOptions overrides for shorter plans (issue 15): compare G_1 schedules and structure variants.
-
-Not the default yet. The controller now assembles these plans as often as the default ones (tests/test_edr.py
-passes with them; 21/28 closed-loop trials either way on 14 tuning layouts of bench_generality.py), and
-they are 12 % shorter in total on bench_planner.py's layouts of 2-8 robots, but planning takes 2-13x
-longer and some plans are longer (gap-8), so the default stays the faster plan the controller was tuned on.
-Those figures predate the overlapped G_1 and pre-positioning (now default), which it does not change: its
-G_1 comparison only runs when no overlapped schedule is found. Not re-measured since.
-"""
-
-
-@dataclass(frozen=True)
-class Phase:
-    """One phase of a plan, as a closed-loop controller follows it.
-
-    ``mover`` (scenario index) drives toward ``target`` with primitives ``turn_k`` (its arm down) and
-    ``straight_k`` (arm up); every robot with a lower voltage index orbits, higher ones push or (for
-    ``pair-B``) drive straight. Kinds: ``pair-A`` (D_n moves, D_{n-1} orbits), ``pair-B`` (D_{n-1} moves,
-    D_n runs straight: ``run`` is D_n's run start and length), ``wait`` (a docking robot orbits before
-    leaving), ``route`` (it drives to the start of its approach through ``waypoints``) and ``approach``
-    (its final approach into the slot: an interpolated clockwise arc, then a short straight push).
-    ``path``/``path_start`` give the mover's planned path; ``approach_um`` the length of its final approach.
-    """
-
-    kind: str
-    mover: int
-    turn_k: int
-    straight_k: int
-    t0_s: float
-    duration_s: float
-    target: tuple[float, float, float]
-    waypoints: tuple[tuple[float, float, float], ...] = ()
-    partner: int = -1
-    run: tuple[tuple[float, float, float], float] | None = None
-    last: bool = False
-    partner_end: tuple[float, float, float] | None = None
-    path: tuple[tuple[str, float], ...] = ()
-    path_start: tuple[float, float, float] | None = None
-    approach_um: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -224,545 +76,7 @@ class PlanResult:
     phases: tuple[Phase, ...] = field(default=())
 
 
-# ----------------------------------------------------------------------------------------------------
-# Obstacles
-
-
-class NearMasks(NamedTuple):
-    """Which obstacles each path segment may reach: discs ``(E, S, K)``, boxes ``(E, S, B)``, arena ``(E, S)``."""
-
-    discs: np.ndarray
-    boxes: np.ndarray
-    arena: np.ndarray
-
-
-class NearPairs(NamedTuple):
-    """Candidate ``(sample, obstacle)`` index pairs for :meth:`Obstacles.hits`: discs and boxes as
-    ``(sample_indices, obstacle_indices)``, and per sample whether the arena edge may be in reach."""
-
-    discs: tuple[np.ndarray, np.ndarray]
-    boxes: tuple[np.ndarray, np.ndarray]
-    arena: np.ndarray
-
-
-def _sample_pairs(mask: np.ndarray, e_of: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Expand a segment mask ``(E, S, K)`` to the ``(sample, obstacle)`` pairs of samples on segment
-    ``(e_of[m], seg[m])``, without a ``(samples, K)`` array (most segments reach one obstacle or none)."""
-    e, nseg, k = mask.shape
-    fseg, obj = np.nonzero(mask.reshape(e * nseg, k))  # sorted by segment
-    count = np.bincount(fseg, minlength=e * nseg)
-    first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    fs = e_of * nseg + seg
-    rep = count[fs]
-    si = np.repeat(np.arange(len(fs)), rep)
-    j = np.arange(si.size) - np.repeat(np.cumsum(rep) - rep, rep)
-    return si, obj[first[fs][si] + j]
-
-
-def _pairs(samples: np.ndarray, centres: np.ndarray, reach: np.ndarray,
-           cand: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
-    """``(sample, obstacle)`` index pairs whose centres are closer than ``reach`` (among ``cand``'s pairs)."""
-    if cand is None:
-        d2 = (samples[:, None, 0] - centres[None, :, 0]) ** 2 + (samples[:, None, 1] - centres[None, :, 1]) ** 2
-        si, ci = np.nonzero(d2 < (reach * reach)[None, :])
-        return si, ci
-    si, ci = cand
-    d2 = (samples[si, 0] - centres[ci, 0]) ** 2 + (samples[si, 1] - centres[ci, 1]) ** 2
-    keep = d2 < reach[ci] ** 2
-    return si[keep], ci[keep]
-
-
-@dataclass(frozen=True)
-class Obstacles:
-    """Static obstacles for one robot's route: orbit discs, docked bodies (boxes) and the arena.
-
-    Public routing API (with :func:`route` and :class:`NoRoute`): the closed-loop controller builds one
-    from its estimates (orbits as measured, docked bodies where they are seen) to route around them.
-    Discs are ``(K, 2)`` centres and ``(K,)`` radii (um); boxes are body poses ``(B, 3)`` with their
-    lengths and widths (um); ``arena`` is ``(width_um, height_um)`` or None (no walls).
-    """
-
-    disc_centres: np.ndarray
-    disc_radii: np.ndarray
-    disc_labels: tuple[str, ...]
-    box_poses: np.ndarray
-    box_lengths: np.ndarray
-    box_widths: np.ndarray
-    box_labels: tuple[str, ...]
-    arena: tuple[float, float] | None
-
-    def with_disc(self, centre, radius, label) -> Obstacles:
-        return Obstacles(
-            np.vstack([self.disc_centres, np.reshape(centre, (1, 2))]),
-            np.append(self.disc_radii, radius),
-            self.disc_labels + (label,),
-            self.box_poses,
-            self.box_lengths,
-            self.box_widths,
-            self.box_labels,
-            self.arena,
-        )
-
-    def hits(self, samples: np.ndarray, length: float, width: float, clearance: float, *,
-             near: NearPairs | None = None) -> np.ndarray:
-        """Per sample, whether the body hits any obstacle (keeping ``clearance``): ``(M,)`` bool.
-
-        A cheap test on the body centre (half-diagonal ``hd``) first; the exact rectangle test runs only
-        on the sample-obstacle pairs near each other. ``near`` (the candidate pairs, e.g. from
-        :func:`_segments_near`) skips the pairs known to be out of reach; it must hold every pair within
-        reach.
-        """
-        samples = np.asarray(samples, dtype=np.float64)
-        bad = np.zeros(len(samples), dtype=bool)
-        hd = 0.5 * math.hypot(length, width)
-        if len(self.disc_radii):
-            # squared distances against a reach enlarged by 1e-6 um: a superset of the pairs within reach
-            si, ci = _pairs(samples, self.disc_centres, self.disc_radii + clearance + hd + 1e-6, None if near is None else near.discs)
-            if len(si):
-                dist = point_rectangle_distance_rows(self.disc_centres[ci], samples[si], length, width)
-                bad[si[dist < (self.disc_radii + clearance)[ci]]] = True
-        if len(self.box_lengths):
-            box_reach = 0.5 * np.hypot(self.box_lengths, self.box_widths) + hd + clearance + 1e-6
-            si, bi = _pairs(samples, self.box_poses[:, :2], box_reach, None if near is None else near.boxes)
-            if len(si):
-                depth = penetration_depth(samples[si], length, width, self.box_poses[bi], self.box_lengths[bi], self.box_widths[bi])
-                bad[si[depth > -clearance]] = True
-        if self.arena is not None:
-            w, h = self.arena
-            m = hd + clearance
-            xy = samples[:, :2]
-            close = (xy[:, 0] < m) | (xy[:, 0] > w - m) | (xy[:, 1] < m) | (xy[:, 1] > h - m)
-            if near is not None:
-                close &= near.arena
-            if close.any():
-                idx = np.flatnonzero(close)
-                shifted = samples[idx] - np.array([clearance, clearance, 0.0])
-                bad[idx] |= outside_arena(shifted, length, width, (w - 2 * clearance, h - 2 * clearance)) > 0
-        return bad
-
-    def first_hit(self, samples: np.ndarray, length: float, width: float, clearance: float, *, box_tol: float | None = None) -> str | None:
-        """Label of an obstacle the body hits along ``samples`` (M, 3), or None.
-
-        Discs and the arena keep ``clearance``; boxes keep ``clearance`` too unless ``box_tol`` is given
-        (then only interpenetration deeper than ``box_tol`` counts: touching the structure is docking).
-        """
-        if len(samples) == 0:
-            return None
-        if len(self.disc_radii):
-            hit = bodies_hit_discs(samples, length, width, self.disc_centres, self.disc_radii + clearance)
-            if hit.any():
-                return self.disc_labels[int(np.argmax(hit.any(axis=0)))]
-        if len(self.box_lengths):
-            m, b = len(samples), len(self.box_lengths)
-            depth = penetration_depth(
-                np.repeat(samples, b, axis=0),
-                length,
-                width,
-                np.tile(self.box_poses, (m, 1)),
-                np.tile(self.box_lengths, m),
-                np.tile(self.box_widths, m),
-            ).reshape(m, b)
-            limit = -clearance if box_tol is None else box_tol
-            bad = depth > limit
-            if bad.any():
-                return self.box_labels[int(np.argmax(bad.any(axis=0)))]
-        if self.arena is not None:
-            w, h = self.arena
-            inner = (w - 2 * clearance, h - 2 * clearance)
-            shifted = samples - np.array([clearance, clearance, 0.0])
-            if (outside_arena(shifted, length, width, inner) > 0).any():
-                return "the arena edge"
-        return None
-
-
-def _path_hit(obst: Obstacles, path: pathlib.Path, length: float, width: float, opts: PlannerOptions) -> str | None:
-    return obst.first_hit(path.sample(opts.sample_um), length, width, opts.clearance_um)
-
-
-# ----------------------------------------------------------------------------------------------------
-# Route search: direct, then a lazily checked roadmap
-
-
-_KNN = 16  # successors per roadmap node
-
-
-class NoRoute(Exception):
-    """No collision-free route exists (at the given clearance); ``reason`` says what blocks it."""
-
-    def __init__(self, reason: str):
-        super().__init__(reason)
-        self.reason = reason
-
-
-class SearchSpent(NoRoute):
-    """Raised by an ``extra_check`` to end a route search whose search budget is spent.
-
-    Every route the search could still find would be vetoed, so searching on only costs time (the bulk
-    of a hopeless G_1 search). :func:`route` draws the random numbers the rest of its roadmaps would
-    have drawn before passing it on, so the random stream, and with it every later plan, is unchanged.
-    """
-
-
-def _skip_roadmaps(rng: np.random.Generator, counts: Sequence[int], discs: int) -> None:
-    """Draw what :func:`_sample_nodes` draws for roadmaps of ``counts`` nodes around ``discs`` discs."""
-    for count in counts:
-        rng.random(discs + 3 * count)
-
-
-def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float, step_um: float,
-                   keep: np.ndarray | None = None, part: tuple[int, int] = (0, 1)):
-    """Sample many 3-segment paths at once: poses ``(P, 3)``, the path and segment index of every sample.
-
-    ``seg_lengths`` is ``(E, S)``; ``words`` holds each path's kinds (e.g. ``"RSR"``). Samples are at most
-    ``step_um`` apart along each path and include both ends. ``keep`` (``(E, S)`` bool) drops the samples
-    of the segments it marks False (the sample positions of the others do not change). ``part = (q, Q)``
-    returns only every Q-th sample of each path, from its q-th (a coarse pass first, for early exits).
-    """
-    e, nseg = seg_lengths.shape
-    curv, joints = _segment_joints(starts, seg_lengths, words, radius)
-    total = seg_lengths.sum(axis=1)
-    counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
-    cum = np.concatenate([np.zeros((e, 1)), np.cumsum(seg_lengths, axis=1)[:, :-1]], axis=1)  # (E, S)
-    if keep is None:
-        owner = np.repeat(np.arange(e), counts)
-        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        index = np.arange(owner.size) - offsets[owner]
-    else:
-        owner, index, wanted = _kept_indices(keep, counts, cum, total)
-    if part[1] > 1:
-        pick = index % part[1] == part[0]
-        owner, index = owner[pick], index[pick]
-        if keep is not None:
-            wanted = wanted[pick]
-    s = index / (counts[owner] - 1) * total[owner]
-    seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
-    seg = np.clip(seg, 0, nseg - 1)
-    if keep is not None:
-        sel = seg == wanted
-        owner, seg, s = owner[sel], seg[sel], s[sel]
-    local = s - cum[owner, seg]
-    poses = move(joints[owner, seg], local, curv[owner, seg])
-    return poses, owner, seg
-
-
-def _kept_indices(keep: np.ndarray, counts: np.ndarray, cum: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Path index, sample index and wanted segment ``(P,)`` of candidate samples of the kept segments: a
-    superset by two samples at each end (the caller keeps those that fall in the wanted segment). Sample
-    positions rise with the index, so each segment's samples are one range of indices."""
-    nseg = keep.shape[1]
-    ke, kj = np.nonzero(keep)
-    den = (counts[ke] - 1).astype(np.float64)
-    safe = np.where(total[ke] > 0, total[ke], 1.0)
-    lo = np.floor(cum[ke, kj] / safe * den).astype(int) - 2
-    nxt = np.where(kj + 1 < nseg, cum[ke, np.minimum(kj + 1, nseg - 1)], np.inf)
-    hi = np.where(kj + 1 < nseg, np.ceil(np.minimum(nxt, total[ke]) / safe * den), den).astype(int) + 2
-    lo = np.where(total[ke] > 0, np.clip(lo, 0, None), 0)
-    hi = np.where(total[ke] > 0, np.minimum(hi, counts[ke] - 1), counts[ke] - 1)
-    n_i = np.maximum(hi - lo + 1, 0)
-    rep = np.repeat(np.arange(len(ke)), n_i)
-    starts = np.concatenate([[0], np.cumsum(n_i)[:-1]])
-    index = lo[rep] + (np.arange(rep.size) - starts[rep])
-    return ke[rep], index, kj[rep]
-
-
-def _segment_joints(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarray, radius: float):
-    """Curvatures ``(E, S)`` and the poses ``(E, S + 1, 3)`` at the ends of every segment of many paths."""
-    nseg = seg_lengths.shape[1]
-    kinds = np.array([[w[j] == "R" for j in range(nseg)] for w in words.tolist()], dtype=bool).reshape(seg_lengths.shape)
-    curv = np.where(kinds, 1.0 / radius, 0.0)
-    joint_list = [starts]
-    for j in range(nseg):
-        joint_list.append(move(joint_list[-1], seg_lengths[:, j], curv[:, j]))
-    return curv, np.stack(joint_list, axis=1)
-
-
-def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray, curv: np.ndarray, radius: float,
-                   hd: float, clearance: float) -> NearMasks:
-    """Which obstacles any sample of each segment could reach in :meth:`Obstacles.hits`: masks ``(E, S, .)``.
-
-    A segment of length ``s`` lies in the disc of radius ``s / 2`` about its chord's midpoint (every point
-    is at most ``s`` from both ends combined), and an arc in its turning circle; an obstacle whose near
-    zone (obstacle, plus clearance and the body's half-diagonal ``hd``) keeps out of that disc cannot be
-    reached by any sample of the segment. Exact pruning: ``hits`` gives the same answers with the masks.
-    """
-    a, b = joints[:, :-1, :2], joints[:, 1:, :2]
-    centre = 0.5 * (a + b)
-    rho = 0.5 * seg_lengths
-    arc = curv > 0
-    if arc.any():
-        tc = a + radius * np.stack([np.cos(joints[:, :-1, 2]), -np.sin(joints[:, :-1, 2])], axis=-1)
-        use = arc & (radius < rho)
-        centre = np.where(use[..., None], tc, centre)
-        rho = np.where(use, radius, rho)
-    rho = rho + 1e-6 * (1.0 + rho)  # rounding of the sampled poses
-
-    def reach(centres: np.ndarray, extent: np.ndarray) -> np.ndarray:
-        d = np.hypot(centre[..., None, 0] - centres[:, 0], centre[..., None, 1] - centres[:, 1])
-        return d < rho[..., None] + extent + clearance + hd
-
-    discs = reach(obst.disc_centres, obst.disc_radii)
-    boxes = reach(obst.box_poses[:, :2], 0.5 * np.hypot(obst.box_lengths, obst.box_widths))
-    arena = np.zeros(rho.shape, dtype=bool)
-    if obst.arena is not None:
-        w, h = obst.arena
-        m = hd + clearance
-        x, y = centre[..., 0], centre[..., 1]
-        arena = (x - rho < m) | (x + rho > w - m) | (y - rho < m) | (y + rho > h - m)
-    return NearMasks(discs, boxes, arena)
-
-
-_SAMPLE_PASSES = 4  # interleaved sampling passes per edge check (every 4th sample first): blocked edges exit early
-
-
-def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
-    """Whether the shortest path of every (start, goal) pair is collision-free: ``(E,)`` bool.
-
-    Two stages: coarse samples with the clearance inflated by the most any body point moves between two
-    samples (half a step, scaled by 1 + half-diagonal / radius on arcs) accept most edges cheaply and
-    conservatively; the edges that fail are checked again at full resolution and the true clearance.
-    Segments far from every obstacle (:func:`_segments_near`) are not sampled at all.
-    """
-    if len(starts) == 0:
-        return np.zeros(0, dtype=bool)
-    starts = np.asarray(starts, float)
-    goals = np.asarray(goals, float)
-    words, seg = pathlib.shortest_path_segments(starts, goals, radius)
-    words = np.asarray(words)
-    curv, joints = _segment_joints(starts, seg, words, radius)
-    hd = 0.5 * math.hypot(length, width)
-
-    def blocked(idx: np.ndarray, step: float, clearance: float) -> np.ndarray:
-        out = np.zeros(len(idx), dtype=bool)
-        near = _segments_near(obst, joints[idx], seg[idx], curv[idx], radius, hd, clearance)
-        any_near = near.discs.any(axis=2) | near.boxes.any(axis=2) | near.arena  # (E, S)
-        live = np.flatnonzero(any_near.any(axis=1))
-        for q in range(_SAMPLE_PASSES):  # interleaved passes: an edge found blocked is not sampled further
-            if len(live) == 0:
-                break
-            e = idx[live]
-            poses, owner, sseg = _batch_samples(starts[e], seg[e], words[e], radius, step, keep=any_near[live], part=(q, _SAMPLE_PASSES))
-            e_of = live[owner]
-            cand = NearPairs(_sample_pairs(near.discs, e_of, sseg), _sample_pairs(near.boxes, e_of, sseg), near.arena[e_of, sseg])
-            bad = obst.hits(poses, length, width, clearance, near=cand)
-            hit = np.zeros(len(live), dtype=bool)
-            hit[owner[bad]] = True
-            out[live[hit]] = True
-            live = live[~hit]
-        return out
-
-    step = 4.0 * opts.sample_um
-    inflate = 0.5 * step * (1.0 + 0.5 * math.hypot(length, width) / radius)
-    clear = ~blocked(np.arange(len(starts)), step, opts.clearance_um + inflate)
-    again = np.flatnonzero(~clear & (True if recheck is None else np.asarray(recheck, bool)))
-    if len(again):
-        clear[again] = ~blocked(again, opts.sample_um, opts.clearance_um)
-    return clear
-
-
-def _sample_nodes(rng: np.random.Generator, count: int, region: tuple[float, float, float, float], obst: Obstacles,
-                  length: float, width: float, opts: PlannerOptions) -> np.ndarray:
-    """Collision-free waypoint poses: tangent to the orbit discs and uniformly random."""
-    x0, y0, x1, y1 = region
-    nodes = []
-    # Poses tangent to rings around each disc, both travel directions: how a route skirts an orbit.
-    for c, r in zip(obst.disc_centres, obst.disc_radii, strict=False):
-        ring = r + opts.clearance_um + 0.5 * math.hypot(length, width) + 5.0
-        ang = np.linspace(0.0, TWO_PI, 12, endpoint=False) + rng.uniform(0, TWO_PI / 12)
-        px = c[0] + ring * np.sin(ang)
-        py = c[1] + ring * np.cos(ang)
-        for sense in (0.5 * math.pi, -0.5 * math.pi):
-            nodes.append(np.stack([px, py, np.mod(ang + sense, TWO_PI)], axis=1))
-    rand = np.column_stack([rng.uniform(x0, x1, count), rng.uniform(y0, y1, count), rng.uniform(0, TWO_PI, count)])
-    nodes.append(rand)
-    allnodes = np.vstack(nodes)
-    return allnodes[~obst.hits(allnodes, length, width, opts.clearance_um)]
-
-
-def _roadmap_region(sources: np.ndarray, target: np.ndarray, obst: Obstacles, radius: float, length: float):
-    """``(x0, y0, x1, y1)`` (um) where roadmap waypoints are drawn: the arena, or without walls the box
-    around the sources, the target and the orbit centres, padded by two turning diameters and a body."""
-    if obst.arena is not None:
-        return (0.0, 0.0, obst.arena[0], obst.arena[1])
-    parts = [sources[:, :2], target[None, :2]] + ([obst.disc_centres] if len(obst.disc_radii) else [])
-    pts = np.vstack(parts)
-    pad = 4.0 * radius + length
-    return (pts[:, 0].min() - pad, pts[:, 1].min() - pad, pts[:, 0].max() + pad, pts[:, 1].max() + pad)
-
-
-def route(
-    sources: np.ndarray,
-    source_costs: np.ndarray,
-    target: np.ndarray,
-    radius: float,
-    length: float,
-    width: float,
-    obst: Obstacles,
-    opts: PlannerOptions,
-    rng: np.random.Generator,
-    who: str,
-    *,
-    extra_check: Callable[[int, pathlib.Path], str | None] | None = None,
-) -> tuple[int, pathlib.Path, tuple[np.ndarray, ...]]:
-    """Cheapest collision-free route from one of ``sources`` to ``target`` (both clear).
-
-    ``source_costs`` (um) are added to each source's route length (waiting time times speed).
-    ``extra_check(source_index, path)`` may veto a whole route (e.g. time-dependent conflicts).
-    Returns ``(source_index, path, waypoints)`` (the roadmap poses the route passes, ending with the
-    target: a closed-loop controller steers from one to the next); raises :class:`NoRoute`.
-    """
-    sources = np.atleast_2d(sources)
-    blocked_by = obst.first_hit(target[None, :], length, width, opts.clearance_um)
-    if blocked_by is not None:
-        raise NoRoute(f"{who}: the start of its straight approach is blocked by {blocked_by}")
-    free = ~obst.hits(sources, length, width, opts.clearance_um)
-    if not free.any():
-        first = obst.first_hit(sources[:1], length, width, opts.clearance_um)
-        raise NoRoute(f"{who}: it starts within {opts.clearance_um:g} um of {first}")
-    sources, source_costs = sources[free], np.asarray(source_costs)[free]
-    index_of = np.flatnonzero(free)
-    # 1. direct shortest paths, cheapest first
-    direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
-    reasons: list[str] = []
-    vetoes: list[str] = []  # reasons extra_check gave for collision-free routes
-    for s in np.argsort(direct, kind="stable"):
-        p = pathlib.shortest_path(sources[s], target, radius)
-        hit = _path_hit(obst, p, length, width, opts)
-        if hit is None and extra_check is not None:
-            try:
-                hit = extra_check(int(index_of[s]), p)
-            except SearchSpent:
-                _skip_roadmaps(rng, opts.roadmap_nodes, len(obst.disc_radii))
-                raise
-            if hit is not None:
-                vetoes.append(hit)
-        if hit is None:
-            return int(index_of[s]), p, (np.asarray(target, float),)
-        reasons.append(hit)
-    # 2. roadmaps of growing size: k-nearest edges, checked lazily along the shortest candidates
-    region = _roadmap_region(sources, target, obst, radius, length)
-    for q, count in enumerate(opts.roadmap_nodes):
-        way = _sample_nodes(rng, count, region, obst, length, width, opts)
-        nodes = np.vstack([sources, target[None, :], way])
-        try:
-            found = _roadmap_search(nodes, len(sources), source_costs, radius, length, width, obst, opts,
-                                    None if extra_check is None else (lambda s, p: extra_check(int(index_of[s]), p)), reasons, vetoes)
-        except SearchSpent:
-            _skip_roadmaps(rng, opts.roadmap_nodes[q + 1:], len(obst.disc_radii))
-            raise
-        if found is not None:
-            s, path, way_nodes = found
-            return int(index_of[s]), path, way_nodes
-    if extra_check is not None and vetoes:
-        common = max(set(vetoes), key=vetoes.count)
-        raise NoRoute(f"{who}: no usable route found ({common})")
-    common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
-    raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
-
-
-def _roadmap_edges(nodes: np.ndarray, ns: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Directed roadmap edges ``(E, 2)`` (sorted, unique) and their lengths ``(E,)`` (um).
-
-    Nodes ``0..ns-1`` are the sources, ``ns`` the target, the rest waypoints. Every node links to its
-    ``_KNN`` nearest successors (by shortest-path length); sources and target link to every waypoint,
-    since near a tight goal only a few approaches are clear. No edge enters a source or leaves the target.
-    """
-    k = len(nodes)
-    ti = ns
-    ii, jj = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
-    w = pathlib.shortest_path_lengths(nodes[ii.ravel()], nodes[jj.ravel()], radius).reshape(k, k)
-    np.fill_diagonal(w, np.inf)
-    w[:, :ns] = np.inf  # never route back into a source
-    w[ti, :] = np.inf  # the target is the end
-    knn = min(_KNN, k - 1)
-    nbr = np.argpartition(w, knn - 1, axis=1)[:, :knn]  # each node's nearest successors
-    src = np.repeat(np.arange(k), knn)
-    dst = nbr.ravel()
-    others = np.arange(ns + 1, k)
-    src = np.concatenate([src, others, np.repeat(np.arange(ns), len(others))])
-    dst = np.concatenate([dst, np.full(len(others), ti), np.tile(others, ns)])
-    pairs = np.unique(np.stack([src, dst], axis=1), axis=0)
-    pairs = pairs[np.isfinite(w[pairs[:, 0], pairs[:, 1]])]
-    return pairs, w[pairs[:, 0], pairs[:, 1]]
-
-
-_STAR_AFTER = 3  # blocked first (last) legs after which every edge leaving a source (entering the target) is checked
-_LAZY_ROUNDS = 200  # Dijkstra rounds that check only the candidate route's edges; then every edge left is checked at once
-
-
-def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, width: float, obst: Obstacles,
-                    opts: PlannerOptions, veto, reasons: list[str], vetoes: list[str]):
-    """The shortest clear route through one roadmap: ``(source, path, waypoints)`` or None.
-
-    Lazy collision checking: Dijkstra runs on every edge not yet known to be blocked, only the edges of
-    the route it returns are checked, blocked ones are dropped and the search repeats. A route whose
-    edges are all clear is the shortest among the clear edges, so the answer is the one a search over the
-    fully checked roadmap gives, at a fraction of the checks. ``veto(source, path)`` may reject a clear
-    route (its first leg is then dropped, at most 20 times), recorded in ``reasons`` and ``vetoes``.
-    """
-    k, ti = len(nodes), ns
-    pairs, lengths = _roadmap_edges(nodes, ns, radius)
-    ends = (pairs[:, 0] < ns) | (pairs[:, 1] == ti)  # edges at a source or the target: checked finely
-    state = np.zeros(len(pairs), dtype=np.int8)  # 0 unknown, 1 clear, -1 blocked or dropped
-    key = pairs[:, 0] * k + pairs[:, 1]  # sorted, since pairs are
-
-    def check(idx: np.ndarray) -> None:
-        ok = _edges_clear(obst, nodes[pairs[idx, 0]], nodes[pairs[idx, 1]], radius, length, width, opts, recheck=ends[idx])
-        state[idx] = np.where(ok, 1, -1)
-
-    vals = np.concatenate([lengths, np.asarray(source_costs, float) + 1e-9]) + 1e-9
-    rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
-    cols = np.concatenate([pairs[:, 1], np.arange(ns)])
-    rounds = vetoed = tstar = sstar = 0
-    while vetoed < 20:
-        keep = np.concatenate([state >= 0, np.ones(ns, dtype=bool)])
-        graph = csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(k + 1, k + 1))
-        dist, pred = csgraph_dijkstra(graph, directed=True, indices=k, return_predecessors=True)
-        if not np.isfinite(dist[ti]):
-            return None
-        seq = [ti]
-        while pred[seq[-1]] != k:
-            seq.append(int(pred[seq[-1]]))
-        seq = seq[::-1]
-        on = np.searchsorted(key, np.asarray(seq[:-1]) * k + np.asarray(seq[1:]))
-        unknown = on[state[on] == 0]
-        if len(unknown):
-            rounds += 1
-            check(np.flatnonzero(state == 0) if rounds > _LAZY_ROUNDS else unknown)
-            bad = on[state[on] < 0]
-            if len(bad):
-                # blocked first or last legs: the start or the approach is cramped, so check that whole star
-                star = np.zeros(len(pairs), dtype=bool)
-                if (pairs[bad, 1] == ti).any():
-                    tstar += 1
-                    if tstar >= _STAR_AFTER:
-                        star |= pairs[:, 1] == ti
-                if (pairs[bad, 0] < ns).any():
-                    sstar += 1
-                    if sstar >= _STAR_AFTER:
-                        star |= pairs[:, 0] < ns
-                star &= state == 0
-                if star.any():
-                    check(np.flatnonzero(star))
-                continue
-        segs: list = []
-        for a, b in zip(seq[:-1], seq[1:], strict=False):
-            segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
-        path = pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
-        why = veto(seq[0], path) if veto is not None else None
-        if why is None:
-            return seq[0], path, tuple(nodes[q].copy() for q in seq[1:])
-        reasons.append(why)
-        vetoes.append(why)
-        state[on[0]] = -1  # forbid this route's first leg and look for another
-        vetoed += 1
-    return None
-
-
-# ----------------------------------------------------------------------------------------------------
-# The planner
-
-
-class _Search:
+class SharedSearch:
     """Work shared by the structure variants of one ``plan_assembly`` call.
 
     ``used`` counts the G_1 schedules tried against :attr:`PlannerOptions.search_budget`.
@@ -790,59 +104,7 @@ class _Search:
         self.used += 1
 
 
-class _Timeline:
-    """Nominal poses of the whole group as primitives are applied (the planner's own forward model)."""
-
-    def __init__(self, scenario, rank: np.ndarray, names_by_rank: Sequence[str]):
-        self.scenario = scenario
-        self.rank = rank  # rank[i] = k means robot i (scenario order) is D_k (1-based)
-        self.names_by_rank = names_by_rank
-        self.poses = scenario.starts.copy()
-        self.poses[:, 2] = np.mod(self.poses[:, 2], TWO_PI)
-        self.docked = np.zeros(scenario.n, dtype=bool)
-        self.speed = scenario.speeds_um_s
-        self.radius = scenario.turn_radii_um
-        self.t = 0.0
-        self.steps: list[PlanStep] = []
-        self.travel = np.zeros(scenario.n)  # distance driven off-orbit per robot (um)
-        self.phases: list[Phase] = []
-
-    def phase(self, kind: str, mover: int, turn_k: int, straight_k: int, t0: float, target, **extra) -> None:
-        """Record the phase that just ran (from ``t0`` to now)."""
-        self.phases.append(
-            Phase(kind, int(mover), int(turn_k), int(straight_k), float(t0), float(self.t - t0),
-                  (float(target[0]), float(target[1]), float(target[2])), **extra)
-        )
-
-    def apply(self, k: int, duration: float, *, counts_for: Sequence[int] = ()) -> None:
-        """Apply P_k for ``duration`` s (docked robots stay, they push against the structure)."""
-        if duration <= 0:
-            return
-        turning = self.rank <= k
-        moving = ~self.docked
-        new = advance(self.poses, turning, self.speed, self.radius, duration)
-        self.poses[moving] = new[moving]
-        for i in counts_for:
-            self.travel[i] += self.speed[i] * duration
-        self.steps.append(PlanStep(f"P{k}", float(duration)))
-        self.t += duration
-
-    def apply_path(self, i: int, path: pathlib.Path, turn_k: int, straight_k: int) -> None:
-        """Drive robot ``i`` along ``path`` with the two primitives that move it (R -> turn_k, S -> straight_k)."""
-        v = self.speed[i]
-        for kind, ell in path.segments:
-            self.apply(turn_k if kind == "R" else straight_k, ell / v, counts_for=(i,))
-
-    def dock(self, i: int, goal: np.ndarray, who: str, tol_um: float = 1e-3) -> None:
-        err = float(np.hypot(*(self.poses[i, :2] - goal[:2])))
-        dth = abs((self.poses[i, 2] - goal[2] + math.pi) % TWO_PI - math.pi)
-        if err > tol_um or dth > 1e-6:
-            raise PlanningError(f"internal: {who} ends {err:.3g} um / {math.degrees(dth):.3g} deg from its slot")
-        self.poses[i] = goal
-        self.docked[i] = True
-
-
-def _label(scn, i: int, rank: int) -> str:
+def robot_label(scn, i: int, rank: int) -> str:
     return f"D{rank} ({scn.names[i]!r})"
 
 
@@ -854,7 +116,7 @@ def _prechecks(scn, struct: Structure, rank: np.ndarray) -> str | None:
     goals = struct.goal_poses(scn.names)
     rstar = orbit_radii(L, W, R)
     centres = turning_centres(starts, R)
-    lab = [_label(scn, i, rank[i]) for i in range(n)]
+    lab = [robot_label(scn, i, rank[i]) for i in range(n)]
     for i, j, d in pairwise_overlaps(starts, L, W, tol_um=1e-6):
         return f"start bodies of {lab[i]} and {lab[j]} overlap by {d:.1f} um"
     if scn.arena_um is not None:
@@ -915,18 +177,18 @@ def lower_bound_s(scn, struct: Structure, rank: np.ndarray, phases: int = 90) ->
     return float(t)
 
 
-def _approach(struct: Structure, name: str, opts: PlannerOptions) -> float:
+def approach_length(struct: Structure, name: str, opts: PlannerOptions) -> float:
     return float(min(opts.approach_um, struct.slot(name).approach_um))
 
 
-def _pre_approach(goal: np.ndarray, a: float) -> np.ndarray:
+def pre_approach_pose(goal: np.ndarray, a: float) -> np.ndarray:
     return np.array([goal[0] - a * math.sin(goal[2]), goal[1] - a * math.cos(goal[2]), goal[2]])
 
 
 class _Planner:
     def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False,
-                 search: _Search | None = None):
-        self.search = search or _Search(opts.search_budget)  # shared by every variant of one plan_assembly call
+                 search: SharedSearch | None = None):
+        self.search = search or SharedSearch(opts.search_budget)  # shared by every variant of one plan_assembly call
         self.extended = extended  # the wider G_1 search (leg stretch, orbit first, ...): after all variants failed
         if extended:  # the wider G_1 search: more pieces (the seed's one-piece scheme stays one), more schedules
             pieces = max(opts.max_pieces, opts.extended_max_pieces) if opts.max_pieces > 1 else opts.max_pieces
@@ -947,14 +209,14 @@ class _Planner:
         self.v, self.r = scn.speeds_um_s, scn.turn_radii_um
         self.rstar = orbit_radii(self.L, self.W, self.r)
         self.rng = np.random.default_rng(np.random.SeedSequence(opts.seed))
-        self.tl = _Timeline(scn, self.rank, [analysis.order[k] for k in range(self.n)])
+        self.tl = Timeline(scn, self.rank, [analysis.order[k] for k in range(self.n)])
         self.notes: list[str] = []
         self.route_lengths = np.zeros(self.n)
         self._timed_cache: dict = {}
         self._route_cache: dict = {}
 
     def lab(self, i: int) -> str:
-        return _label(self.scn, i, self.rank[i])
+        return robot_label(self.scn, i, self.rank[i])
 
     def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> Obstacles:
         orbiting = list(orbiting)
@@ -985,14 +247,14 @@ class _Planner:
         r, L, W = self.r[i], self.L[i], self.W[i]
         tail = min(20.0, 0.25 * a)
         s_f = a - tail
-        p_pre = _pre_approach(goal, tail)
+        p_pre = pre_approach_pose(goal, tail)
         hit = None
         options = [(20.0, a), (12.0, a), (6.0, a), (0.0, a)]
         if a_max is not None and a_max > a:
             options.append((0.0, a_max))
         for phi_deg, length in options:
             if phi_deg == 0.0:
-                path = pathlib.Path(Pose(*_pre_approach(goal, length)), r, (("S", length),))
+                path = pathlib.Path(Pose(*pre_approach_pose(goal, length)), r, (("S", length),))
                 if obst.first_hit(path.sample(self.opts.sample_um)[:1], L, W, self.opts.clearance_um) is not None:
                     hit = "a docked neighbour at its start"
                     continue
@@ -1007,7 +269,6 @@ class _Planner:
                 return path
         raise NoRoute(f"{who}: the approach into its slot is blocked by {hit}")
 
-    # -- docking of single robots (steps 2..n-1) -------------------------------------------------
 
     def dock_check(self, k: int) -> None:
         """Raise :class:`NoRoute` unless D_k can reach its slot from its start orbit.
@@ -1021,7 +282,7 @@ class _Planner:
         who = self.lab(i)
         obst = self.obstacles([self.by_rank[j] for j in range(1, k)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
         slot = float(self.struct.slot(self.scn.names[i]).approach_um)
-        approach = self.approach_path(i, self.goals[i], _approach(self.struct, self.scn.names[i], self.opts), obst, who, a_max=slot)
+        approach = self.approach_path(i, self.goals[i], approach_length(self.struct, self.scn.names[i], self.opts), obst, who, a_max=slot)
         m = self.opts.departure_phases
         waits = np.arange(m) * TWO_PI * self.r[i] / self.v[i] / m
         sources = advance(np.repeat(self.scn.starts[i][None, :], m, axis=0), np.ones(m, bool), self.v[i], self.r[i], waits)
@@ -1033,7 +294,7 @@ class _Planner:
         i = self.by_rank[k]
         who = self.lab(i)
         goal = self.goals[i]
-        a = _approach(self.struct, self.scn.names[i], self.opts)
+        a = approach_length(self.struct, self.scn.names[i], self.opts)
         orbiting = [self.by_rank[j] for j in range(1, k)]
         docked = [self.by_rank[j] for j in range(k + 1, self.n + 1)]
         obst = self.obstacles(orbiting, docked)
@@ -1092,7 +353,7 @@ class _Planner:
         obst_f = self.obstacles([self.by_rank[j] for j in range(1, k - 1)], [self.by_rank[j] for j in range(k, self.n + 1)])
         a_max = float(self.struct.slot(self.scn.names[f]).approach_um)
         try:
-            app_f = self.approach_path(f, self.goals[f], _approach(self.struct, self.scn.names[f], self.opts), obst_f, self.lab(f),
+            app_f = self.approach_path(f, self.goals[f], approach_length(self.struct, self.scn.names[f], self.opts), obst_f, self.lab(f),
                                        a_max=a_max)
         except NoRoute:
             return None
@@ -1119,9 +380,9 @@ class _Planner:
         opts = self.opts
         vf, rf, Lf, Wf = self.v[f], self.r[f], self.L[f], self.W[f]
         follower = pathlib.Path(Pose(*self.tl.poses[f]), rf, (("R", vf * tau), ("S", vf * dt), ("R", vf * (total - tau - dt))))
-        if _path_hit(obst_s, pathlib.sub_path(follower, vf * tau, vf * (tau + dt)), Lf, Wf, opts) is not None:
+        if path_hit(obst_s, pathlib.sub_path(follower, vf * tau, vf * (tau + dt)), Lf, Wf, opts) is not None:
             return False
-        if _path_hit(obst_f, pathlib.Path(Pose(*end), rf, (("R", TWO_PI * rf),)), Lf, Wf, opts) is not None:
+        if path_hit(obst_f, pathlib.Path(Pose(*end), rf, (("R", TWO_PI * rf),)), Lf, Wf, opts) is not None:
             return False
         for i, path in movers:
             t = np.append(np.arange(tau, total, opts.sample_um / max(vf, self.v[i])), total)
@@ -1129,9 +390,8 @@ class _Planner:
             if (depth > -opts.clearance_um).any():
                 return False
         src = advance(end[None, :], np.ones(1, bool), vf, rf, wait_f)[0]
-        return _path_hit(obst_f, pathlib.shortest_path(src, pre, rf), Lf, Wf, opts) is None
+        return path_hit(obst_f, pathlib.shortest_path(src, pre, rf), Lf, Wf, opts) is None
 
-    # -- G_1 (step 1) -------------------------------------------------------------------------------
 
     def _free_run(self, pose: np.ndarray, i: int, obst: Obstacles, limit_um: float, *, backwards: bool) -> float:
         """Longest straight run (um) of robot ``i`` from ``pose`` (ahead, or behind it) clear of ``obst``."""
@@ -1152,8 +412,8 @@ class _Planner:
         # same start poses and the same random stream), so an equal key fails the same way.
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
-        key = (tuple(np.round(self.goals[[N, M]], 9).ravel()), _approach(self.struct, self.scn.names[N], self.opts),
-               _approach(self.struct, self.scn.names[M], self.opts), self.extended, self.opts)
+        key = (tuple(np.round(self.goals[[N, M]], 9).ravel()), approach_length(self.struct, self.scn.names[N], self.opts),
+               approach_length(self.struct, self.scn.names[M], self.opts), self.extended, self.opts)
         if key in self.search.pair_failures:
             raise NoRoute(self.search.pair_failures[key])
         try:
@@ -1181,8 +441,8 @@ class _Planner:
         TM = TWO_PI * rM / vM
         lower = [self.by_rank[j] for j in range(1, n - 1)]
         obst_low = self.obstacles(lower, [])
-        aM = _approach(self.struct, self.scn.names[M], self.opts)
-        aN = _approach(self.struct, self.scn.names[N], self.opts)
+        aM = approach_length(self.struct, self.scn.names[M], self.opts)
+        aN = approach_length(self.struct, self.scn.names[N], self.opts)
         whoN, whoM = self.lab(N), self.lab(M)
         opts = self.opts
         approachM = self.approach_path(M, gM, aM, obst_low, whoM)
@@ -1264,7 +524,6 @@ class _Planner:
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
 
-    # -- overlapped G_1 schedules (stressbots.overlap) ---------------------------------------------------
 
     def _overlap_first(self, N: int, M: int, sourcesM, waits, preM, approachM: pathlib.Path, obst_low: Obstacles) -> bool:
         """Form G_1 with the best overlapped schedule over D_{n-1}'s direct routes; False if there is none."""
@@ -1326,7 +585,7 @@ class _Planner:
                 routed, at = with_orbits(routeM, count, offset)
                 if count and not at:
                     continue
-                if any(_path_hit(obst_low, pathlib.sub_path(routed, a, a + orbit), LM, WM, opts) for a in at):
+                if any(path_hit(obst_low, pathlib.sub_path(routed, a, a + orbit), LM, WM, opts) for a in at):
                     continue  # D_(n-1)'s inserted orbit is blocked there
                 sched = overlap_schedule(self.tl.poses[N], self.tl.poses[M], self.goals[N], routed, approachM, wait0, TM, vN,
                                          self.r[N], vM, self.r[M], static_ok, joint_ok, poses_ok, opts.overlap, not_after_s=not_after_s,
@@ -1350,7 +609,7 @@ class _Planner:
             if best is not None and bound[s] >= best.duration_s - 1e-9:
                 break
             p = pathlib.shortest_path(sourcesM[s], preM, rM)
-            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+            if path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
                 continue
             sched = self._overlap_try(N, M, p, approachM, float(waits[s]), obst_low,
                                       not_after_s=math.inf if best is None else best.duration_s - 1e-9)
@@ -1409,7 +668,7 @@ class _Planner:
             if len(found) >= self.opts.pair_candidates:
                 break
             p = pathlib.shortest_path(sourcesM[s], preM, rM)
-            if _path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
+            if path_hit(obst_low, p, self.L[M], self.W[M], self.opts) is not None:
                 continue
             self._pair_schedule = None
             try:
@@ -1451,7 +710,7 @@ class _Planner:
     def _run_starts(self, N: int, durs: Sequence[float], park) -> list[np.ndarray]:
         """Start pose of D_n's straight run in every piece: the parking track, the final corridor last."""
         gN = self.goals[N]
-        final = _pre_approach(gN, self.v[N] * durs[-1])
+        final = pre_approach_pose(gN, self.v[N] * durs[-1])
         if park is None:
             return [final] * len(durs)
         return [np.asarray(park[0], float)] * (len(durs) - 1) + [final]
@@ -1505,10 +764,10 @@ class _Planner:
                 continue
             if park is None:
                 t_piece = tm - margin
-                keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm)]
+                keep = [(pre_approach_pose(gN, 0.5 * vN * tm), vN * tm)]
             else:
                 t_piece = park[1] / vN - margin
-                keep = [(_pre_approach(gN, 0.5 * vN * tm), vN * tm), (_pre_approach(np.asarray(park[0]), -0.5 * park[1]), park[1])]
+                keep = [(pre_approach_pose(gN, 0.5 * vN * tm), vN * tm), (pre_approach_pose(np.asarray(park[0]), -0.5 * park[1]), park[1])]
             if t_piece <= 0.2 * tm or (T - tm) / t_piece > opts.max_pieces:
                 continue
             good = ok.copy()
@@ -1633,7 +892,7 @@ class _Planner:
                 p = pathlib.path_of_length(start, goal, r, want)
             except pathlib.InfeasibleLengthError:
                 continue
-            hit = _path_hit(obst, p, L, W, self.opts)
+            hit = path_hit(obst, p, L, W, self.opts)
             if hit is None:
                 return p
             last = f"blocked by {hit}"
@@ -1688,7 +947,7 @@ class _Planner:
             except pathlib.InfeasibleLengthError:
                 continue
             full = pathlib.Path(Pose(*(float(x) for x in start)), r, (("R", v * taus[j]),) + p.segments)
-            if _path_hit(obst, full, L, W, self.opts) is None:
+            if path_hit(obst, full, L, W, self.opts) is None:
                 return full
         return None
 
@@ -1708,7 +967,7 @@ class _Planner:
                 leg = pathlib.path_of_length(nodes[j], nodes[j + 1], r, legs[j].length + extra)
             except pathlib.InfeasibleLengthError:
                 continue
-            if _path_hit(obst, leg, L, W, self.opts) is None:
+            if path_hit(obst, leg, L, W, self.opts) is None:
                 segs = tuple(sg for q, p in enumerate(legs) for sg in (leg.segments if q == j else p.segments))
                 return pathlib.Path(Pose(*(float(x) for x in nodes[0])), r, segs)
         return None
@@ -1724,7 +983,7 @@ class _Planner:
                 tail = pathlib.path_of_length(nodes[cut], nodes[-1], path.radius, need)
             except pathlib.InfeasibleLengthError:
                 continue
-            if _path_hit(obst, tail, L, W, self.opts) is None:
+            if path_hit(obst, tail, L, W, self.opts) is None:
                 return pathlib.Path(path.start, path.radius, segs[:cut] + tail.segments)
         return None
 
@@ -1779,7 +1038,7 @@ def _plan_primitives(analysis: ControlAnalysis) -> tuple[PlanPrimitive, ...]:
 
 
 def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, candidates: int, opts: PlannerOptions, say,
-                    extended: bool = False, search: _Search | None = None) -> PlanResult | str:
+                    extended: bool = False, search: SharedSearch | None = None) -> PlanResult | str:
     """Plan the assembly of one candidate structure: the replayed result, or why it failed."""
     t0 = time.perf_counter()
     planner = _Planner(scn, analysis, st, opts, extended=extended, search=search)
@@ -1869,7 +1128,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
     t_start = time.perf_counter()
-    search = _Search(opts.search_budget)
+    search = SharedSearch(opts.search_budget)
     best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=False, search=search)
     standard = len(failures)
     if best is None and opts.extended_search and not search.spent:
@@ -1885,7 +1144,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
 
 
 def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, say, failures: list[str], t_start: float, *,
-                  extended: bool, search: _Search) -> PlanResult | None:
+                  extended: bool, search: SharedSearch) -> PlanResult | None:
     """The shortest plan over up to ``variants_compared`` plannable variants (cheapest bound first).
 
     ``extended`` turns on the wider G_1 search (one-leg stretch, orbit first); plan_assembly uses it
