@@ -69,7 +69,7 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         gN, gM = self.goals[N], self.goals[M]
-        vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
+        vM, rM = self.v[M], self.r[M]
         TM = TWO_PI * rM / vM
         lower = [self.by_rank[j] for j in range(1, n - 1)]
         obst_low = self.obstacles(lower, [])
@@ -90,24 +90,42 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         d_free = self._free_run(gN, N, obst_low, span, backwards=True)
         if d_free < aN:
             raise NoRoute(f"{whoN}: its straight approach into its slot is blocked ({max(d_free, 0.0):.0f} um free behind it)")
-        # Parking tracks for D_n's runs during the earlier pieces: the final corridor itself (its runs
-        # stop short of the slot) and the free line ahead of D_n's start.
-        # Candidate tracks start on D_n's start orbit (at quarter turns), so reaching them is cheap.
+        parks = self._parking_tracks(N, M, obst_low, span)
+        self._overlap_sched = None
+        self._overlap_routes_tried = 0
+        if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
+            return
+        self._piece_search(N, M, sourcesM, waits, preM, approachM, obst_low, lower, parks, d_free, aM)
+
+    def _parking_tracks(self, N: int, M: int, obst_low: Obstacles, span: float) -> list:
+        """Parking tracks ``(pose, free length)`` for D_n's runs during the earlier pieces: None (the final
+        corridor itself; its runs stop short of the slot), then up to two free lines ahead of D_n, longest first.
+
+        Candidate tracks start on D_n's start orbit (at quarter turns), so reaching them is cheap.
+        """
+        vN, rN, rM = self.v[N], self.r[N], self.r[M]
         parks: list = [None]
         obst_park = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], "M")
         quarter = np.arange(4) * 0.5 * math.pi * rN / vN
         on_orbit = advance(np.repeat(self.tl.poses[N][None, :], 4, axis=0), np.ones(4, bool), vN, rN, quarter)
         tracks = [(p, self._free_run(p, N, obst_park, span, backwards=False)) for p in on_orbit]
         tracks = sorted((t for t in tracks if t[1] > 2.0 * rN), key=lambda t: -t[1])
-        parks.extend(tracks[:2] if opts.max_pieces > 1 else [])
+        parks.extend(tracks[:2] if self.opts.max_pieces > 1 else [])
+        return parks
+
+    def _piece_search(self, N: int, M: int, sourcesM: np.ndarray, waits: np.ndarray, preM: np.ndarray, approachM: pathlib.Path,
+                      obst_low: Obstacles, lower: list[int], parks: list, d_free: float, aM: float) -> None:
+        """Form G_1 with the piece scheme around D_{n-1}'s routes: the best direct ones first (with
+        ``pair_candidates`` > 1, and one-piece schedules around roadmap routes), then the routes its roadmap
+        search finds, overlapped first when ``overlap_pair``; raise :class:`NoRoute` when none fits.
+        """
+        opts = self.opts
+        vM, rM = self.v[M], self.r[M]
+        whoN, whoM = self.lab(N), self.lab(M)
         attempts: list[str] = []
         budget = [opts.pair_schedules]  # schedule attempts per G_1: bounds the planner's time on hopeless layouts
         one_piece = [False]  # schedule only the seed's one-piece scheme
         overlap_routes = [False]  # try overlapped schedules around the routes the roadmap finds
-        self._overlap_sched = None
-        self._overlap_routes_tried = 0
-        if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
-            return
 
         def try_route(sidx: int, routeM: pathlib.Path) -> str | None:
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""

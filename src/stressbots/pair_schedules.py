@@ -118,14 +118,7 @@ class PieceSchedules(TimedPaths):
             for centre_pose, length in keep:
                 good &= point_rectangle_distance(centres, centre_pose, length + self.L[N], self.W[N])[0] >= rr
             good[0] = True  # D_{n-1}'s departure point: it orbits there anyway
-            cuts = [total - vM * tm]
-            while cuts[-1] > 1e-9:
-                lo = cuts[-1] - vM * t_piece
-                cand = np.flatnonzero(good & (pos >= lo - 1e-9) & (pos < cuts[-1] - 1e-9))
-                if len(cand) == 0 or len(cuts) > opts.max_pieces:
-                    cuts = []
-                    break
-                cuts.append(float(pos[cand[0]]))
+            cuts = greedy_cuts(pos, good, total - vM * tm, vM * t_piece, opts.max_pieces)
             if not cuts:
                 continue
             k_last = int(np.searchsorted(pos, cuts[0] - 1e-9))
@@ -150,9 +143,8 @@ class PieceSchedules(TimedPaths):
         number of D_{n-1}'s orbit periods, so D_{n-1}, orbiting, is back where it stopped.
         """
         opts = self.opts
-        vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
+        vN, vM, rN = self.v[N], self.v[M], self.r[N]
         LN, WN, LM, WM = self.L[N], self.W[N], self.L[M], self.W[M]
-        TM = TWO_PI * rM / vM
         pieces = len(durs)
         straight_first = 0.0
         here = self.tl.poses[N]
@@ -188,6 +180,24 @@ class PieceSchedules(TimedPaths):
             if (depth > limit).any():
                 return f"{whoN}'s straight run meets {whoM} (piece {j + 1} of {pieces})"
         # 3. A phases: D_n's paths lasting a whole number of D_{n-1}'s periods; D_{n-1} orbits meanwhile.
+        a_paths = self._a_paths(N, M, wait0, straight_first, starts, runs, cuts, obst_low)
+        if isinstance(a_paths, str):
+            return a_paths
+        self._pair_schedule = (N, M, fullM, wait0, tuple(durs), runs, a_paths)
+        return None
+
+    def _a_paths(self, N: int, M: int, wait0: float, straight_first: float, starts: list[np.ndarray], runs: list[pathlib.Path],
+                 cuts: list, obst_low: Obstacles) -> list[pathlib.Path] | str:
+        """D_n's paths of a G_1 schedule's A phases, or why one is blocked: to its first run (lasting
+        ``wait0`` plus whole periods of D_{n-1}, or driven straight ``straight_first`` um along its track),
+        then from the end of each run to the start of the next (whole periods), while D_{n-1} orbits.
+        """
+        opts = self.opts
+        vN, vM, rN, rM = self.v[N], self.v[M], self.r[N], self.r[M]
+        LN, WN = self.L[N], self.W[N]
+        TM = TWO_PI * rM / vM
+        whoN, whoM = self.lab(N), self.lab(M)
+        here = self.tl.poses[N]
         obst0 = obst_low.with_disc(turning_centres(self.tl.poses[M], rM)[0], self.rstar[M], f"the orbit of {whoM}")
         first: pathlib.Path | str
         if straight_first > 0.0:
@@ -209,8 +219,7 @@ class PieceSchedules(TimedPaths):
                 what = "loop back to its run" if same_track else "move to its final corridor"
                 return f"{whoN} cannot {what} ({link})"
             a_paths.append(link)
-        self._pair_schedule = (N, M, fullM, wait0, tuple(durs), runs, a_paths)
-        return None
+        return a_paths
 
     def _run_pieces(self, schedule: tuple) -> None:
         """Apply a G_1 schedule of the piece scheme (:meth:`_schedule_pair`) to the timeline."""
@@ -253,3 +262,18 @@ class PieceSchedules(TimedPaths):
             )
         self.tl.dock(N, self.goals[N], self.lab(N))
         self.tl.dock(M, self.goals[M], self.lab(M))
+
+
+def greedy_cuts(pos: np.ndarray, good: np.ndarray, first: float, piece_um: float, max_pieces: int) -> list[float]:
+    """Cut positions (um) along D_{n-1}'s route, chosen greedily from the end: ``first``, then each as early
+    as a piece of at most ``piece_um`` allows among the positions ``pos`` where ``good`` (D_{n-1} may orbit
+    there), down to the start; [] when no position fits or more than ``max_pieces`` pieces would be needed.
+    """
+    cuts = [first]
+    while cuts[-1] > 1e-9:
+        lo = cuts[-1] - piece_um
+        cand = np.flatnonzero(good & (pos >= lo - 1e-9) & (pos < cuts[-1] - 1e-9))
+        if len(cand) == 0 or len(cuts) > max_pieces:
+            return []
+        cuts.append(float(pos[cand[0]]))
+    return cuts
