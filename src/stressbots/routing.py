@@ -413,23 +413,11 @@ def route(
     sources, source_costs = sources[free], np.asarray(source_costs)[free]
     index_of = np.flatnonzero(free)
     # 1. direct shortest paths, cheapest first
-    direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
     reasons: list[str] = []
     vetoes: list[str] = []  # reasons extra_check gave for collision-free routes
-    for s in np.argsort(direct, kind="stable"):
-        p = pathlib.shortest_path(sources[s], target, radius)
-        hit = path_hit(obst, p, length, width, opts)
-        if hit is None and extra_check is not None:
-            try:
-                hit = extra_check(int(index_of[s]), p)
-            except SearchSpent:
-                _skip_roadmaps(rng, opts.roadmap_nodes, len(obst.disc_radii))
-                raise
-            if hit is not None:
-                vetoes.append(hit)
-        if hit is None:
-            return int(index_of[s]), p, (np.asarray(target, float),)
-        reasons.append(hit)
+    direct = _direct_route(sources, source_costs, index_of, target, radius, length, width, obst, opts, rng, extra_check, reasons, vetoes)
+    if direct is not None:
+        return direct
     # 2. roadmaps of growing size: k-nearest edges, checked lazily along the shortest candidates
     region = _roadmap_region(sources, target, obst, radius, length)
     for q, count in enumerate(opts.roadmap_nodes):
@@ -449,6 +437,30 @@ def route(
         raise NoRoute(f"{who}: no usable route found ({common})")
     common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
     raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
+
+
+def _direct_route(sources: np.ndarray, source_costs: np.ndarray, index_of: np.ndarray, target: np.ndarray, radius: float,
+                  length: float, width: float, obst: Obstacles, opts: PlannerOptions, rng: np.random.Generator,
+                  extra_check: Callable[[int, pathlib.Path], str | None] | None, reasons: list[str],
+                  vetoes: list[str]) -> tuple[int, pathlib.Path, tuple[np.ndarray, ...]] | None:
+    """The cheapest clear direct shortest path of :func:`route` (source index in the caller's numbering,
+    path, ``(target,)``), or None; the obstacles and vetoes met are appended to ``reasons``/``vetoes``."""
+    direct = pathlib.shortest_path_lengths(sources, np.broadcast_to(target, sources.shape), radius) + source_costs
+    for s in np.argsort(direct, kind="stable"):
+        p = pathlib.shortest_path(sources[s], target, radius)
+        hit = path_hit(obst, p, length, width, opts)
+        if hit is None and extra_check is not None:
+            try:
+                hit = extra_check(int(index_of[s]), p)
+            except SearchSpent:
+                _skip_roadmaps(rng, opts.roadmap_nodes, len(obst.disc_radii))
+                raise
+            if hit is not None:
+                vetoes.append(hit)
+        if hit is None:
+            return int(index_of[s]), p, (np.asarray(target, float),)
+        reasons.append(hit)
+    return None
 
 
 def _roadmap_edges(nodes: np.ndarray, ns: int, radius: float) -> tuple[np.ndarray, np.ndarray]:
