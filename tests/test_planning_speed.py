@@ -13,14 +13,8 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from stressbots import paths as pathlib
-from stressbots.planning import (
-    Obstacles,
-    PlannerOptions,
-    _batch_samples,
-    _edges_clear,
-    _roadmap_edges,
-    _roadmap_search,
-)
+from stressbots.planning import Obstacles, PlannerOptions
+from stressbots.routing import _batch_samples, _edges_clear, _roadmap_edges, _roadmap_search
 
 RADIUS, LENGTH, WIDTH = 200.0, 260.0, 60.0
 OPTS = PlannerOptions()

@@ -1,0 +1,129 @@
+"""State of the nominal planner: what one structure variant's planner holds (:class:`PlannerState`: the
+scenario, the slots, the group's :class:`~stressbots.timeline.Timeline`, its random stream and notes) and
+what the variants of one :func:`~stressbots.planning.plan_assembly` call share (:class:`SharedSearch`:
+the search budget and the failures remembered across variants).
+
+The planner's steps are classes built on :class:`PlannerState`, one concept per module:
+:mod:`stressbots.dock_planning` (single-robot docking, pre-positioning, final approaches),
+:mod:`stressbots.timed_paths` (paths of a prescribed duration), :mod:`stressbots.overlapped_pair`
+(the overlapped G_1), :mod:`stressbots.pair_schedules` (the piece scheme of G_1) and
+:mod:`stressbots.pair_planning` (the G_1 search that tries them).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from .electrostatics import ControlAnalysis
+from .overlap import PairSchedule
+from .planner_options import PlannerOptions
+from .robots import orbit_radii, turning_centres
+from .routing import Obstacles
+from .structures import Structure
+from .timeline import Timeline
+
+
+class SharedSearch:
+    """Work shared by the structure variants of one ``plan_assembly`` call.
+
+    ``used`` counts the G_1 schedules tried against :attr:`PlannerOptions.search_budget`.
+    ``pair_failures`` maps what a G_1 search depends on (see :meth:`~stressbots.pair_planning.PairPlanning.form_pair`) to why it
+    failed: variants that differ only in later slots (which side stems grow on, which tooth is first)
+    would repeat the same failing search exactly, so they fail at once with the same reason.
+    ``bottlenecks`` are the ranks of robots whose docking failed in a variant: later variants check first
+    that those robots can reach their slots at all (:meth:`~stressbots.dock_planning.DockPlanning.dock_check`), before forming G_1.
+    ``docking_failed`` holds the variants (by id) that failed after G_1 was formed: the extended search,
+    which only widens the G_1 search, skips them.
+    """
+
+    def __init__(self, budget: int | None):
+        self.budget = budget
+        self.used = 0
+        self.pair_failures: dict = {}
+        self.bottlenecks: list[int] = []
+        self.docking_failed: set[int] = set()
+
+    @property
+    def spent(self) -> bool:
+        return self.budget is not None and self.used >= self.budget
+
+    def take(self) -> None:
+        self.used += 1
+
+
+def robot_label(scn, i: int, rank: int) -> str:
+    """How messages name robot ``i`` of rank ``rank``: ``D3 ('R2')``."""
+    return f"D{rank} ({scn.names[i]!r})"
+
+
+def approach_length(struct: Structure, name: str, opts: PlannerOptions) -> float:
+    """Length (um) of robot ``name``'s final approach: the planner's, capped by its slot's clear corridor."""
+    return float(min(opts.approach_um, struct.slot(name).approach_um))
+
+
+def pre_approach_pose(goal: np.ndarray, a: float) -> np.ndarray:
+    """The pose ``a`` um straight back from ``goal`` along its heading (negative ``a``: ahead of it)."""
+    return np.array([goal[0] - a * math.sin(goal[2]), goal[1] - a * math.cos(goal[2]), goal[2]])
+
+
+class PlannerState:
+    """What the planner of one structure variant holds: the scenario, the slots, the robots' sizes and
+    motion, the group's :class:`~stressbots.timeline.Timeline`, the random stream of its route searches
+    and its notes. ``extended`` selects the wider G_1 search (after every variant failed).
+    """
+
+    def __init__(self, scn, analysis: ControlAnalysis, struct: Structure, opts: PlannerOptions, *, extended: bool = False,
+                 search: SharedSearch | None = None):
+        self.search = search or SharedSearch(opts.search_budget)  # shared by every variant of one plan_assembly call
+        self.extended = extended  # the wider G_1 search (leg stretch, orbit first, ...): after all variants failed
+        if extended:  # the wider G_1 search: more pieces (the seed's one-piece scheme stays one), more schedules
+            pieces = max(opts.max_pieces, opts.extended_max_pieces) if opts.max_pieces > 1 else opts.max_pieces
+            opts = replace(opts, max_pieces=pieces, pair_schedules=max(opts.pair_schedules, opts.extended_pair_schedules))
+        self.scn = scn
+        self.analysis = analysis
+        self.struct = struct
+        self.opts = opts
+        self.n = scn.n
+        order = analysis.order_index  # scenario indices of D_1..D_n
+        assert order is not None and analysis.order is not None  # a STRING design (checked by plan_assembly)
+        self.by_rank = {k + 1: int(i) for k, i in enumerate(order)}
+        self.rank = np.empty(self.n, dtype=int)
+        for k, i in self.by_rank.items():
+            self.rank[i] = k
+        self.goals = struct.goal_poses(scn.names)
+        self.L, self.W = scn.lengths_um, scn.widths_um
+        self.v, self.r = scn.speeds_um_s, scn.turn_radii_um
+        self.rstar = orbit_radii(self.L, self.W, self.r)
+        self.rng = np.random.default_rng(np.random.SeedSequence(opts.seed))
+        self.tl = Timeline(scn, self.rank, [analysis.order[k] for k in range(self.n)])
+        self.notes: list[str] = []
+        self.route_lengths = np.zeros(self.n)
+        self._timed_cache: dict = {}
+        self._route_cache: dict = {}
+        # Set by the G_1 search (:mod:`stressbots.pair_planning`) and read by the schedules it tries:
+        self._orbit_first_on = False  # timed paths may first orbit at their start (the second G_1 pass)
+        self._overlap_sched: PairSchedule | None = None  # an overlapped schedule accepted around a roadmap route
+        self._overlap_routes_tried = 0  # roadmap routes tried overlapped in this G_1 search
+        self._pair_schedule: tuple | None = None  # the piece scheme's accepted schedule
+
+    def lab(self, i: int) -> str:
+        return robot_label(self.scn, i, self.rank[i])
+
+    def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> Obstacles:
+        orbiting = list(orbiting)
+        docked = list(docked)
+        centres = turning_centres(self.tl.poses[orbiting], self.r[orbiting]) if orbiting else np.zeros((0, 2))
+        return Obstacles(
+            centres,
+            self.rstar[orbiting] if orbiting else np.zeros(0),
+            tuple(f"the orbit of {self.lab(i)}" for i in orbiting),
+            self.goals[docked] if docked else np.zeros((0, 3)),
+            self.L[docked] if docked else np.zeros(0),
+            self.W[docked] if docked else np.zeros(0),
+            tuple(f"the docked body of {self.lab(i)}" for i in docked),
+            self.scn.arena_um,
+        )
