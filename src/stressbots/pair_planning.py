@@ -169,7 +169,7 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:
-            reason = max(set(attempts), key=attempts.count) if attempts else exc.reason
+            reason = max(dict.fromkeys(attempts), key=attempts.count) if attempts else exc.reason
             raise NoRoute(f"cannot form G_1 with {whoN} and {whoM}: {reason}") from None
         self._run_pair_schedule()
 

@@ -250,7 +250,7 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         return best
     # the extended search's reasons, when it ran: what still blocks after the wider search
     last = failures[standard:] or failures
-    reason = max(set(last), key=last.count) if last else "no plan found"
+    reason = max(dict.fromkeys(last), key=last.count) if last else "no plan found"
     if search.spent:
         reason += f" (search budget of {opts.search_budget} G_1 schedules spent: a larger PlannerOptions.search_budget searches longer)"
     raise PlanningError(reason + advice(reason), source=scn.source)

@@ -433,9 +433,9 @@ def route(
             s, path, way_nodes = found
             return int(index_of[s]), path, way_nodes
     if extra_check is not None and vetoes:
-        common = max(set(vetoes), key=vetoes.count)
+        common = max(dict.fromkeys(vetoes), key=vetoes.count)
         raise NoRoute(f"{who}: no usable route found ({common})")
-    common = max(set(reasons), key=reasons.count) if reasons else "obstacles"
+    common = max(dict.fromkeys(reasons), key=reasons.count) if reasons else "obstacles"
     raise NoRoute(f"{who}: no collision-free route found (the direct path is blocked by {common})")
 
 
