@@ -210,7 +210,8 @@ def summarise(records: list[dict], out=sys.stdout) -> dict:
     if ran:
         k = len(ran[0]["trials"])
         below = [r for r in ran if r["successes"] < k]
-        print(f"layouts below {k}/{k}: {len(below)}; worst: " + ", ".join(f"{r['layout_seed']} ({r['n']} {r['shape']}) {r['successes']}/{k}" for r in worst if r["successes"] < k), file=out)
+        named = (f"{r['layout_seed']} ({r['n']} {r['shape']}) {r['successes']}/{k}" for r in worst if r["successes"] < k)
+        print(f"layouts below {k}/{k}: {len(below)}; worst: " + ", ".join(named), file=out)
         by_n = {}
         for r in ran:
             by_n.setdefault(r["n"], [0, 0])
@@ -224,7 +225,8 @@ def summarise(records: list[dict], out=sys.stdout) -> dict:
         w = np.array([t["wall_s"] for r in ran if r["n"] == n for t in r["trials"]])
         if w.size:
             walls[n] = (float(np.median(w)), float(np.percentile(w, 95)), float(w.max()))
-            print(f"wall per assembly, {n} robots: median {walls[n][0]:.2f} s, 95th {walls[n][1]:.2f} s, max {walls[n][2]:.2f} s ({w.size} trials)", file=out)
+            print(f"wall per assembly, {n} robots: median {walls[n][0]:.2f} s, 95th {walls[n][1]:.2f} s, max {walls[n][2]:.2f} s "
+                  f"({w.size} trials)", file=out)
     for r in records:
         if r["status"] == "no-plan":
             got = f"controller alone {r['successes']}/{len(r['trials'])}" if r.get("trials") else "not run"
@@ -270,12 +272,14 @@ def main(argv=None) -> None:
                 fails = [f"{t['plant_seed']}: {t['failure']}" for t in rec["trials"] if not t["success"]]
                 walls = [t["wall_s"] for t in rec["trials"]]
                 tag = "" if rec["status"] == "ran" else " (no nominal plan: slots only)"
-                print(f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6} {rec['successes']}/{len(rec['trials'])}{tag}"
+                head = f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6}"
+                print(f"{head} {rec['successes']}/{len(rec['trials'])}{tag}"
                       f"  wall med {np.median(walls):.2f} s  plan {rec['plan_s']:.1f} s", flush=True)
                 for f in fails:
                     print(f"      {f[:160]}", flush=True)
             else:
-                print(f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6} {rec['status']}: {rec['reason'][:140]}", flush=True)
+                head = f"{rec['index']:>3} seed {rec['layout_seed']} n={rec['n']} {rec['shape']:<6}"
+                print(f"{head} {rec['status']}: {rec['reason'][:140]}", flush=True)
             if a.jsonl:
                 with open(a.jsonl, "a") as fh:
                     fh.write(json.dumps(rec) + "\n")
