@@ -30,6 +30,28 @@ def _targets(node: ast.AST, here: tuple[str, ...]) -> list[tuple[str, ...]]:
     return []
 
 
+def _type_checking_only(node: ast.AST) -> bool:
+    """``if TYPE_CHECKING:`` (or ``typing.TYPE_CHECKING``): a block that never runs."""
+    test = getattr(node, "test", None)
+    return isinstance(node, ast.If) and (
+        (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING")
+        or (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+    )
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node that can run: imports inside functions count, imports for the type checker only do not
+    (they never execute, so they cannot make the import order fragile)."""
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        yield node
+        if _type_checking_only(node):
+            stack.extend(getattr(node, "orelse", []))
+            continue
+        stack.extend(ast.iter_child_nodes(node))
+
+
 def import_graph(package: Path = PACKAGE, *, inside: str | None = None) -> dict[str, set[str]]:
     """Module -> package modules it imports anywhere in its source (top level or inside functions).
 
@@ -47,7 +69,7 @@ def import_graph(package: Path = PACKAGE, *, inside: str | None = None) -> dict[
     for path, here in files:
         me = (here[0] if here else path.stem) if inside is None else path.stem
         deps = graph.setdefault(me, set())
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
             for target in _targets(node, here):
                 if inside is None and target:
                     deps.add(target[0])
@@ -101,6 +123,8 @@ def test_the_cycle_finder_finds_cycles():
     tree = ast.parse(src)
     assert any(isinstance(n, ast.ImportFrom) and n.module == "cli" for n in ast.walk(tree))
     # the import resolver: from a file in subpackage "sim", ".x" is sim.x and "..x" the top-level x
+    typed = ast.parse("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .cli import main\ndef f():\n    from .sim import x\n")
+    assert sorted(n.module for n in _runtime_nodes(typed) if isinstance(n, ast.ImportFrom)) == ["sim", "typing"]
     rel = ast.parse("from .bodies import a\nfrom ..kinematics import b\nfrom . import contact\n").body
     assert [_targets(n, ("sim",)) for n in rel] == [[("sim", "bodies")], [("kinematics",)], [("sim", "contact")]]
 
