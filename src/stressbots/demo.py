@@ -185,25 +185,24 @@ def run_demo(out_dir: Path, console, quiet: bool = False, *, seed: int = 0, err_
 def _comparisons(ctx):
     """The demo's comparison runs: the same plan open loop (no noise, literature noise) and closed loop
     without noise. Writes ``comparisons/`` and returns the rows for the report."""
-    from .assessment import assess
     from .control import assemble
+    from .openloop import run_open_loop
     from .outputs import prepare_dir, provenance, save_figure, write_json
     from .pipeline import Extra, run_summary
     from .scenario import Noise
-    from .sim import SimulatedPlant, run_plan
+    from .sim import SimulatedPlant
     from .viz import plot_run
 
     scenario, plan = ctx.scenario, ctx.plan_result.plan
     seed = ctx.run.result.seed
     cdir = prepare_dir(ctx.out_dir / "comparisons")
-    goals = plan.goal_array()
     extra = Extra()
     nominal = scenario.with_noise(Noise())
     for label, scn, s in (("open-loop-nominal", nominal, 0), ("open-loop-noisy", scenario, seed)):
-        plant = run_plan(scn, plan, seed=s, record=True)
-        a = assess(scn.names, plant.true_poses(), goals, plant.docked, scn.lengths_um, scn.widths_um)
+        run = run_open_loop(scn, plan, seed=s)
+        plant, a, goals = run.plant, run.assessment, run.goals
         write_json(cdir / f"{label}.json", {
-            "success": a.success, "seed": s, "robots": a.robot_rows(plant.observe()), "mode": "open-loop",
+            "success": a.success, "seed": s, "robots": a.robot_rows(run.observed), "mode": "open-loop",
             "noise": scn.noise.to_file_units(), **{k: v for k, v in a.summary().items() if k != "success"},
             "events": [e.as_dict() for e in plant.events], "provenance": provenance(s),
         })

@@ -392,12 +392,10 @@ def _prepared_out(scenario, out_dir: Path | str, inputs: list[Path | str], sourc
     """The output folder, checked before anything is computed: creatable, no output file on an input, and
     a scenario the job can run (every robot has a start pose, small enough to plan and simulate in
     reasonable time, start bodies apart)."""
-    from .outputs import check_not_input, prepare_dir
+    from .outputs import prepare_dir
     from .scenario import check_movable, check_starts
 
-    out = prepare_dir(out_dir, inputs=inputs)
-    for name, _ in OUTPUT_FILES:
-        check_not_input(out / name, inputs)
+    out = prepare_dir(out_dir, inputs=inputs, files=[name for name, _ in OUTPUT_FILES])
     if not scenario.has_starts:
         raise StressbotsError("every robot needs a start pose for the job (robots[].start)", source=source, field="robots")
     check_movable(scenario, source=source)
