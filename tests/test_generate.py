@@ -39,3 +39,12 @@ def test_generated_slots_inside_and_orbits_disjoint(n, seed, shape):
     rstar = orbit_radii(scn.lengths_um, scn.widths_um, scn.turn_radii_um)
     centres = turning_centres(scn.starts, scn.turn_radii_um)
     assert disc_overlaps(centres, rstar + 30.0) == []  # generated with a 60 um gap between discs
+
+
+def test_a_given_arena_is_kept_or_refused_never_grown():
+    """A caller's arena is never enlarged behind its back: roomy, the scenario keeps exactly that size; too crowded for
+    the orbits, a RuntimeError says to make it larger (only the default arena grows by 10 % steps)."""
+    roomy = random_scenario(3, 0, arena_um=(5000.0, 4000.0))
+    assert roomy.arena_um == (5000.0, 4000.0)
+    with pytest.raises(RuntimeError, match="make it larger"):
+        random_scenario(6, 0, arena_um=(2600.0, 2600.0), max_tries=200)

@@ -9,6 +9,7 @@ seed (``np.random.SeedSequence``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -54,7 +55,8 @@ def random_scenario(
     heterogeneous:
         Draw L, W, v, r per robot (L 220-300 um, W 50-70 um, v 80-150 um/s, r 150-250 um).
     arena_um:
-        Arena size; default grows with ``n`` so that the orbits fit.
+        Arena size; default grows with ``n`` (and by 10 % steps while the start orbits do not fit). A given
+        arena is kept: ``RuntimeError`` when the orbits cannot be placed in it.
     gap_um:
         Least free distance between orbit discs, the structure and the arena edge.
     shuffle:
@@ -62,8 +64,37 @@ def random_scenario(
     """
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(n), 7]))
     e = Electrodes(margin_V=2.0 if n > 6 else 5.0)
+    robots_in_order, spec, struct, size = _draw_robots_and_structure(rng, n, e, shape, heterogeneous, arena_um, gap_um)
+    names = [rb.name for rb in robots_in_order]
+    goals_by_name = struct.goals()
+    goal_arr = np.array([goals_by_name[nm] for nm in names])
+    starts, goal_arr, spec, (w, h) = _place_starts(rng, robots_in_order, goal_arr, spec, size, gap_um=gap_um,
+                                                   max_tries=max_tries, may_grow=arena_um is None)
+    perm = rng.permutation(n) if shuffle else np.arange(n)
+    robots = tuple(
+        dataclasses.replace(robots_in_order[k], start=Pose(*starts[k]), goal=Pose(*goal_arr[k]) if explicit_goals else None) for k in perm
+    )
+    return Scenario(
+        name=f"random-{shape}-{n}-{seed}",
+        robots=robots,
+        electrodes=e,
+        arena_um=(float(w), float(h)),
+        structure=None if explicit_goals else spec,
+        noise=noise or Noise(),
+        control=ControlSettings(),
+        source=None,
+    )
+
+
+def _draw_robots_and_structure(rng: np.random.Generator, n: int, e: Electrodes, shape: str, heterogeneous: bool,
+                               arena_um: tuple[float, float] | None, gap_um: float
+                               ) -> tuple[list[Robot], StructureSpec, Structure, tuple[float, float]]:
+    """The robots in voltage order (no starts yet) and the structure placed in the arena: redrawn (up to 50
+    times) while the structure cannot be built, e.g. a wider robot that cannot dock on a narrower one's rear edge.
+
+    With ``arena_um`` None the arena's side grows with ``n`` and the largest orbit so that the orbits fit.
+    """
     des = design_string(n, e)
-    names = [f"R{k}" for k in range(n)]
     for attempt in range(50):
         if heterogeneous:
             L = rng.uniform(220, 300, n)
@@ -72,91 +103,86 @@ def random_scenario(
             r = rng.uniform(150, 250, n)
         else:
             L, W, v, r = (np.full(n, x) for x in (260.0, 60.0, 100.0, 200.0))
-        rstar = orbit_radii(L, W, r)
         if arena_um is None:
+            rstar = orbit_radii(L, W, r)
             side = max(3000.0, math.sqrt((n + 5) * (2 * rstar.max() + gap_um) ** 2 * 2.6))
             size = (side, side)
         else:
             size = arena_um
         robots_in_order = [
-            Robot(names[k], des.snap_down_V[k], des.release_V[k], float(L[k]), float(W[k]), float(v[k]), float(r[k]))
+            Robot(f"R{k}", des.snap_down_V[k], des.release_V[k], float(L[k]), float(W[k]), float(v[k]), float(r[k]))
             for k in range(n)
         ]
         try:
-            spec, struct, (w, h) = _place_structure(rng, robots_in_order, shape, size, grow=arena_um is None, gap_um=gap_um)
-            break
-        except PlanningError:  # e.g. a wider robot cannot dock on a narrower one's rear edge: redraw
+            spec, struct, placed_size = _place_structure(rng, robots_in_order, shape, size, grow=arena_um is None, gap_um=gap_um)
+            return robots_in_order, spec, struct, placed_size
+        except PlanningError:
             if attempt == 49:
                 raise
-    arena_um = (w, h)
-    goals_by_name = struct.goals()
-    goal_arr = np.array([goals_by_name[nm] for nm in names])
-    # Keep-out for orbits: the structure's bodies plus a margin for every approach.
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def _orbit_is_free(p: np.ndarray, k: int, starts: np.ndarray, centres: np.ndarray, L: np.ndarray, W: np.ndarray,
+                   r: np.ndarray, rstar: np.ndarray, size: tuple[float, float], keep_centre: np.ndarray, keep_radius: float,
+                   gap_um: float) -> bool:
+    """Whether robot ``k`` may start at pose ``p``: its orbit disc (radius ``rstar[k]``) is ``gap_um`` clear of the
+    arena edge, the structure's keep-out disc and the orbit discs and bodies of robots ``0 .. k-1``, and its body
+    clears their orbit discs."""
+    w, h = size
+    c = turning_centres(p, r[k])[0]
+    R = rstar[k]
+    if min(c[0], w - c[0], c[1], h - c[1]) < R + gap_um:
+        return False
+    if np.hypot(*(c - keep_centre)) < R + keep_radius + gap_um:
+        return False
+    if k and (np.hypot(*(centres[:k] - c).T) < rstar[:k] + R + gap_um).any():
+        return False
+    if k and bodies_hit_discs(starts[:k], L[:k], W[:k], c[None, :], [R + gap_um]).any():
+        return False
+    return not (k and (point_rectangle_distance(centres[:k], p, L[k], W[k])[0] < rstar[:k] + gap_um).any())
+
+
+def _place_starts(rng: np.random.Generator, robots_in_order: list[Robot], goal_arr: np.ndarray, spec: StructureSpec,
+                  size: tuple[float, float], *, gap_um: float, max_tries: int, may_grow: bool
+                  ) -> tuple[np.ndarray, np.ndarray, StructureSpec, tuple[float, float]]:
+    """Start poses drawn uniformly, one robot at a time, until each passes :func:`_orbit_is_free`.
+
+    The structure's keep-out disc covers its bodies plus 350 um for every approach. After ``max_tries`` draws
+    for one set of robots the arena is crowded: with ``may_grow`` it grows by 10 % (the structure keeps its
+    relative place) and placing starts over; else a ``RuntimeError`` says to make the arena larger.
+    Returns ``(starts, goals, spec, arena size)``, the goals and spec moved with a grown arena.
+    """
+    n = len(robots_in_order)
+    L = np.array([rb.length_um for rb in robots_in_order])
+    W = np.array([rb.width_um for rb in robots_in_order])
+    r = np.array([rb.turn_radius_um for rb in robots_in_order])
+    rstar = orbit_radii(L, W, r)
+    w, h = size
     keep_pts = body_corners(goal_arr, L, W).reshape(-1, 2)
     keep_centre = keep_pts.mean(axis=0)
     keep_radius = float(np.max(np.hypot(*(keep_pts - keep_centre).T))) + 350.0
     starts = np.zeros((n, 3))
     centres = np.zeros((n, 2))
-    placed = 0
-    tries = 0
+    placed = tries = 0
     while placed < n:
         tries += 1
         if tries > max_tries:
-            if arena_um is not None and tries > 4 * max_tries:
+            if not may_grow:
                 raise RuntimeError(f"could not place {n} robots in a {w:.0f} x {h:.0f} um arena; make it larger")
-            # crowded: grow the arena by 10 % (the structure stays at its relative place) and retry
             scale = 1.1
             w, h = w * scale, h * scale
             keep_centre = keep_centre * scale
-            goal_arr = goal_arr + np.concatenate([keep_centre - keep_centre / scale, [0.0]])
-            keep_pts = keep_pts + (keep_centre - keep_centre / scale)
-            spec = StructureSpec(shape, Pose(spec.at.x + keep_centre[0] - keep_centre[0] / scale,
-                                             spec.at.y + keep_centre[1] - keep_centre[1] / scale, spec.at.theta))
+            shift = keep_centre - keep_centre / scale
+            goal_arr = goal_arr + np.concatenate([shift, [0.0]])
+            spec = StructureSpec(spec.shape, Pose(spec.at.x + keep_centre[0] - keep_centre[0] / scale,
+                                                  spec.at.y + keep_centre[1] - keep_centre[1] / scale, spec.at.theta))
             tries, placed = 0, 0
         p = np.array([rng.uniform(0, w), rng.uniform(0, h), rng.uniform(0, TWO_PI)])
-        c = turning_centres(p, r[placed])[0]
-        R = rstar[placed]
-        if min(c[0], w - c[0], c[1], h - c[1]) < R + gap_um:
-            continue
-        if np.hypot(*(c - keep_centre)) < R + keep_radius + gap_um:
-            continue
-        if placed and (np.hypot(*(centres[:placed] - c).T) < rstar[:placed] + R + gap_um).any():
-            continue
-        # every robot's orbit disc must also clear the bodies of robots already placed and vice versa
-        if placed and bodies_hit_discs(starts[:placed], L[:placed], W[:placed], c[None, :], [R + gap_um]).any():
-            continue
-        if placed and (point_rectangle_distance(centres[:placed], p, L[placed], W[placed])[0] < rstar[:placed] + gap_um).any():
-            continue
-        starts[placed] = p
-        centres[placed] = c
-        placed += 1
-    perm = rng.permutation(n) if shuffle else np.arange(n)
-    robots = []
-    for k in perm:
-        rb = robots_in_order[k]
-        robots.append(
-            Robot(
-                rb.name,
-                rb.snap_down_V,
-                rb.release_V,
-                rb.length_um,
-                rb.width_um,
-                rb.speed_um_s,
-                rb.turn_radius_um,
-                start=Pose(*starts[k]),
-                goal=Pose(*goal_arr[k]) if explicit_goals else None,
-            )
-        )
-    return Scenario(
-        name=f"random-{shape}-{n}-{seed}",
-        robots=tuple(robots),
-        electrodes=e,
-        arena_um=(float(w), float(h)),
-        structure=None if explicit_goals else spec,
-        noise=noise or Noise(),
-        control=ControlSettings(),
-        source=None,
-    )
+        if _orbit_is_free(p, placed, starts, centres, L, W, r, rstar, (w, h), keep_centre, keep_radius, gap_um):
+            starts[placed] = p
+            centres[placed] = turning_centres(p, r[placed])[0]
+            placed += 1
+    return starts, goal_arr, spec, (w, h)
 
 
 def _place_structure(rng: np.random.Generator, robots_in_order: list[Robot], shape: str, size: tuple[float, float], *,
