@@ -94,11 +94,7 @@ def replay(
         goals = np.array([plan.goals[nm] if nm in plan.goals else (np.nan,) * 3 for nm in names], dtype=np.float64)
     goals = np.asarray(goals, dtype=np.float64)
 
-    speed = scenario.speeds_um_s
-    radius = scenario.turn_radii_um
-    length = scenario.lengths_um
-    width = scenario.widths_um
-    arena = scenario.arena_um
+    speed, length, width = scenario.speeds_um_s, scenario.lengths_um, scenario.widths_um
     pose = scenario.starts.copy()
     pose[:, 2] = np.mod(pose[:, 2], TWO_PI)
     docked = np.zeros(n, dtype=bool)
@@ -108,43 +104,27 @@ def replay(
     trace_t: list[float] = [0.0]
     trace_p: list[np.ndarray] = [pose.copy()]
     vmax = float(speed.max())
-    reported: set[tuple] = set()
-
-    def note(key: tuple, text: str) -> None:
-        if key not in reported:
-            reported.add(key)
-            problems.append(text)
-
+    note = _ProblemLog(problems)
     for k, step in enumerate(plan.steps):
-        dur = step.duration_s
         turning = turning_all[k]
         for i in np.flatnonzero(docked & turning).tolist():
             note(("turn-docked", i), f"step {k} ({step.primitive}): docked robot {names[i]} receives a turning primitive")
-        if dur <= 0:
+        if step.duration_s <= 0:
             continue
-        moving = ~docked
-        # Docking events: straight-moving robots whose slot lies ahead on their line within this step.
-        t_dock = _docking_times(pose, goals, moving & ~turning, speed, dur, tol_um, heading_tol_rad)
-        ksteps = max(2, int(math.ceil(vmax * dur / max_step_um)) + 1)
-        t = np.linspace(0.0, dur, ksteps)
-        t = np.unique(np.concatenate([t, t_dock[np.isfinite(t_dock)]]))
-        traj = _motion(pose, turning & moving, speed, radius, t)  # (K, n, 3)
-        traj[:, docked, :] = pose[docked]
-        accepted = _accepted_docks(t_dock, goals, pose, docked, length, width, speed, tol_um)
-        _stop_at_docks(traj, t, pose, speed, t_dock, accepted)
-        where = f"step {k}, {step.primitive}"
-        for key, text in _overlaps(traj, t + t_now, pairs_i, pairs_j, length, width, tol_um, names, where):
+        traj, t, t_dock, accepted = _step_motion(pose, goals, docked, turning, scenario, step.duration_s,
+                                                 max(2, int(math.ceil(vmax * step.duration_s / max_step_um)) + 1),
+                                                 tol_um, heading_tol_rad)
+        for key, text in _overlaps(traj, t + t_now, pairs_i, pairs_j, length, width, tol_um, names, f"step {k}, {step.primitive}"):
             note(key, text)
-        if arena is not None:
-            for key, text in _arena_exits(traj, t + t_now, length, width, arena, tol_um, names, f"step {k}"):
+        if scenario.arena_um is not None:
+            for key, text in _arena_exits(traj, t + t_now, length, width, scenario.arena_um, tol_um, names, f"step {k}"):
                 note(key, text)
         pose = traj[-1].copy()
-        for i in np.flatnonzero(accepted).tolist():
-            docked[i] = True
-            dock_time[i] = t_now + t_dock[i]
+        docked[accepted] = True
+        dock_time[accepted] = t_now + t_dock[accepted]
         if trace_every_um is not None:
             _extend_trace(trace_t, trace_p, traj, t, t_now, trace_every_um, vmax)
-        t_now += dur
+        t_now += step.duration_s
 
     problems.extend(_undocked(pose, goals, docked, names))
     return ReplayReport(
@@ -156,6 +136,37 @@ def replay(
         trace_t=np.asarray(trace_t),
         trace_poses=np.asarray(trace_p),
     )
+
+
+class _ProblemLog:
+    """Appends a problem to ``problems`` once per key (a collision or exit is reported at its first sample only)."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = problems
+        self.reported: set[tuple] = set()
+
+    def __call__(self, key: tuple, text: str) -> None:
+        if key not in self.reported:
+            self.reported.add(key)
+            self.problems.append(text)
+
+
+def _step_motion(pose: np.ndarray, goals: np.ndarray, docked: np.ndarray, turning: np.ndarray, scenario, dur: float,
+                 ksteps: int, tol_um: float, heading_tol_rad: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One primitive of ``dur`` s from ``pose``: ``(traj (K, n, 3), t (K,) s, t_dock (n,) s, accepted (n,))``.
+
+    ``ksteps`` evenly spaced samples plus every docking instant (straight-moving robots whose slot lies ahead
+    on their line within the step); docked robots stay put; a robot whose docking is accepted stops there.
+    """
+    speed = scenario.speeds_um_s
+    moving = ~docked
+    t_dock = _docking_times(pose, goals, moving & ~turning, speed, dur, tol_um, heading_tol_rad)
+    t = np.unique(np.concatenate([np.linspace(0.0, dur, ksteps), t_dock[np.isfinite(t_dock)]]))
+    traj = _motion(pose, turning & moving, speed, scenario.turn_radii_um, t)
+    traj[:, docked, :] = pose[docked]
+    accepted = _accepted_docks(t_dock, goals, pose, docked, scenario.lengths_um, scenario.widths_um, speed, tol_um)
+    _stop_at_docks(traj, t, pose, speed, t_dock, accepted)
+    return traj, t, t_dock, accepted
 
 
 def _inaccessible_primitives(plan: Plan, accessible_turning: set[frozenset[str]] | None) -> list[str]:
