@@ -83,7 +83,8 @@ def run_trial(scn, plan, ps: int, cap_s: float | None) -> dict:
         rec.update(judge(r, plant, scn.lengths_um, scn.widths_um))
         failure = r.failure if not r.success else rec["truth_failure"]
         rec.update(sim_s=float(r.duration_s), shape_error_um=float(r.shape_error_rms_um),
-                   events_tail=[] if rec["success"] else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]])
+                   events_tail=[] if rec["success"] else
+                   [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]])
     except bg.WallTimeCap as exc:
         failure = f"wall-time cap: {exc} ({cap_s:g} s)"
         rec.update(success=False, claimed=False, sim_s=float("nan"), shape_error_um=float("nan"), events_tail=[])
@@ -139,7 +140,8 @@ def load_records(paths: str) -> dict[int, dict]:
 
 def compare(records: list[dict], baseline: dict[int, dict], out=sys.stdout) -> dict[str, int]:
     """Trial by trial (same layout, same plant seed): where the independent plant and our simulator disagree."""
-    counts = {"both succeed": 0, "both fail": 0, "only our simulator succeeds": 0, "only the independent plant succeeds": 0, "no baseline": 0}
+    counts = dict.fromkeys(["both succeed", "both fail", "only our simulator succeeds", "only the independent plant succeeds",
+                            "no baseline"], 0)
     lines = []
     for r in sorted(records, key=lambda r: r["index"]):
         base = {t["plant_seed"]: t for t in baseline.get(r["index"], {}).get("trials", [])}
@@ -152,8 +154,8 @@ def compare(records: list[dict], baseline: dict[int, dict], out=sys.stdout) -> d
                    (False, True): "only the independent plant succeeds"}[(bool(b["success"]), bool(t["success"]))]
             counts[key] += 1
             if b["success"] != t["success"] or not t["success"]:
-                lines.append(f"  {r['index']:>3} ({r['n']} {r['shape']}) seed {t['plant_seed']}: ours {'ok' if b['success'] else b['kind']} | "
-                             f"independent {'ok' if t['success'] else t['kind']}")
+                ours, new = "ok" if b["success"] else b["kind"], "ok" if t["success"] else t["kind"]
+                lines.append(f"  {r['index']:>3} ({r['n']} {r['shape']}) seed {t['plant_seed']}: ours {ours} | independent {new}")
     print("\nindependent plant vs our simulator, same layouts and plant seeds:", file=out)
     for k, c in counts.items():
         print(f"  {c:>4} {k}", file=out)

@@ -324,7 +324,7 @@ class IndependentPlant:
         if who is None:
             self._last_contact.pop(i, None)
         else:
-            self._on_contact(i, who, pose_at, f, (1.0 - f) * s)
+            self._on_contact(i, who, (1.0 - f) * s)
 
     def _move_bar(self, a: int, b: int, dt: float) -> None:
         """One sub-step of a G_1 bar: pushes along the bar cancel, turns and sideways motion average."""
@@ -402,7 +402,7 @@ class IndependentPlant:
             self._c[i] = one_body(new[k], float(self.L[i]), float(self.W[i]))
 
     # ------------------------------------------------------------------------------------ contact
-    def _on_contact(self, i: int, j: int, pose_at, f: float, remaining_um: float) -> None:
+    def _on_contact(self, i: int, j: int, remaining_um: float) -> None:
         """Robot ``i`` stopped against ``j``: docking compliance, G_1, or stuck (logged once per contact)."""
         if j == WALL:
             self._note(i, "wall", j, "stopped at the arena edge")
