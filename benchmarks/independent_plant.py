@@ -71,6 +71,10 @@ class PlantSettings:
         Penetration depth below which two bodies are touching, not overlapping.
     bisect_steps:
         Bisection steps locating a contact within a sub-step (4 um / 2^14 ~ 0.2 nm).
+    probe_um:
+        A body blocked within this much travel does not move in that sub-step (no bisection): a robot
+        pushing against an obstacle costs two contact tests, not sixteen. While neither it nor the
+        obstacle moves and its arm keeps its state, it is not tested again (it stays blocked).
     touch_um:
         Largest gap between two front edges that counts as front-to-front contact (G_1).
     flush_rad:
@@ -84,6 +88,7 @@ class PlantSettings:
     substep_um: float = 4.0
     contact_tol_um: float = 0.01
     bisect_steps: int = 14
+    probe_um: float = 0.05
     touch_um: float = 1.0
     flush_rad: float = math.radians(0.5)
     dock_cone_rad: float = math.radians(45.0)
@@ -258,6 +263,7 @@ class IndependentPlant:
         self.t = 0.0
         self.events: list[dict] = []
         self._last_contact: dict[int, tuple] = {}
+        self._stall: dict[int, tuple] = {}
         self._hd = 0.5 * np.hypot(self.L, self.W)
         self._c = corners(self.poses, self.L, self.W)
 
@@ -310,6 +316,9 @@ class IndependentPlant:
             self.t += dt
 
     def _move_single(self, i: int, dt: float, z: float) -> None:
+        if i in self._stall and self._stall[i] == self._stall_key(i, self._stall[i][0]):
+            return  # still pushing against the same unmoved obstacle with the same arm state
+        self._stall.pop(i, None)
         s = float(self.speed[i]) * dt
         rad = float(self.radius[i]) if self.arms[i] else None
         start = self.poses[i].copy()
@@ -323,8 +332,16 @@ class IndependentPlant:
         self.travel_um[i] += f * s
         if who is None:
             self._last_contact.pop(i, None)
-        else:
-            self._on_contact(i, who, (1.0 - f) * s)
+            return
+        before = self.poses[i].copy()
+        self._on_contact(i, who, (1.0 - f) * s)
+        if f == 0.0 and np.array_equal(before, self.poses[i]) and self.partner[i] < 0:
+            self._stall[i] = self._stall_key(i, who)
+
+    def _stall_key(self, i: int, j: int) -> tuple:
+        """What a blocked robot's next sub-step depends on: obstacle, arm state, both poses."""
+        other = () if j == WALL else tuple(self.poses[j])
+        return (j, int(self.arms[i]), tuple(self.poses[i]), other)
 
     def _move_bar(self, a: int, b: int, dt: float) -> None:
         """One sub-step of a G_1 bar: pushes along the bar cancel, turns and sideways motion average."""
@@ -362,7 +379,8 @@ class IndependentPlant:
             self._set(ids, full)
             return 1.0, None
         lo, hi = 0.0, 1.0
-        tiny = 2.0 ** -self.cfg.bisect_steps
+        reach = float(np.abs(full[:, :2] - pose_at(0.0)[:, :2]).max())
+        tiny = min(1.0, self.cfg.probe_um / max(reach, 1e-12))
         if self._blocking(ids, pose_at(tiny))[0] > self.cfg.contact_tol_um:
             hi = tiny  # already pushing against it: no need to bisect
         else:
