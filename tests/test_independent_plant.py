@@ -73,25 +73,33 @@ def test_arm_states_follow_the_decoders_hysteresis(levels):
     assert turned.tolist() == (np.asarray(expected) == 1).tolist()
 
 
-def _drift_spread(cuts: int, seeds: range) -> np.ndarray:
-    """Heading changes of 36 far-apart robots driven 1 mm straight in ``cuts`` equal drives, over seeds."""
-    starts = [(1000.0 * (k % 6), 1000.0 * (k // 6), 0.0) for k in range(36)]
+def _drift_spread(cuts: int, seeds: range, substep_um: float, mm: float = 1.0) -> np.ndarray:
+    """Heading changes of 36 far-apart robots driven ``mm`` straight in ``cuts`` equal drives, over seeds."""
+    starts = [(1500.0 * (k % 6), 1500.0 * (k // 6), 0.0) for k in range(36)]
     scn = scenario(starts, noise="heading_drift_deg_per_mm = 3.7")
     out = []
     for s in seeds:
-        plant = ip.IndependentPlant(scn, seed=s, settings=ip.PlantSettings(substep_um=25.0))
-        plant.apply([Drive(80.0, 100.0, 10.0 / cuts)] * cuts)
+        plant = ip.IndependentPlant(scn, seed=s, settings=ip.PlantSettings(substep_um=substep_um))
+        plant.apply([Drive(80.0, 100.0, 10.0 * mm / cuts)] * cuts)
         out.append(ip.wrap_pi(plant.true_poses()[:, 2]))
     return np.concatenate(out)
 
 
 def test_drift_spread_over_1mm_is_spec_figure_however_the_drive_is_cut():
-    one, forty = _drift_spread(1, range(0, 12)), _drift_spread(40, range(100, 112))
+    """1 mm as one sub-step of one drive, or as 40 drives of one sub-step each: the same SD, the SPEC's figure."""
+    one, forty = _drift_spread(1, range(0, 12), 1000.0), _drift_spread(40, range(100, 112), 25.0)
     want = math.radians(3.7)
     # 432 samples each: the sample SD is within 4 standard errors (~3.4 % each) of the figure
     assert np.std(one) == pytest.approx(want, rel=0.14)
     assert np.std(forty) == pytest.approx(want, rel=0.14)
     assert abs(np.mean(one)) < 4 * want / math.sqrt(one.size)
+
+
+def test_drift_over_4mm_shows_the_per_run_bias():
+    """Var(s) = sigma_b^2 s^2 + sigma_w^2 s, half each at 1 mm: SD sqrt(10) x the figure at 4 mm
+    (a pure random walk would give 2x, a pure bias 4x)."""
+    four = _drift_spread(1, range(200, 212), 4000.0, mm=4.0)
+    assert np.std(four) == pytest.approx(math.radians(3.7) * math.sqrt(10.0), rel=0.14)
 
 
 def test_same_seed_same_run_and_camera_reports_nan_rows():
