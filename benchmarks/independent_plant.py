@@ -31,9 +31,13 @@ What it models (SPEC 3, 4, 6), with the choices SPEC leaves open marked *choice*
   body (a G_1 member or a docked robot) with its heading within +-45 deg of that edge's inward normal
   rotates about the contact point until flush; *choice*: gradually, the free corner advancing at the
   drive, ``dtheta/ds = 1 / W`` (45 deg in ~47 um of drive for W = 60), not instantly. A robot whose
-  front edge rests flush on a structure edge joins the structure (it is docked).
-- **G_1**: two free robots meeting front to front (front edges within
-  :attr:`PlantSettings.touch_um`) with incidence ``|alpha| < 60 deg`` and lateral offset
+  front edge rests flush on a structure edge joins the structure (it is docked), also one that arrives
+  flush while turning (SPEC 6); a turning robot is otherwise just blocked (it pivots on its stylus).
+  *choice*: no slides or grazes: a corner outside the cone, or on a long side, is stuck until the
+  motion takes it away; compliance acts only against the structure, not against stopped free robots.
+- **G_1**: two free robots meeting front to front (the contact point, the corner of either body nearest
+  the other, in the front half of both: front edges, corner to corner, or a corner on the other's long
+  side near its front; any arm states) with incidence ``|alpha| < 60 deg`` and lateral offset
   ``|w_y| < 80 um`` (between the front-edge centres, across the meeting axis ``u = h_a - h_b``) snap
   collinear and flush about the midpoint of their front-edge centres (instantly) and then move as one
   bar: *choice*: their pushes along the bar cancel (scratch drives stall head-on), the bar turns about
@@ -172,13 +176,24 @@ def arc_or_line(pose, s_um: float, radius_um: float | None, extra_dtheta: float 
                      y + radius_um * (math.sin(t + dphi) - math.sin(t)), t + dphi + extra_dtheta])
 
 
-def segment_gap(a0, a1, b0, b1) -> float:
-    """Smallest distance (um) between two segments that do not cross (endpoint-to-segment distances)."""
-    def point_seg(p, q0, q1):
-        d = q1 - q0
-        u = float(np.clip(np.dot(p - q0, d) / max(float(np.dot(d, d)), 1e-12), 0.0, 1.0))
-        return float(np.linalg.norm(p - (q0 + u * d)))
-    return min(point_seg(a0, b0, b1), point_seg(a1, b0, b1), point_seg(b0, a0, a1), point_seg(b1, a0, a1))
+def rect_distance(q: np.ndarray, pose: np.ndarray, L: float, W: float) -> np.ndarray:
+    """Distances (um) of points ``q`` (k, 2) to a body (0 inside)."""
+    h = heading(pose[2])
+    rel = q - pose[:2]
+    a, b = rel @ h, rel @ np.array([h[1], -h[0]])
+    return np.hypot(np.maximum(np.abs(a) - L / 2, 0.0), np.maximum(np.abs(b) - W / 2, 0.0))
+
+
+def contact_point(ca, pb, Lb, Wb, cb, pa, La, Wa) -> np.ndarray:
+    """Where two touching bodies meet: the corner of either (corners ``ca``/``cb``) nearest to the other.
+
+    Two convex polygons are nearest at a vertex of one against the other, so this is exact up to the
+    choice between equally near vertices (flush edges: either end of the shared stretch).
+    """
+    da, db = rect_distance(ca, pb, Lb, Wb), rect_distance(cb, pa, La, Wa)
+    if da.min() <= db.min():
+        return ca[int(np.argmin(da))]
+    return cb[int(np.argmin(db))]
 
 
 def wrap_pi(a):
@@ -424,7 +439,7 @@ class IndependentPlant:
         """Robot ``i`` stopped against ``j``: docking compliance, G_1, or stuck (logged once per contact)."""
         if j == WALL:
             self._note(i, "wall", j, "stopped at the arena edge")
-        elif self.member[j] and not self.member[i] and not self.arms[i]:
+        elif self.member[j] and not self.member[i]:
             self._dock(i, j, remaining_um)
         elif not self.member[i] and not self.member[j] and self.partner[i] < 0 and self.partner[j] < 0:
             self._g1(i, j)
@@ -446,6 +461,9 @@ class IndependentPlant:
         err = float(wrap_pi(math.atan2(-normal[0], -normal[1]) - p[2]))
         if abs(err) > self.cfg.dock_cone_rad:
             self._note(i, "stuck", j, f"outside the sticking cone ({math.degrees(err):.0f} deg)")
+            return
+        if self.arms[i] and abs(err) > self.cfg.flush_rad:
+            self._note(i, "stuck", j, "turning robot blocked by the structure (pivots on its stylus)")
             return
         if abs(err) > self.cfg.flush_rad:
             turn = math.copysign(min(abs(err), remaining_um / float(self.W[i])), err)
@@ -469,8 +487,9 @@ class IndependentPlant:
         """Self-aligning compliance: front to front within the limits -> collinear, flush, one bar."""
         pa, pb = self.poses[a], self.poses[b]
         ca, cb = self._c[a], self._c[b]
-        if segment_gap(ca[0], ca[1], cb[0], cb[1]) > self.cfg.touch_um:
-            self._note(a, "stuck", b, "met a free robot, not front to front")
+        q = contact_point(ca, pb, float(self.L[b]), float(self.W[b]), cb, pa, float(self.L[a]), float(self.W[a]))
+        if min(float(np.dot(q - pa[:2], heading(pa[2]))), float(np.dot(q - pb[:2], heading(pb[2])))) < 0.0:
+            self._note(a, "stuck", b, "met a free robot, not front to front (contact in a rear half)")
             return
         alpha = float(wrap_pi(pa[2] - pb[2] - math.pi))
         u = heading(pa[2]) - heading(pb[2])
