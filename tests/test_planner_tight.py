@@ -1,4 +1,5 @@
-"""Tight final approaches (issue 15, completeness): a slot whose rear lies near the arena edge.
+"""Tight final approaches (issue 15, completeness): a slot whose rear lies near the arena edge; and the
+step-wise clearance fallback of the controller's nominal plan.
 
 A generated tee of 10 identical robots puts its stem's tip (D1's slot) 168 um from the arena's top edge:
 no route reaches the start of the gentle approach, which starts ~160 um straight behind the slot. The
@@ -43,6 +44,7 @@ def _corners(pose, length, width) -> np.ndarray:
 def test_a_stem_tip_near_the_arena_edge_is_docked_by_a_tight_approach():
     scn = _stem_near_edge()
     res = plan_assembly(scn, PlannerOptions(max_candidates=1))
+    assert res.analysis.order is not None
     d1 = res.analysis.order[0]
     i = scn.names.index(d1)
     goal = res.plan.goals[d1]
@@ -78,3 +80,21 @@ def test_tight_approach_ends_at_the_slot_heading_and_starts_beside_it(x, y, th):
     back = float(np.dot(goal[:2] - np.asarray(path.start[:2], float), h))
     assert abs(math.remainder(path.start[2] - th + 0.5 * math.pi, 2 * math.pi)) < 1e-9
     assert back <= p.opts.tight_approach_radius * p.r[i] + 20.0 + 1e-6
+
+
+def test_a_docking_too_tight_for_the_wide_clearance_alone_falls_back_in_that_step():
+    """A generated comb of 9: D6's approach start is within 40 um of D7's docked body, so the wide
+    clearance alone refuses it; the nominal plan plans that docking at the default clearance, keeps
+    the wide one elsewhere, and its plan replays independently."""
+    from stressbots.control.targets import PLAN_CLEARANCE_UM, nominal_plan
+
+    scn = random_scenario(9, 1155, shape="comb", explicit_goals=True, heterogeneous=True)
+    with pytest.raises(PlanningError, match=r"D6 \('R5'\)"):
+        plan_assembly(scn, PlannerOptions(clearance_um=PLAN_CLEARANCE_UM, max_candidates=1, extended_search=False))
+    res = nominal_plan(scn)
+    fell_back = [note for note in res.notes if "um clearance" in note]
+    assert fell_back and all("none found with 40 um" in note for note in fell_back)
+    assert len(fell_back) < scn.n - 1  # G_1 and n - 2 dockings: most keep the wide clearance
+    plan = plans.from_dict(json.loads(json.dumps(res.plan.to_dict())))
+    rep = replay(plan, scn, max_step_um=1.0)
+    assert rep.ok and rep.docked.all(), rep.problems[:3]
