@@ -71,6 +71,20 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   (0.26-0.84); lower bound / duration median 0.74 (old 0.42, seed 0.56); CPU for n = 8 median 1.1 s, max
   1.5 s; n = 16 median 4.2 s, max 6.1 s; tee-16's efficiency 1.01 (pre-positioned robots beat the bound's
   start-orbit assumption).
+  Tight final approaches and the step-wise clearance fallback (issue 15 goals 1 and 2; branch plan6 at
+  39cc2a5), ``--modes full,seed --jobs 2 --timeout 150``, load average 10-22 from other work (wall times
+  5-40x CPU): full planned 62/62 (tee-10, tee-13, tee-14 newly: D1 docks by a 90 deg tight approach arc,
+  2.0, 3.3, 8.2 s of CPU), no replay failure; the 59 planned before keep their durations exactly; lower
+  bound / duration median 0.74 (n = 2-8 0.72, 9-16 0.79); CPU n = 8 median 1.0 s, max 1.3 s; n = 16 median
+  3.6 s, max 4.5 s; all: median 1.0 s, max 8.4 s (tee-14). Seed scheme 7/62; full / seed duration on those
+  7: median 0.70 (0.58-0.79), total 0.71. ``--modes cmd`` (the whole ``stressbots plan`` command, the
+  controller's plan, one at a time, load ~22): n = 8 5/5 planned, wall 5.2-11.4 s, CPU 2.6 s median,
+  4.4 s max (ladder-8; start-up, planning, replay, plan.png).
+  The controller's plan (``nominal_plan``, one in-process call per layout, CPU, same load): before, a
+  whole 40 um attempt then a whole 10 um search; after, one search with the step-wise fallback. 47 of 62
+  plans identical; on the 15 whose 40 um attempt failed somewhere, total CPU 90.4 -> 91.2 s (gap-16 10.0
+  -> 24.4 s, comb-12 7.1 -> 3.4 s), plan duration ratio median 1.06 (0.88-1.35, total 1.09): more steps
+  keep 40 um, so routes are longer. n = 2-8: CPU sum 19.8 -> 19.3 s, max 3.4 -> 2.9 s.
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.

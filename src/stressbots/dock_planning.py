@@ -84,15 +84,17 @@ class DockPlanning(PlannerState):
         waits = np.arange(m) * TWO_PI * self.r[i] / self.v[i] / m
         sources = advance(np.repeat(self.scn.starts[i][None, :], m, axis=0), np.ones(m, bool), self.v[i], self.r[i], waits)
         rng = np.random.default_rng(np.random.SeedSequence([self.opts.seed, k, 1]))
-        self.dock_route(i, obst, sources, waits * self.v[i], rng)
+        self.dock_route(i, obst, sources, waits * self.v[i], rng, note=False)
 
-    def dock_route(self, i: int, obst: Obstacles, sources: np.ndarray, costs: np.ndarray, rng: np.random.Generator):
+    def dock_route(self, i: int, obst: Obstacles, sources: np.ndarray, costs: np.ndarray, rng: np.random.Generator, *,
+                   note: bool = True):
         """Robot ``i``'s final approach and its route from one of ``sources`` to the approach's start:
         ``(approach, (source_index, path, waypoints))``; raises :class:`NoRoute`.
 
         The gentle approach first (:meth:`approach_path`); when no route reaches its start (or it is
         blocked), the tight approaches, which start beside the slot instead of behind it. The first
-        failure's reason is the one raised: it names what blocks the usual approach.
+        failure's reason is the one raised: it names what blocks the usual approach. ``note``: say in
+        the plan's notes when the tight approach is taken (not for :meth:`dock_check`'s test).
         """
         who = self.lab(i)
         name = self.scn.names[i]
@@ -109,7 +111,8 @@ class DockPlanning(PlannerState):
             found = self._route_to(i, approach, obst, sources, costs, rng)
         except NoRoute:
             raise first from None
-        self.notes.append(f"{who} docks by a tight approach arc ({approach.length:.0f} um): no route reaches the gentle one")
+        if note:
+            self.notes.append(f"{who} docks by a tight approach arc ({approach.length:.0f} um): no route reaches the gentle one")
         return approach, found
 
     def _route_to(self, i: int, approach: pathlib.Path, obst: Obstacles, sources: np.ndarray, costs: np.ndarray,
