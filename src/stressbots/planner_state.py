@@ -121,15 +121,20 @@ class PlannerState:
         was (steps are committed only once found), and a step starts from much the same configuration
         whatever the clearance of the steps before (docked robots in their slots, the others on their
         orbits), so the plan is about as complete as one planned at the fallback clearance throughout,
-        at the cost of one search instead of two. Raises the fallback attempt's :class:`NoRoute`.
+        at the cost of one search instead of two. The G_1 schedules the failed wide attempt tried are
+        added to the search budget, so the fallback searches as far as a search at its clearance alone
+        would. Raises the fallback attempt's :class:`NoRoute`.
         """
         wide, fallback = self.opts, self.opts.fallback_clearance_um
+        used = self.search.used
         try:
             step()
             return
         except NoRoute:
             if fallback is None or fallback >= wide.clearance_um:
                 raise
+        if self.search.budget is not None:  # the failed wide attempt's G_1 schedules are not the fallback's to miss
+            self.search.budget += self.search.used - used
         self.opts = replace(wide, clearance_um=fallback, fallback_clearance_um=None)
         self._timed_cache.clear()  # both caches hold paths checked at the wider clearance
         self._route_cache.clear()
