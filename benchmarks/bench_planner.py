@@ -79,7 +79,10 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   3.6 s, max 4.5 s; all: median 1.0 s, max 8.4 s (tee-14). Seed scheme 7/62; full / seed duration on those
   7: median 0.70 (0.58-0.79), total 0.71. ``--modes cmd`` (the whole ``stressbots plan`` command, the
   controller's plan, one at a time, load ~22): n = 8 5/5 planned, wall 5.2-11.4 s, CPU 2.6 s median,
-  4.4 s max (ladder-8; start-up, planning, replay, plan.png).
+  4.4 s max (ladder-8; start-up, planning, replay, plan.png). n = 16 (load 23, the test suite running
+  too): tee-16 18.0 s wall; cross-16, comb-16, ladder-16 over the 150 s limit (in-process CPU 3.4-4.3 s);
+  gap-16 refused ("search budget of 128 G_1 schedules spent": the wide attempts had used the fallback's
+  budget); with the refund of 425c850 it plans (779 s, 40 um throughout, 25.9 s of CPU in-process).
   The controller's plan (``nominal_plan``, one in-process call per layout, CPU, same load): before, a
   whole 40 um attempt then a whole 10 um search; after, one search with the step-wise fallback. 47 of 62
   plans identical; on the 15 whose 40 um attempt failed somewhere, total CPU 90.4 -> 91.2 s (gap-16 10.0
