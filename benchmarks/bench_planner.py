@@ -87,7 +87,9 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   whole 40 um attempt then a whole 10 um search; after, one search with the step-wise fallback. 47 of 62
   plans identical; on the 15 whose 40 um attempt failed somewhere, total CPU 90.4 -> 91.2 s (gap-16 10.0
   -> 24.4 s, comb-12 7.1 -> 3.4 s), plan duration ratio median 1.06 (0.88-1.35, total 1.09): more steps
-  keep 40 um, so routes are longer. n = 2-8: CPU sum 19.8 -> 19.3 s, max 3.4 -> 2.9 s.
+  keep 40 um, so routes are longer. n = 2-8: CPU sum 19.8 -> 19.3 s, max 3.4 -> 2.9 s. With the budget
+  refund (425c850), the same 15: CPU 90.4 -> 88.1 s, duration ratio median 1.06 (0.88-1.40, total 1.09);
+  only gap-16 changed (792 s at 40 um throughout, 23.1 s of CPU).
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
