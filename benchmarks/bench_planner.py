@@ -11,7 +11,9 @@ planned twice, each in its own ``nice``-d subprocess with a wall-time limit (at 
   structure variants: shorter plans, longer planning);
 - ``seed``: the planner restricted to the seed's scheme (:data:`SEED_SCHEME`: D_{n-1}'s route in one
   piece from its start, D_n on one straight run, docking robots leave their orbit where they are);
-- ``old``: the planner without the overlapped G_1 and pre-positioning (:data:`NO_OVERLAP`).
+- ``old``: the planner without the overlapped G_1 and pre-positioning (:data:`NO_OVERLAP`);
+- ``cmd``: the whole ``stressbots plan`` command on the layout written as a scenario file (the
+  controller's plan: wide clearance, else the default one); its planning time is the command's wall time.
 
 Per layout it prints and writes one JSON line: planned or the failure reason, planning wall time
 (inside the worker, so without the interpreter's start-up), the plan's duration, the lower bound
@@ -69,6 +71,25 @@ Measured 2026-11-23 (load average 7-10 on 2 cores: every timeout below is suspec
   (0.26-0.84); lower bound / duration median 0.74 (old 0.42, seed 0.56); CPU for n = 8 median 1.1 s, max
   1.5 s; n = 16 median 4.2 s, max 6.1 s; tee-16's efficiency 1.01 (pre-positioned robots beat the bound's
   start-orbit assumption).
+  Tight final approaches and the step-wise clearance fallback (issue 15 goals 1 and 2; branch plan6 at
+  39cc2a5), ``--modes full,seed --jobs 2 --timeout 150``, load average 10-22 from other work (wall times
+  5-40x CPU): full planned 62/62 (tee-10, tee-13, tee-14 newly: D1 docks by a 90 deg tight approach arc,
+  2.0, 3.3, 8.2 s of CPU), no replay failure; the 59 planned before keep their durations exactly; lower
+  bound / duration median 0.74 (n = 2-8 0.72, 9-16 0.79); CPU n = 8 median 1.0 s, max 1.3 s; n = 16 median
+  3.6 s, max 4.5 s; all: median 1.0 s, max 8.4 s (tee-14). Seed scheme 7/62; full / seed duration on those
+  7: median 0.70 (0.58-0.79), total 0.71. ``--modes cmd`` (the whole ``stressbots plan`` command, the
+  controller's plan, one at a time, load ~22): n = 8 5/5 planned, wall 5.2-11.4 s, CPU 2.6 s median,
+  4.4 s max (ladder-8; start-up, planning, replay, plan.png). n = 16 (load 23, the test suite running
+  too): tee-16 18.0 s wall; cross-16, comb-16, ladder-16 over the 150 s limit (in-process CPU 3.4-4.3 s);
+  gap-16 refused ("search budget of 128 G_1 schedules spent": the wide attempts had used the fallback's
+  budget); with the refund of 425c850 it plans (779 s, 40 um throughout, 25.9 s of CPU in-process).
+  The controller's plan (``nominal_plan``, one in-process call per layout, CPU, same load): before, a
+  whole 40 um attempt then a whole 10 um search; after, one search with the step-wise fallback. 47 of 62
+  plans identical; on the 15 whose 40 um attempt failed somewhere, total CPU 90.4 -> 91.2 s (gap-16 10.0
+  -> 24.4 s, comb-12 7.1 -> 3.4 s), plan duration ratio median 1.06 (0.88-1.35, total 1.09): more steps
+  keep 40 um, so routes are longer. n = 2-8: CPU sum 19.8 -> 19.3 s, max 3.4 -> 2.9 s. With the budget
+  refund (425c850), the same 15: CPU 90.4 -> 88.1 s, duration ratio median 1.06 (0.88-1.40, total 1.09);
+  only gap-16 changed (792 s at 40 um throughout, 23.1 s of CPU).
   The earlier step (budget 96), n = 9-16, two at once, 120 s limit: 24/30 planned (comb-14 newly, 7.5 s of CPU; comb-16
   10.5 s of CPU instead of 87 s), no replay failure; the same six refused (tee-10/13/14, gap-10/13/16) in
   3-15 s of CPU.
@@ -226,6 +247,45 @@ def run_one(lay: Layout, mode: str) -> dict:
     return rec
 
 
+def run_cmd(lay: Layout) -> dict:
+    """Mode ``cmd``: the whole ``stressbots plan`` command on the layout's scenario file, as a user runs it.
+
+    Its wall time includes the interpreter's start-up, the controller's two clearances
+    (:func:`stressbots.control.nominal_plan`), the replay and writing plan.json, plan.png and summary.json;
+    the written plan.json is replayed again here at 1 um steps against the scenario file.
+    """
+    import tempfile
+
+    from stressbots import plans, scenario
+    from stressbots.outputs import versions
+    from stressbots.replay import replay
+
+    rec: dict = {"layout": lay.key, "n": lay.n, "shape": lay.shape, "seed": lay.seed, "explicit": lay.explicit,
+                 "heterogeneous": lay.heterogeneous, "mode": "cmd", "versions": versions()}
+    with tempfile.TemporaryDirectory(prefix="bench_planner_") as tmp:
+        toml = Path(tmp) / f"{lay.key}.toml"
+        toml.write_text(scenario.to_toml(make_scenario(lay)))
+        scn = scenario.load(toml)
+        exe = Path(sys.executable).with_name("stressbots")
+        cmd = [str(exe), "plan", str(toml), "--out", str(Path(tmp) / "out"), "--quiet"]
+        import resource
+
+        t0, c0 = time.perf_counter(), resource.getrusage(resource.RUSAGE_CHILDREN)
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        rec["plan_s"] = time.perf_counter() - t0  # the whole command's wall time
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        rec["plan_cpu_s"] = c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime  # the command's CPU time
+        if done.returncode != 0:
+            rec.update(status="failed", reason=done.stderr.strip().splitlines()[-1] if done.stderr.strip() else f"exit {done.returncode}")
+            return rec
+        plan = plans.load(Path(tmp) / "out" / "plan.json")
+        summary = json.loads((Path(tmp) / "out" / "summary.json").read_text())
+    rep = replay(plan, scn, max_step_um=1.0)
+    rec.update(status="planned" if rep.ok else "replay-failed", problems=list(rep.problems[:3]), duration_s=summary["duration_s"],
+               lower_bound_s=summary["lower_bound_s"], variant=summary["variant"], notes=list(summary.get("notes", [])))
+    return rec
+
+
 def _spawn(lay: Layout, mode: str, timeout: float) -> tuple[subprocess.Popen, float]:
     cmd = ["nice", "-n", "10", sys.executable, __file__, "--one", json.dumps([lay.__dict__, mode])]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True), time.monotonic() + timeout
@@ -301,7 +361,7 @@ def _ratios(by: dict, other: str) -> list[str]:
 def summarise(records: list[dict]) -> str:
     by = {(r["layout"], r["mode"]): r for r in records}
     lines = []
-    for mode in ("full", "old", "short", "seed"):
+    for mode in ("full", "cmd", "old", "short", "seed"):
         rs = [r for r in records if r["mode"] == mode]
         if not rs:
             continue
@@ -322,9 +382,9 @@ def summarise(records: list[dict]) -> str:
         lines.extend(_per_size(rs))
     for other in ("seed", "old"):
         lines.extend(_ratios(by, other))
-    fails = [r for r in records if r["mode"] == "full" and r["status"] != "planned"]
+    fails = [r for r in records if r["mode"] in ("full", "cmd") and r["status"] != "planned"]
     for r in fails:
-        lines.append(f"  full {r['status']}: {r['layout']}: {r.get('reason', '')[:160]}")
+        lines.append(f"  {r['mode']} {r['status']}: {r['layout']}: {r.get('reason', '')[:160]}")
     return "\n".join(lines)
 
 
@@ -333,14 +393,14 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("bench_planner.jsonl"), help="JSONL file (appended)")
     ap.add_argument("--jobs", type=int, default=2, help="layouts planned at once (<= 2 on the shared machine)")
     ap.add_argument("--timeout", type=float, default=120.0, help="wall-time limit per layout and mode (s)")
-    ap.add_argument("--modes", default="full,seed", help="comma-separated: full, short, seed")
+    ap.add_argument("--modes", default="full,seed", help="comma-separated: full, short, seed, old, cmd")
     ap.add_argument("--only", default="", help="n range, e.g. 2..8, or a comma list of layout keys")
     ap.add_argument("--summary", type=Path, help="only summarise an existing JSONL file")
     ap.add_argument("--one", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
         lay, mode = json.loads(args.one)
-        print(json.dumps(run_one(Layout(**lay), mode)))
+        print(json.dumps(run_cmd(Layout(**lay)) if mode == "cmd" else run_one(Layout(**lay), mode)))
         return
     if args.summary:
         print(summarise([json.loads(x) for x in args.summary.read_text().splitlines() if x.strip()]))

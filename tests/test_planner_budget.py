@@ -90,8 +90,11 @@ def test_a_layout_only_the_extended_search_plans_is_planned_within_the_budget_an
     assert rep.ok, rep.problems
 
 
-def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
-    from stressbots.control.targets import PLAN_CLEARANCE_SEARCH_BUDGET, PLAN_CLEARANCE_UM, nominal_plan
+def test_the_nominal_plan_searches_once_at_both_clearances(monkeypatch):
+    """G_1 fails at the wide clearance and is searched again at the default one in the same search; the
+    schedules the wide attempt tried are refunded, so each clearance's attempts stay within one default
+    budget (before, a whole second search at the default clearance followed the wide one)."""
+    from stressbots.control.targets import PLAN_CLEARANCE_UM, nominal_plan
 
     by_clearance: dict[float, int] = {}
     orig = planning._Planner._schedule_pair
@@ -108,8 +111,8 @@ def test_the_nominal_plan_bounds_its_wide_clearance_attempt(monkeypatch):
         nominal_plan(random_scenario(**_HARD))
     except PlanningError as exc:
         assert "; to make it plannable: " in exc.message
-    assert 0 < by_clearance[PLAN_CLEARANCE_UM] <= PLAN_CLEARANCE_SEARCH_BUDGET  # the wide attempt fails here
-    assert 0 < by_clearance[PlannerOptions().clearance_um] <= planning.SEARCH_BUDGET_DEFAULT
+    assert by_clearance[PLAN_CLEARANCE_UM] > 0 and by_clearance[PlannerOptions().clearance_um] > 0
+    assert max(by_clearance.values()) <= planning.SEARCH_BUDGET_DEFAULT
 
 
 @pytest.mark.parametrize("wait0", [1.0, 2.0, 3.5])

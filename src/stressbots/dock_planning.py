@@ -25,7 +25,8 @@ from .routing import NoRoute, Obstacles, path_hit, route
 class DockPlanning(PlannerState):
     """Single-robot docking, pre-positioning and final approaches of the planner."""
 
-    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: Obstacles, who: str, a_max: float | None = None) -> pathlib.Path:
+    def approach_path(self, i: int, goal: np.ndarray, a: float, obst: Obstacles, who: str, a_max: float | None = None,
+                      tight: bool = False) -> pathlib.Path:
         """The final approach of robot ``i`` into its slot, ``a`` um long.
 
         A clockwise arc of radius ``s / phi`` (flown as an interpolated turn, seed App. 3.1) that arrives
@@ -35,16 +36,24 @@ class DockPlanning(PlannerState):
         largest of 20, 12, 6 deg whose swept bodies clear the obstacles (touching the structure at the
         end is docking); else a straight approach, as long as the slot's clear corridor (``a_max``) if
         need be, so that it starts outside a gap between docked neighbours.
+
+        ``tight``: instead, arcs of :attr:`PlannerOptions.tight_approach_deg` at
+        :attr:`PlannerOptions.tight_approach_radius` times the turning radius, which start off to the
+        side of the slot rather than behind it: for a slot whose rear lies near the arena edge (a long
+        stem's tip), where a route cannot reach the start of the gentle approach (:meth:`dock_route`).
         """
         r, L, W = self.r[i], self.L[i], self.W[i]
         tail = min(20.0, 0.25 * a)
-        s_f = a - tail
         p_pre = pre_approach_pose(goal, tail)
         hit = None
         options = [(20.0, a), (12.0, a), (6.0, a), (0.0, a)]
-        if a_max is not None and a_max > a:
+        if tight:
+            rho = self.opts.tight_approach_radius * r
+            options = [(phi, tail + rho * math.radians(phi)) for phi in self.opts.tight_approach_deg]
+        elif a_max is not None and a_max > a:
             options.append((0.0, a_max))
         for phi_deg, length in options:
+            s_f = length - tail
             if phi_deg == 0.0:
                 path = pathlib.Path(Pose(*pre_approach_pose(goal, length)), r, (("S", length),))
                 if obst.first_hit(path.sample(self.opts.sample_um)[:1], L, W, self.opts.clearance_um) is not None:
@@ -70,33 +79,61 @@ class DockPlanning(PlannerState):
         stream, so the plan of a variant that passes is what it would be without the test.
         """
         i = self.by_rank[k]
-        who = self.lab(i)
         obst = self.obstacles([self.by_rank[j] for j in range(1, k)], [self.by_rank[j] for j in range(k + 1, self.n + 1)])
-        slot = float(self.struct.slot(self.scn.names[i]).approach_um)
-        approach = self.approach_path(i, self.goals[i], approach_length(self.struct, self.scn.names[i], self.opts), obst, who, a_max=slot)
         m = self.opts.departure_phases
         waits = np.arange(m) * TWO_PI * self.r[i] / self.v[i] / m
         sources = advance(np.repeat(self.scn.starts[i][None, :], m, axis=0), np.ones(m, bool), self.v[i], self.r[i], waits)
         rng = np.random.default_rng(np.random.SeedSequence([self.opts.seed, k, 1]))
-        route(sources, waits * self.v[i], np.array(approach.start, dtype=np.float64), self.r[i], self.L[i], self.W[i], obst, self.opts,
-              rng, who)
+        self.dock_route(i, obst, sources, waits * self.v[i], rng, note=False)
+
+    def dock_route(self, i: int, obst: Obstacles, sources: np.ndarray, costs: np.ndarray, rng: np.random.Generator, *,
+                   note: bool = True):
+        """Robot ``i``'s final approach and its route from one of ``sources`` to the approach's start:
+        ``(approach, (source_index, path, waypoints))``; raises :class:`NoRoute`.
+
+        The gentle approach first (:meth:`approach_path`); when no route reaches its start (or it is
+        blocked), the tight approaches, which start beside the slot instead of behind it. The first
+        failure's reason is the one raised: it names what blocks the usual approach. ``note``: say in
+        the plan's notes when the tight approach is taken (not for :meth:`dock_check`'s test).
+        """
+        who = self.lab(i)
+        name = self.scn.names[i]
+        a, slot = approach_length(self.struct, name, self.opts), float(self.struct.slot(name).approach_um)
+        try:
+            approach = self.approach_path(i, self.goals[i], a, obst, who, a_max=slot)
+            return approach, self._route_to(i, approach, obst, sources, costs, rng)
+        except NoRoute as exc:
+            if not self.opts.tight_approach_deg:
+                raise
+            first = exc
+        try:
+            approach = self.approach_path(i, self.goals[i], a, obst, who, tight=True)
+            found = self._route_to(i, approach, obst, sources, costs, rng)
+        except NoRoute:
+            raise first from None
+        if note:
+            self.notes.append(f"{who} docks by a tight approach arc ({approach.length:.0f} um): no route reaches the gentle one")
+        return approach, found
+
+    def _route_to(self, i: int, approach: pathlib.Path, obst: Obstacles, sources: np.ndarray, costs: np.ndarray,
+                  rng: np.random.Generator):
+        pre = np.array(approach.start, dtype=np.float64)
+        return route(sources, costs, pre, self.r[i], self.L[i], self.W[i], obst, self.opts, rng, self.lab(i))
 
     def dock_single(self, k: int) -> None:
         i = self.by_rank[k]
         who = self.lab(i)
         goal = self.goals[i]
-        a = approach_length(self.struct, self.scn.names[i], self.opts)
         orbiting = [self.by_rank[j] for j in range(1, k)]
         docked = [self.by_rank[j] for j in range(k + 1, self.n + 1)]
         obst = self.obstacles(orbiting, docked)
-        approach = self.approach_path(i, goal, a, obst, who, a_max=float(self.struct.slot(self.scn.names[i]).approach_um))
-        pre = np.array(approach.start, dtype=np.float64)
         m = self.opts.departure_phases
         period = TWO_PI * self.r[i] / self.v[i]
         waits = np.arange(m) * period / m
         p0 = np.repeat(self.tl.poses[i][None, :], m, axis=0)
         sources = advance(p0, np.ones(m, bool), self.v[i], self.r[i], waits)
-        s, path, waypoints = route(sources, waits * self.v[i], pre, self.r[i], self.L[i], self.W[i], obst, self.opts, self.rng, who)
+        approach, (s, path, waypoints) = self.dock_route(i, obst, sources, waits * self.v[i], self.rng)
+        pre = np.array(approach.start, dtype=np.float64)
         t0 = self.tl.t
         self.tl.apply(k, float(waits[s]))
         self.tl.phase("wait", i, k, k - 1, t0, sources[s])

@@ -246,20 +246,10 @@ def overlap_schedule(
     ends = [w[0] for w in windows] + [total_m]
     begins = [lead] + [w[1] for w in windows]
     runs = [e - b for b, e in zip(begins, ends, strict=True)]  # D_n's straight runs (s)
-    if min(runs) < -1e-9:
-        return None
-    goal_n = np.asarray(goal_n, float)
-    h = np.array([math.sin(goal_n[2]), math.cos(goal_n[2]), 0.0])
-    s_last = goal_n - v_n * runs[-1] * h
-    tail = pathlib.Path(Pose(*s_last), r_n, (("S", v_n * runs[-1]),))
-    if not static_ok(tail):
-        return None
-    beam: list[tuple[np.ndarray, tuple]] = [(s_last, tail.segments)]
     start_n = np.asarray(start_n, float)
-    for j in range(len(windows) - 1, -1, -1):
-        beam = _extend_beam(beam, windows[j], runs[j], start_n, v_n, r_n, static_ok, poses_ok, settings)
-        if not beam:
-            return None
+    beam = _backward_beam(np.asarray(goal_n, float), start_n, windows, runs, v_n, r_n, static_ok, poses_ok, settings)
+    if not beam:
+        return None
 
     def direct(s1: np.ndarray, orbit_s: float) -> pathlib.Path | None:
         try:
@@ -276,6 +266,26 @@ def overlap_schedule(
         if joint_ok(path_n, path_m):
             return PairSchedule(path_n, path_m, orbit_s + total_m, _pieces(orbit_s + lead, runs, windows), orbit_s)
     return None
+
+
+def _backward_beam(goal_n: np.ndarray, start_n: np.ndarray, windows, runs: list[float], v_n: float, r_n: float,
+                   static_ok, poses_ok, settings: OverlapSettings) -> list[tuple[np.ndarray, tuple]]:
+    """D_n's path from its first run's start to its slot, built backwards from the slot: its last
+    straight run, then each window's turn and the run before it (a beam of candidates, see
+    :func:`_extend_beam`). Empty when a run is negative or nothing clears."""
+    if min(runs) < -1e-9:
+        return []
+    h = np.array([math.sin(goal_n[2]), math.cos(goal_n[2]), 0.0])
+    s_last = goal_n - v_n * runs[-1] * h
+    tail = pathlib.Path(Pose(*s_last), r_n, (("S", v_n * runs[-1]),))
+    if not static_ok(tail):
+        return []
+    beam: list[tuple[np.ndarray, tuple]] = [(s_last, tail.segments)]
+    for j in range(len(windows) - 1, -1, -1):
+        beam = _extend_beam(beam, windows[j], runs[j], start_n, v_n, r_n, static_ok, poses_ok, settings)
+        if not beam:
+            return []
+    return beam
 
 
 def _first_paths(beam, start_n, v_n, r_n, lead, wait_s, period_m_s, total_m, not_after_s, direct, routed, settings):

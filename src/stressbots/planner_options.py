@@ -79,6 +79,17 @@ class PlannerOptions:
         instead of P_{k-1}: :mod:`stressbots.prepositioning`) when that shortens the next one's docking.
     preposition_settings:
         Settings of that search.
+    fallback_clearance_um:
+        When a step (G_1, or one robot's docking) finds no plan at ``clearance_um``, that step alone is
+        planned again at this clearance (um; None: never), the other steps keeping ``clearance_um``. The
+        controller's plans (:func:`stressbots.control.nominal_plan`) use it: a wide clearance wherever
+        it fits, in one search instead of a whole second one at the smaller clearance.
+    tight_approach_deg, tight_approach_radius:
+        Turn angles (deg, tried in order) and radius (times the robot's turning radius) of the tight
+        final approaches a docking robot falls back on when no route reaches the start of its gentle
+        approach (which starts ~``approach_um`` behind the slot): arcs that start beside the slot, for a
+        slot whose rear lies near the arena edge (a long stem's tip). A radius just above the turning
+        radius leaves the fine motion little room to correct, so they are only a fallback; () never.
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike
@@ -102,6 +113,9 @@ class PlannerOptions:
     pair_schedules: int = 24
     extended_max_pieces: int = 10
     extended_pair_schedules: int = 64
+    fallback_clearance_um: float | None = None
+    tight_approach_deg: tuple[float, ...] = (90.0, 60.0, 45.0)
+    tight_approach_radius: float = 1.1
     search_budget: int | None = SEARCH_BUDGET_DEFAULT
     overlap_pair: bool = True
     overlap: OverlapSettings = OverlapSettings()

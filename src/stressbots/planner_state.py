@@ -13,7 +13,7 @@ The planner's steps are classes built on :class:`PlannerState`, one concept per 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -22,7 +22,7 @@ from .electrostatics import ControlAnalysis
 from .overlap import PairSchedule
 from .planner_options import PlannerOptions
 from .robots import orbit_radii, turning_centres
-from .routing import Obstacles
+from .routing import NoRoute, Obstacles
 from .structures import Structure
 from .timeline import Timeline
 
@@ -112,6 +112,40 @@ class PlannerState:
 
     def lab(self, i: int) -> str:
         return robot_label(self.scn, i, self.rank[i])
+
+    def step_with_fallback(self, step: Callable[[], None], what: str) -> None:
+        """Run one planning step (G_1, or one robot's docking); when it fails at the planner's clearance,
+        plan that step again at :attr:`PlannerOptions.fallback_clearance_um`.
+
+        The steps before and after keep the wider clearance: a failed step leaves the timeline as it
+        was (steps are committed only once found), and a step starts from much the same configuration
+        whatever the clearance of the steps before (docked robots in their slots, the others on their
+        orbits), so the plan is about as complete as one planned at the fallback clearance throughout,
+        at the cost of one search instead of two. The G_1 schedules the failed wide attempt tried are
+        added to the search budget, so the fallback searches as far as a search at its clearance alone
+        would. Raises the fallback attempt's :class:`NoRoute`.
+        """
+        wide, fallback = self.opts, self.opts.fallback_clearance_um
+        used = self.search.used
+        try:
+            step()
+            return
+        except NoRoute:
+            if fallback is None or fallback >= wide.clearance_um:
+                raise
+        if self.search.budget is not None:  # the failed wide attempt's G_1 schedules are not the fallback's to miss
+            self.search.budget += self.search.used - used
+        self.opts = replace(wide, clearance_um=fallback, fallback_clearance_um=None)
+        self._timed_cache.clear()  # both caches hold paths checked at the wider clearance
+        self._route_cache.clear()
+        try:
+            step()
+        finally:
+            self.opts = wide
+            self._timed_cache.clear()
+            self._route_cache.clear()
+        if what:
+            self.notes.append(f"{what} planned with {fallback:g} um clearance (none found with {wide.clearance_um:g} um)")
 
     def obstacles(self, orbiting: Sequence[int], docked: Sequence[int]) -> Obstacles:
         orbiting = list(orbiting)

@@ -33,6 +33,7 @@ import re
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -157,15 +158,15 @@ def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, ca
     planner = _Planner(scn, analysis, st, opts, extended=extended, search=search)
     try:
         for k in planner.search.bottlenecks:  # fail fast where an earlier variant failed to dock
-            planner.dock_check(k)
+            planner.step_with_fallback(partial(planner.dock_check, k), "")
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
-        planner.form_pair()
+        planner.step_with_fallback(planner.form_pair, "G_1")
     except NoRoute as exc:
         return exc.reason
     try:
         for k in range(scn.n - 2, 0, -1):
             say(f"docking {planner.lab(planner.by_rank[k])}")
-            planner.dock_single(k)
+            planner.step_with_fallback(partial(planner.dock_single, k), f"the docking of {planner.lab(planner.by_rank[k])}")
     except NoRoute as exc:
         planner.search.docking_failed.add(id(st))
         if k not in planner.search.bottlenecks:

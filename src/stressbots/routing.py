@@ -495,6 +495,33 @@ _STAR_AFTER = 3  # blocked first (last) legs after which every edge leaving a so
 _LAZY_ROUNDS = 200  # Dijkstra rounds that check only the candidate route's edges; then every edge left is checked at once
 
 
+def _star_edges(pairs: np.ndarray, bad: np.ndarray, ns: int, stars: list[int]) -> np.ndarray:
+    """Edges to check at once after the route's ``bad`` edges were found blocked (mask over ``pairs``).
+
+    Blocked first or last legs mean the start or the approach is cramped: after :data:`_STAR_AFTER`
+    such rounds (counted in ``stars``: last legs, first legs) every edge leaving a source or entering
+    the target (node ``ns``) is checked, instead of one per round.
+    """
+    star = np.zeros(len(pairs), dtype=bool)
+    if (pairs[bad, 1] == ns).any():
+        stars[0] += 1
+        if stars[0] >= _STAR_AFTER:
+            star |= pairs[:, 1] == ns
+    if (pairs[bad, 0] < ns).any():
+        stars[1] += 1
+        if stars[1] >= _STAR_AFTER:
+            star |= pairs[:, 0] < ns
+    return star
+
+
+def _chain_path(nodes: np.ndarray, seq: Sequence[int], radius: float) -> pathlib.Path:
+    """The path through roadmap nodes ``seq``: shortest one-way paths between consecutive nodes."""
+    segs: list = []
+    for a, b in zip(seq[:-1], seq[1:], strict=False):
+        segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
+    return pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
+
+
 def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, width: float, obst: Obstacles,
                     opts: PlannerOptions, veto, reasons: list[str], vetoes: list[str]):
     """The shortest clear route through one roadmap: ``(source, path, waypoints)`` or None.
@@ -518,7 +545,8 @@ def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, 
     vals = np.concatenate([lengths, np.asarray(source_costs, float) + 1e-9]) + 1e-9
     rows = np.concatenate([pairs[:, 0], np.full(ns, k)])
     cols = np.concatenate([pairs[:, 1], np.arange(ns)])
-    rounds = vetoed = tstar = sstar = 0
+    rounds = vetoed = 0
+    stars = [0, 0]  # rounds with a blocked last leg, with a blocked first leg
     while vetoed < 20:
         keep = np.concatenate([state >= 0, np.ones(ns, dtype=bool)])
         graph = csr_matrix((vals[keep], (rows[keep], cols[keep])), shape=(k + 1, k + 1))
@@ -536,24 +564,11 @@ def _roadmap_search(nodes, ns: int, source_costs, radius: float, length: float, 
             check(np.flatnonzero(state == 0) if rounds > _LAZY_ROUNDS else unknown)
             bad = on[state[on] < 0]
             if len(bad):
-                # blocked first or last legs: the start or the approach is cramped, so check that whole star
-                star = np.zeros(len(pairs), dtype=bool)
-                if (pairs[bad, 1] == ti).any():
-                    tstar += 1
-                    if tstar >= _STAR_AFTER:
-                        star |= pairs[:, 1] == ti
-                if (pairs[bad, 0] < ns).any():
-                    sstar += 1
-                    if sstar >= _STAR_AFTER:
-                        star |= pairs[:, 0] < ns
-                star &= state == 0
+                star = _star_edges(pairs, bad, ns, stars) & (state == 0)
                 if star.any():
                     check(np.flatnonzero(star))
                 continue
-        segs: list = []
-        for a, b in zip(seq[:-1], seq[1:], strict=False):
-            segs.extend(pathlib.shortest_path(nodes[a], nodes[b], radius).segments)
-        path = pathlib.Path(Pose(*nodes[seq[0]]), radius, tuple(segs))
+        path = _chain_path(nodes, seq, radius)
         why = veto(seq[0], path) if veto is not None else None
         if why is None:
             return seq[0], path, tuple(nodes[q].copy() for q in seq[1:])

@@ -17,21 +17,15 @@ PLAN_CLEARANCE_UM = 40.0
 """Clearance of the nominal plans the controller follows: room for tens of um of control error."""
 
 
-PLAN_CLEARANCE_SEARCH_BUDGET = 48
-"""G_1 schedules (:attr:`stressbots.planning.PlannerOptions.search_budget`) the wide-clearance attempt may
-spend before the default plan is tried: half the default, since a layout that cannot be planned is searched
-twice. Every wide-clearance plan of ``benchmarks/bench_planner.py``'s layouts of 2-8 robots took at most 30."""
-
-
 def nominal_plan(scenario, *, seed: int = 0):
-    """The nominal plan a closed-loop run follows: planned with a wide clearance, else the default one."""
+    """The nominal plan a closed-loop run follows: a wide clearance (:data:`PLAN_CLEARANCE_UM`) in every
+    step where one is found, the planner's default clearance in the steps where none is
+    (:attr:`stressbots.planning.PlannerOptions.fallback_clearance_um`): one search, so a layout that
+    cannot be planned is refused after one search instead of two."""
     from ..planning import PlannerOptions, plan_assembly
 
-    try:
-        wide = PlannerOptions(clearance_um=PLAN_CLEARANCE_UM, seed=seed, search_budget=PLAN_CLEARANCE_SEARCH_BUDGET)
-        return plan_assembly(scenario, wide)
-    except PlanningError:
-        return plan_assembly(scenario, PlannerOptions(seed=seed))
+    default = PlannerOptions(seed=seed)
+    return plan_assembly(scenario, PlannerOptions(clearance_um=PLAN_CLEARANCE_UM, seed=seed, fallback_clearance_um=default.clearance_um))
 
 
 @dataclass(frozen=True)
