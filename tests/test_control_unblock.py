@@ -35,11 +35,15 @@ def test_blocking_orbits_matches_brute_force(discs, points, reach):
 def test_way_points_run_from_the_slot_back_along_the_approach_line_to_the_aim():
     goal = np.array([1000.0, 1000.0, math.radians(90.0)])  # heading +x: the line runs back towards -x
     aim = np.array([600.0, 980.0, math.radians(84.0)])
-    pts = way_points(goal, aim, 400.0, 50.0)
+    pts = way_points(goal, aim, 400.0, step_um=50.0)
     assert np.allclose(pts[0], goal[:2]) and np.allclose(pts[-1], aim[:2])
     assert np.allclose(pts[:-1, 1], 1000.0) and np.allclose(np.diff(pts[:-1, 0]), -50.0)
-    chord = way_points(goal, aim, None, 50.0)  # S_2f: the straight chord from slot to aim
+    chord = way_points(goal, aim, None, step_um=50.0)  # S_2f: the straight chord from slot to aim
     assert np.allclose(chord[0], goal[:2]) and np.allclose(chord[-1], aim[:2])
+    looped = way_points(goal, aim, 400.0, 150.0, 50.0)  # plus the clockwise loop (r = 150 um) through the aim
+    extra = looped[len(pts):]
+    centre = aim[:2] + 150.0 * np.array([math.cos(aim[2]), -math.sin(aim[2])])  # right of the heading
+    assert np.allclose(np.hypot(*(extra - centre).T), 150.0, atol=1e-6) and len(extra) >= 8
 
 
 def replay(poses, move, still, dt=0.2):
@@ -65,7 +69,7 @@ def test_an_orbit_over_the_aim_moves_off_it_and_nobody_hits_anything(theta, thet
         [cj[0] - R * math.cos(theta), cj[1] + R * math.sin(theta), theta],  # D_j, waiting
         [700.0 - R * math.cos(theta_k), 700.0 + R * math.sin(theta_k), theta_k],  # D_k, the docking robot
     ])
-    pts = way_points(np.array([1900.0, 1500.0, math.radians(90.0)]), np.array([1300.0, 1480.0, 1.5]), 600.0, 25.0)
+    pts = way_points(np.array([1900.0, 1500.0, math.radians(90.0)]), np.array([1300.0, 1480.0, 1.5]), 600.0, step_um=25.0)
     reach = 0.5 * math.hypot(L, W) + 15.0
     centres = turning_centres(poses, np.full(2, R))
     assert blocking_orbits(centres[:1], [RSTAR], pts, reach)[0]

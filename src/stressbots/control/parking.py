@@ -156,7 +156,8 @@ def blocking_orbits(centres, rstar, points, reach_um: float) -> np.ndarray:
 
 
 def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um, docked_poses, docked_L,
-                 docked_W, points, *, reach_um: float, margin_um: float, max_shift_um: float, clearance_um: float) -> ParkMove | None:
+                 docked_W, points, *, reach_um: float, margin_um: float, max_shift_um: float, clearance_um: float,
+                 headings=None) -> ParkMove | None:
     """The manoeuvre that moves waiting robot ``j``'s orbit off the way ``points`` (P, 2) another robot needs, or None.
 
     Like :func:`park_move` (same group manoeuvre: wait under P_k, then P_{j-1} drives ``movers`` straight),
@@ -164,7 +165,8 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
     with the shortest straight (at most ``max_shift_um``) that takes D_j's disc ``reach_um + margin_um``
     (um) clear of all of them, the cheapest (wait + straight) whose movers keep ``clearance_um``. A waiting
     robot is not needed until its own phase: moving its orbit costs one wait and one straight, while a
-    route around it may not exist (its disc covers the aim) at all.
+    route around it may not exist (its disc covers the aim) at all. ``headings`` (rad) replaces the 24
+    candidate headings (e.g. only the one D_j has: a straight from where it is, no wait).
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -176,7 +178,7 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
     # every 15 deg: the shortest straight (10 um steps) that takes D_j's disc clear of all the points
     cands = []
     steps = np.arange(0.0, max_shift_um + 1e-9, 10.0)
-    for th in np.radians(np.arange(0.0, 360.0, 15.0)):
+    for th in (np.radians(np.arange(0.0, 360.0, 15.0)) if headings is None else np.asarray(headings, float)):
         h = np.array([math.sin(th), math.cos(th)])
         ends = centres[j][None, :] + steps[:, None] * h[None, :]
         ok = np.hypot(*(ends[:, None, :] - q[None, :, :]).transpose(2, 0, 1)).min(axis=1) >= need

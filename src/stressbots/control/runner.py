@@ -249,11 +249,17 @@ class _Runner(PlantLoop):
             self.replans += 1
             heading = float(np.mod(self.est[b, 2] + self.omega_hat[b] * move_.wait_s, 2.0 * np.pi))
             self.drive([(k, move_.wait_s)])
-            # a waiting robot touched by the docking one cannot turn: its straight would run off in another direction
+            # a waiting robot touched by the docking one cannot turn: its planned straight would run off in another
+            # direction; a straight along the heading it has is taken only if it is checked the same way
             if abs(angle_difference(self.est[b, 2], heading)) > np.radians(self.tune.unblock_heading_tol_deg):
-                self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but it did not turn "
-                                       "to its departure heading: it stays")
-                continue
+                move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                     self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
+                                     margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
+                                     clearance_um=self.tune.park_clearance_um, headings=[float(self.est[b, 2])])
+                if move_ is None:
+                    self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but it did not "
+                                           "turn to its departure heading: it stays")
+                    continue
             self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way: it moves "
                                    f"{move_.straight_s * self.v_hat[b]:.0f} um off it")
             self.drive([(j - 1, move_.straight_s)])
