@@ -86,7 +86,7 @@ def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still
 
 
 def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
-              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float) -> ParkMove | None:
+              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False) -> ParkMove | None:
     """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
 
     ``movers``: the undocked robots that drive straight with ``j`` under P_{j-1} (``j`` included);
@@ -95,7 +95,8 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     radii. Candidate departure headings: away from the obstacle and up to 60 deg either side; each is
     reached by waiting (every robot of ``movers`` and ``still`` orbits meanwhile). A candidate is taken
     when D_j's gap grows and every mover keeps ``clearance_um`` (or, if it starts closer, does not get
-    closer). The shortest wait wins.
+    closer). The shortest wait wins. ``held``: D_j's disc already overlaps the obstacle, so it may be unable
+    to turn (a turning robot pushing into anything stops): only a straight along the heading it has, no wait.
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -110,21 +111,24 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
         end = orbit_gaps(end_c[None, :], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
         return bool(end > gap0[j] + 0.5 * shift_um)
 
+    cands = [(float(poses[j, 2]), straight_s)] if held else None
     return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
-                      straight_s, gap0, clearance_um, accept)
+                      straight_s, gap0, clearance_um, accept, cands)
 
 
 def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
-               straight_s: float, gap0: dict, clearance_um: float, accept, candidates=None) -> ParkMove | None:
+               straight_s: float, gap0: dict, clearance_um: float, accept, candidates=None, loops: int = 0) -> ParkMove | None:
     """The cheapest move of D_j's orbit whose movers' discs keep ``clearance_um`` (or do not get closer) and whose
     end centre passes ``accept``. Candidates: ``(heading, straight_s)`` pairs (shortest wait + straight wins), by
-    default headings within 60 deg of ``away`` for ``straight_s`` s (shortest wait wins)."""
+    default headings within 60 deg of ``away`` for ``straight_s`` s (shortest wait wins); each also after up to
+    ``loops`` extra loops of D_j."""
     everyone = movers + still
     devs = np.radians([0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0])
     cands = candidates if candidates is not None else [(math.atan2(away[0], away[1]) + dev, straight_s) for dev in devs]
     best, best_cost = None, math.inf
-    for th, straight in cands:
-        wait = float(np.mod(th - poses[j, 2], TWO_PI)) / rates[j]
+    for (th, straight), m in ((c, m) for c in cands for m in range(loops + 1)):
+        # m extra loops of D_j: the other movers, turning at their own rates, then head elsewhere
+        wait = (float(np.mod(th - poses[j, 2], TWO_PI)) + m * TWO_PI) / rates[j]
         # everyone orbits for ``wait`` (heading + rate * wait, same centre)
         after = poses.copy()
         after[everyone, 2] = np.mod(poses[everyone, 2] + rates[everyone] * wait, TWO_PI)
@@ -157,7 +161,7 @@ def blocking_orbits(centres, rstar, points, reach_um: float) -> np.ndarray:
 
 def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um, docked_poses, docked_L,
                  docked_W, points, *, reach_um: float, margin_um: float, max_shift_um: float, clearance_um: float,
-                 headings=None) -> ParkMove | None:
+                 headings=None, loops: int = 0) -> ParkMove | None:
     """The manoeuvre that moves waiting robot ``j``'s orbit off the way ``points`` (P, 2) another robot needs, or None.
 
     Like :func:`park_move` (same group manoeuvre: wait under P_k, then P_{j-1} drives ``movers`` straight),
@@ -166,7 +170,8 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
     (um) clear of all of them, the cheapest (wait + straight) whose movers keep ``clearance_um``. A waiting
     robot is not needed until its own phase: moving its orbit costs one wait and one straight, while a
     route around it may not exist (its disc covers the aim) at all. ``headings`` (rad) replaces the 24
-    candidate headings (e.g. only the one D_j has: a straight from where it is, no wait).
+    candidate headings (e.g. only the one D_j has: a straight from where it is, no wait); each heading is
+    also tried after up to ``loops`` extra loops of D_j (the other movers then head elsewhere).
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -189,7 +194,7 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
         return bool(np.hypot(*(q - end_c).T).min() >= need)
 
     return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, None, 0.0,
-                      gap0, clearance_um, accept, cands)
+                      gap0, clearance_um, accept, cands, loops)
 
 
 def _away(c, idx, centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np.ndarray:

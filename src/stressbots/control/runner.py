@@ -193,9 +193,15 @@ class _Runner(PlantLoop):
                 continue
             movers = [self.by_rank[m] for m in range(j, k + 1)]
             still = [self.by_rank[m] for m in range(1, j)]
-            move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                              self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
-                              clearance_um=self.tune.park_clearance_um)
+            move_ = None
+            if gaps[idx] < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
+                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                                  clearance_um=self.tune.park_clearance_um, held=True)
+            if move_ is None:
+                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                                  clearance_um=self.tune.park_clearance_um)
             if move_ is None:
                 if (i, "park") not in self._warned:  # once: tend_orbits asks every t_x
                     self._warned.add((i, "park"))
@@ -240,7 +246,7 @@ class _Runner(PlantLoop):
             move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
                                  self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
                                  margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
-                                 clearance_um=self.tune.park_clearance_um)
+                                 clearance_um=self.tune.park_clearance_um, loops=self.tune.unblock_extra_loops)
             self._unblocks[(b, k)] = self._unblocks.get((b, k), 0) + 1
             if move_ is None:
                 self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way and no clear move takes "

@@ -266,15 +266,20 @@ class Tuning:
     unblock_max_shift_um: float = 600.0
     """um. Longest straight move of such an orbit (one wait and one straight drive of the waiting group)."""
     unblock_moves_per_phase: int = 2
+    unblock_extra_loops: int = 2
+    """Extra loops of the waiting robot an orbit move may wait before its straight: the robots driving straight with it
+    (D_j .. D_k, turning at their own rates) then head elsewhere, and a move that ran one of them into the arena
+    edge or another orbit may find a clear set of tracks."""
     unblock_heading_tol_deg: float = 15.0
     """deg. After its wait, a waiting robot more than this off its planned departure heading does not drive the
     straight: it was held (touched by the docking robot, it cannot turn) and would leave in a direction nobody
     checked (one ran its orbit 137 um into the arena edge so)."""
     """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
-    start_park_margin_um: float = 60.0
+    start_park_margin_um: float = 100.0
     """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
     are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
-    6 um from the edge at 52 s was trapped by 96 s. Wider than ``park_margin_um`` by the drift of one G_1 phase."""
+    64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
+    the drift of one G_1 phase."""
 
 
 @dataclass(frozen=True)
