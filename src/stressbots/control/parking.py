@@ -62,6 +62,15 @@ def orbit_gaps(centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np
     return gap
 
 
+def _wall_gaps(tracks, rstar, arena_um) -> np.ndarray:
+    """Gap (um) of each disc (tracks (M, T, 2), radii (M,)) to the arena edge at every instant (M, T); inf without an arena."""
+    if arena_um is None:
+        return np.full(tracks.shape[:2], np.inf)
+    w, h = arena_um
+    x, y = tracks[..., 0], tracks[..., 1]
+    return np.minimum(np.minimum(x, w - x), np.minimum(y, h - y)) - np.asarray(rstar, float)[:, None]
+
+
 def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still_c, still_r) -> np.ndarray:
     """Smallest gap (um) over time of each mover's disc (tracks (M, T, 2)) to everything, movers included."""
     M, T, _ = tracks.shape
@@ -137,8 +146,11 @@ def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um,
         tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
         gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
         need = np.array([min(clearance_um, gap0[m] - 1e-6) for m in movers])
+        # the arena edge apart: a mover whose disc starts overlapping another disc must not swap it for the edge
+        walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
+        wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
         cost = wait if candidates is None else wait + straight
-        if (gaps >= need).all() and accept(tracks[movers.index(j), -1]) and cost < best_cost:
+        if (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all() and accept(tracks[movers.index(j), -1]) and cost < best_cost:
             best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
 
