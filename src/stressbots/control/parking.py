@@ -150,7 +150,8 @@ def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um,
         walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
         wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
         cost = wait if candidates is None else wait + straight
-        if (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all() and accept(tracks[movers.index(j), -1]) and cost < best_cost:
+        clear = (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all()
+        if clear and accept(tracks[movers.index(j), -1]) and cost < best_cost:
             best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
 
