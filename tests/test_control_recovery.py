@@ -214,3 +214,55 @@ def test_a_robot_stopped_flush_off_its_slot_is_docked_not_backed_off():
     assert any(e["kind"] == "docked" and "off its slot" in e["detail"] for e in mine), mine[-4:]
     assert not any(e["kind"] == "stuck" for e in mine)
     assert result.docked.all() and (result.failure is None or result.failure.startswith("shape error"))
+
+
+class ShoveOntoAim(ProtocolOnly):
+    """Fault injection: once ``after_s`` has passed, the orbiting ``victim`` is displaced (as by an orbit drifting
+    with accumulated error) so that its orbit disc sits on ``mover``'s approach line, ``behind_um`` behind its slot
+    ``goal``: no route reaches the funnel while it waits there."""
+
+    def __init__(self, inner, victim: int, goal, behind_um: float, after_s: float):
+        super().__init__(inner)
+        self.victim, self.goal, self.behind_um, self.after_s = victim, np.asarray(goal, float), behind_um, after_s
+        self.done = False
+
+    def apply(self, waveform):
+        sim = self._inner
+        if not self.done and sim.time_s >= self.after_s:
+            from stressbots.robots import turning_centres
+
+            p = sim.true_poses()
+            R = sim.scenario.turn_radii_um
+            v = self.victim
+            h = np.array([np.sin(self.goal[2]), np.cos(self.goal[2])])
+            centre = self.goal[:2] - self.behind_um * h
+            sim._bodies.pose[v, :2] = p[v, :2] + (centre - turning_centres(p[v], R[v])[0])
+            self.done = True
+        super().apply(waveform)
+
+
+def test_a_waiting_orbit_on_the_approach_line_is_moved_off_it():
+    """D_1's orbit sits on D_2's approach line: there is no route to D_2's funnel around it, and before, every
+    retry met the same orbit. The controller moves D_1's orbit off the way (it is not needed yet) and both dock."""
+    from stressbots.electrostatics import analyse_scenario
+    from stressbots.robots import orbit_radii
+
+    scn = random_scenario(4, 6, shape="tee", noise=Noise())
+    plan = structure_targets(scn)
+    order = analyse_scenario(scn).order_index
+    assert order is not None
+    d1, d2 = int(order[0]), int(order[1])
+    dry = assemble(scn, SimulatedPlant(scn, seed=0), seed=0, plan=plan)
+    assert dry.success
+    t_g1 = next(e["t_s"] for e in dry.events if e["kind"] == "G_1")
+    rs = float(orbit_radii(scn.lengths_um[d1], scn.widths_um[d1], scn.turn_radii_um[d1]))
+    sim = SimulatedPlant(scn, seed=0)
+    plant = ShoveOntoAim(sim, d1, dry.goals[d2], rs + 0.5 * scn.lengths_um[d2] + 60.0, after_s=t_g1 - 5.0)
+    result = assemble(scn, plant, seed=0, plan=Targets(plan.goals))
+    assert plant.done
+    moved = [e for e in result.events if e["kind"] == "unblock" and e["robot"] == scn.names[d1] and "moves" in e["detail"]]
+    assert moved, [e for e in result.events if e["kind"] in ("unblock", "blocked", "retry")]
+    hits = [e for e in sim.events if {e.robot, e.other} == {scn.names[d1], scn.names[d2]} and e.kind != "dock"]
+    assert not hits, hits
+    assert result.success, (result.failure, result.events[-6:])
+    assert sim.docked.all()

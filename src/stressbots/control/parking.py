@@ -26,7 +26,7 @@ import numpy as np
 from ..collision import point_rectangle_distance
 from ..robots import TWO_PI, turning_centres
 
-__all__ = ["ParkMove", "orbit_gaps", "park_move"]
+__all__ = ["ParkMove", "blocking_orbits", "orbit_gaps", "park_move", "unblock_move"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +62,15 @@ def orbit_gaps(centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np
     return gap
 
 
+def _wall_gaps(tracks, rstar, arena_um) -> np.ndarray:
+    """Gap (um) of each disc (tracks (M, T, 2), radii (M,)) to the arena edge at every instant (M, T); inf without an arena."""
+    if arena_um is None:
+        return np.full(tracks.shape[:2], np.inf)
+    w, h = arena_um
+    x, y = tracks[..., 0], tracks[..., 1]
+    return np.minimum(np.minimum(x, w - x), np.minimum(y, h - y)) - np.asarray(rstar, float)[:, None]
+
+
 def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still_c, still_r) -> np.ndarray:
     """Smallest gap (um) over time of each mover's disc (tracks (M, T, 2)) to everything, movers included."""
     M, T, _ = tracks.shape
@@ -86,7 +95,7 @@ def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still
 
 
 def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
-              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float) -> ParkMove | None:
+              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False) -> ParkMove | None:
     """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
 
     ``movers``: the undocked robots that drive straight with ``j`` under P_{j-1} (``j`` included);
@@ -95,7 +104,8 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     radii. Candidate departure headings: away from the obstacle and up to 60 deg either side; each is
     reached by waiting (every robot of ``movers`` and ``still`` orbits meanwhile). A candidate is taken
     when D_j's gap grows and every mover keeps ``clearance_um`` (or, if it starts closer, does not get
-    closer). The shortest wait wins.
+    closer). The shortest wait wins. ``held``: D_j's disc already overlaps the obstacle, so it may be unable
+    to turn (a turning robot pushing into anything stops): only a straight along the heading it has, no wait.
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -105,22 +115,99 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     gap0 = dict(zip(everyone, now, strict=True))
     away = _away(centres[j], everyone.index(j), centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)
     straight_s = shift_um / speeds[j]
-    best = None
-    for dev in np.radians([0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0]):
-        th = math.atan2(away[0], away[1]) + dev
-        wait = float(np.mod(th - poses[j, 2], TWO_PI)) / rates[j]
+
+    def accept(end_c: np.ndarray) -> bool:
+        end = orbit_gaps(end_c[None, :], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
+        return bool(end > gap0[j] + 0.5 * shift_um)
+
+    cands = [(float(poses[j, 2]), straight_s)] if held else None
+    return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
+                      straight_s, gap0, clearance_um, accept, cands)
+
+
+def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
+               straight_s: float, gap0: dict, clearance_um: float, accept, candidates=None, loops: int = 0) -> ParkMove | None:
+    """The cheapest move of D_j's orbit whose movers' discs keep ``clearance_um`` (or do not get closer) and whose
+    end centre passes ``accept``. Candidates: ``(heading, straight_s)`` pairs (shortest wait + straight wins), by
+    default headings within 60 deg of ``away`` for ``straight_s`` s (shortest wait wins); each also after up to
+    ``loops`` extra loops of D_j."""
+    everyone = movers + still
+    devs = np.radians([0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0])
+    cands = candidates if candidates is not None else [(math.atan2(away[0], away[1]) + dev, straight_s) for dev in devs]
+    best, best_cost = None, math.inf
+    for (th, straight), m in ((c, m) for c in cands for m in range(loops + 1)):
+        # m extra loops of D_j: the other movers, turning at their own rates, then head elsewhere
+        wait = (float(np.mod(th - poses[j, 2], TWO_PI)) + m * TWO_PI) / rates[j]
         # everyone orbits for ``wait`` (heading + rate * wait, same centre)
         after = poses.copy()
         after[everyone, 2] = np.mod(poses[everyone, 2] + rates[everyone] * wait, TWO_PI)
-        t = np.linspace(0.0, straight_s, 24)
+        t = np.linspace(0.0, straight, 24)
         h = np.stack([np.sin(after[movers, 2]), np.cos(after[movers, 2])], axis=1)  # (M, 2)
         tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
         gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
         need = np.array([min(clearance_um, gap0[m] - 1e-6) for m in movers])
-        end = orbit_gaps(tracks[[movers.index(j)], -1], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
-        if (gaps >= need).all() and end > gap0[j] + 0.5 * shift_um and (best is None or wait < best.wait_s):
-            best = ParkMove(j, wait, straight_s, float(gap0[j]), float(gaps[movers.index(j)]))
+        # the arena edge apart: a mover whose disc starts overlapping another disc must not swap it for the edge
+        walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
+        wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
+        cost = wait if candidates is None else wait + straight
+        clear = (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all()
+        if clear and accept(tracks[movers.index(j), -1]) and cost < best_cost:
+            best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
+
+
+def blocking_orbits(centres, rstar, points, reach_um: float) -> np.ndarray:
+    """Which orbit discs ``(centres (K, 2), rstar (K,))`` come within ``reach_um`` (um) of any of ``points``
+    (P, 2): the waiting orbits that block a way a moving robot needs (``reach_um``: its half diagonal plus
+    clearance). Boolean (K,).
+
+    >>> blocking_orbits(np.array([[0.0, 0.0], [500.0, 0.0]]), np.array([100.0, 100.0]), np.array([[150.0, 0.0]]), 60.0).tolist()
+    [True, False]
+    """
+    c = np.atleast_2d(np.asarray(centres, float))
+    q = np.atleast_2d(np.asarray(points, float))[:, :2]
+    if not len(c) or not len(q):
+        return np.zeros(len(c), dtype=bool)
+    d = np.hypot(*(c[:, None, :] - q[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+    return d < np.asarray(rstar, float).reshape(-1) + reach_um
+
+
+def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um, docked_poses, docked_L,
+                 docked_W, points, *, reach_um: float, margin_um: float, max_shift_um: float, clearance_um: float,
+                 headings=None, loops: int = 0) -> ParkMove | None:
+    """The manoeuvre that moves waiting robot ``j``'s orbit off the way ``points`` (P, 2) another robot needs, or None.
+
+    Like :func:`park_move` (same group manoeuvre: wait under P_k, then P_{j-1} drives ``movers`` straight),
+    off the ``points`` (the moving robot's aim, its approach corridor, where it is): of 24 headings, each
+    with the shortest straight (at most ``max_shift_um``) that takes D_j's disc ``reach_um + margin_um``
+    (um) clear of all of them, the cheapest (wait + straight) whose movers keep ``clearance_um``. A waiting
+    robot is not needed until its own phase: moving its orbit costs one wait and one straight, while a
+    route around it may not exist (its disc covers the aim) at all. ``headings`` (rad) replaces the 24
+    candidate headings (e.g. only the one D_j has: a straight from where it is, no wait); each heading is
+    also tried after up to ``loops`` extra loops of D_j (the other movers then head elsewhere).
+    """
+    poses = np.asarray(poses, float)
+    centres = turning_centres(poses, radii)
+    docked_poses = np.atleast_2d(np.asarray(docked_poses, float)).reshape(-1, 3)
+    q = np.atleast_2d(np.asarray(points, float))[:, :2]
+    everyone = movers + still
+    gap0 = dict(zip(everyone, orbit_gaps(centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W), strict=True))
+    need = float(rstar[j]) + reach_um + margin_um
+    # every 15 deg: the shortest straight (10 um steps) that takes D_j's disc clear of all the points
+    cands = []
+    steps = np.arange(0.0, max_shift_um + 1e-9, 10.0)
+    for th in (np.radians(np.arange(0.0, 360.0, 15.0)) if headings is None else np.asarray(headings, float)):
+        h = np.array([math.sin(th), math.cos(th)])
+        ends = centres[j][None, :] + steps[:, None] * h[None, :]
+        ok = np.hypot(*(ends[:, None, :] - q[None, :, :]).transpose(2, 0, 1)).min(axis=1) >= need
+        if ok.any():
+            cands.append((float(th), float(steps[int(np.argmax(ok))] + margin_um) / speeds[j]))
+
+    def accept(end_c: np.ndarray) -> bool:
+        return bool(np.hypot(*(q - end_c).T).min() >= need)
+
+    return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, None, 0.0,
+                      gap0, clearance_um, accept, cands, loops)
 
 
 def _away(c, idx, centres, rstar, arena_um, docked_poses, docked_L, docked_W) -> np.ndarray:

@@ -55,11 +55,11 @@ import numpy as np
 
 from ..collision import point_rectangle_distance
 from ..errors import PlanningError
-from ..robots import turning_centres
+from ..robots import angle_difference, turning_centres
 from .gross import GrossMotion
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
-from .parking import orbit_gaps, park_move
+from .parking import blocking_orbits, orbit_gaps, park_move, unblock_move
 from .queries import interpolated_steps
 from .result import AssemblyResult, judge_run
 from .single import SingleDocking
@@ -115,6 +115,7 @@ class _Runner(PlantLoop):
         self.stuck = False
         self._warned: set = set()
         self._parked: set[tuple[int, int]] = set()  # (robot, phase k) of every park move (parking)
+        self._unblocks: dict[tuple[int, int], int] = {}  # (robot, phase k) -> orbit moves off a docking robot's way
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
         # gross motion sigma_1 (:mod:`stressbots.control.gross`), G_1 (:mod:`stressbots.control.pair`) and the single
@@ -175,10 +176,12 @@ class _Runner(PlantLoop):
         (:meth:`stressbots.control.gross.GrossMotion.obstacles_hit`)."""
         return self.gross.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target)
 
-    def park_orbits(self, k: int, top: int | None = None) -> None:
-        """Before D_k's phase: move waiting orbits that drifted within ``Tuning.park_margin_um`` of the arena
-        edge, the structure or another orbit (:mod:`stressbots.control.parking`); at most one move each.
-        Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k moves: it has no orbit then)."""
+    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None) -> None:
+        """Before D_k's phase: move waiting orbits that drifted within ``margin_um`` (default
+        ``Tuning.park_margin_um``) of the arena edge, the structure or another orbit
+        (:mod:`stressbots.control.parking`); at most one move each. Only the orbits of D_1 .. D_top count
+        (``top`` = k; k - 1 while D_k moves: it has no orbit then)."""
+        margin = self.tune.park_margin_um if margin_um is None else margin_um
         waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
         docked = np.flatnonzero(self.docked)
         gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
@@ -186,13 +189,19 @@ class _Runner(PlantLoop):
         for idx in np.argsort(gaps):
             i = waiting[int(idx)]
             j = int(self.rank[i])
-            if gaps[idx] >= self.tune.park_margin_um or j == k or (i, k) in self._parked:
+            if gaps[idx] >= margin or j == k or (i, k) in self._parked:
                 continue
             movers = [self.by_rank[m] for m in range(j, k + 1)]
             still = [self.by_rank[m] for m in range(1, j)]
-            move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                              self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
-                              clearance_um=self.tune.park_clearance_um)
+            move_ = None
+            if gaps[idx] < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
+                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                                  clearance_um=self.tune.park_clearance_um, held=True)
+            if move_ is None:
+                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
+                                  clearance_um=self.tune.park_clearance_um)
             if move_ is None:
                 if (i, "park") not in self._warned:  # once: tend_orbits asks every t_x
                     self._warned.add((i, "park"))
@@ -215,6 +224,54 @@ class _Runner(PlantLoop):
         if 1 <= k <= self.n - 2:
             self.park_orbits(k, top=k - 1)
 
+    def unblock_orbits(self, k: int, i: int, points: np.ndarray) -> bool:
+        """During D_k's (robot ``i``'s) phase: move the waiting orbits (D_1 .. D_(k-1)) that block the ``points``
+        (P, 2) robot ``i`` needs (:func:`~stressbots.control.parking.blocking_orbits`) off them
+        (:func:`~stressbots.control.parking.unblock_move`), at most ``Tuning.unblock_moves_per_phase`` times
+        each; True if one moved."""
+        waiting = self.orbiting_below(k)
+        if not waiting:
+            return False
+        reach = 0.5 * float(np.hypot(self.L[i], self.W[i])) + self.opts.clearance_um
+        blocked = blocking_orbits(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], points, reach)
+        docked = np.flatnonzero(self.docked)
+        moved = False
+        for idx in np.flatnonzero(blocked):
+            b = waiting[int(idx)]
+            j = int(self.rank[b])
+            if self._unblocks.get((b, k), 0) >= self.tune.unblock_moves_per_phase:
+                continue
+            movers = [self.by_rank[m] for m in range(j, k + 1)]
+            still = [self.by_rank[m] for m in range(1, j)]
+            move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                 self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
+                                 margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
+                                 clearance_um=self.tune.park_clearance_um, loops=self.tune.unblock_extra_loops)
+            self._unblocks[(b, k)] = self._unblocks.get((b, k), 0) + 1
+            if move_ is None:
+                self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way and no clear move takes "
+                                       "it off")
+                continue
+            self.replans += 1
+            heading = float(np.mod(self.est[b, 2] + self.omega_hat[b] * move_.wait_s, 2.0 * np.pi))
+            self.drive([(k, move_.wait_s)])
+            # a waiting robot touched by the docking one cannot turn: its planned straight would run off in another
+            # direction; a straight along the heading it has is taken only if it is checked the same way
+            if abs(angle_difference(self.est[b, 2], heading)) > np.radians(self.tune.unblock_heading_tol_deg):
+                move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
+                                     self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
+                                     margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
+                                     clearance_um=self.tune.park_clearance_um, headings=[float(self.est[b, 2])])
+                if move_ is None:
+                    self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but it did not "
+                                           "turn to its departure heading: it stays")
+                    continue
+            self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way: it moves "
+                                   f"{move_.straight_s * self.v_hat[b]:.0f} um off it")
+            self.drive([(j - 1, move_.straight_s)])
+            moved = True
+        return moved
+
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]
 
@@ -235,6 +292,8 @@ class _Runner(PlantLoop):
     def run(self) -> str | None:
         phases = self.pr.phases
         try:
+            # nothing tends the waiting orbits during G_1: those already near trouble move first
+            self.park_orbits(self.n, top=self.n - 2, margin_um=self.tune.start_park_margin_um)
             self.pair.form()
             for k in range(self.n - 2, 0, -1):
                 i = self.by_rank[k]

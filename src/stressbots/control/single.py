@@ -32,7 +32,8 @@ from .docking import DockOutcome, DockView
 from .loopview import DockingLoop
 from .queries import in_funnel, line_coords, line_pose, merge, turn_fraction
 
-__all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget"]
+__all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget",
+           "way_points"]
 
 
 Bodies = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -46,6 +47,8 @@ class SingleLoop(DockingLoop, Protocol):
     straight_drift: Any
 
     def park_orbits(self, k: int) -> None: ...
+
+    def unblock_orbits(self, k: int, i: int, points: np.ndarray) -> bool: ...
 
 
 # -- pure geometry ------------------------------------------------------------------------------------
@@ -152,6 +155,30 @@ def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, le
     return False
 
 
+def way_points(goal: np.ndarray, a_pose: np.ndarray, back: float | None, r: float = 0.0, step_um: float = 25.0) -> np.ndarray:
+    """Points (P, 2) a docking robot needs free of waiting orbits: its aim ``a_pose``, the approach corridor
+    from there to the slot ``goal`` (the line ``back`` um long; the straight chord of the S_2f arc when
+    ``back`` is None) and, with a turning radius ``r`` (um), the clockwise loop through the aim (a one-way
+    robot arrives on it: an orbit beside the aim left no way in, though the aim itself was clear);
+    ``step_um`` apart (um).
+
+    >>> way_points(np.array([0.0, 0.0, 0.0]), np.array([20.0, -200.0, 0.1]), 100.0, step_um=50.0).shape
+    (4, 2)
+    """
+    a = np.asarray(a_pose, float)[:2]
+    if back is None:
+        g = np.asarray(goal, float)[:2]
+        m = max(2, int(np.hypot(*(a - g)) / step_um) + 1)
+        pts = g + np.linspace(0.0, 1.0, m)[:, None] * (a - g)
+    else:
+        line = np.stack([line_pose(goal, float(b), 0.0, 0.0)[:2] for b in np.linspace(0.0, back, max(2, int(back / step_um) + 1))])
+        pts = np.vstack([line, a[None, :]])
+    if r > 0.0:
+        s = np.linspace(0.0, TWO_PI * r, max(8, int(TWO_PI * r / step_um) + 1))
+        pts = np.vstack([pts, move(np.asarray(a_pose, float), s, 1.0 / r)[:, :2]])
+    return pts
+
+
 def retarget(pose: np.ndarray, motion: tuple[float, np.ndarray, np.ndarray] | None) -> np.ndarray:
     """A nominal pose moved by the rigid ``motion`` ``(phi_rad, c_nom, c_meas)`` the structure took when G_1
     formed (rotation by ``phi`` about ``c_nom``, then ``c_nom`` to ``c_meas``, um); unchanged when None."""
@@ -217,6 +244,7 @@ class SingleDocking:
             else:
                 a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
                 ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
+            lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
             for tgt in targets:
                 lp.steer(i, tgt, k, k - 1, orbiting, ready=ready)
@@ -224,7 +252,12 @@ class SingleDocking:
                     break
             waypoints = []
             if lp.stuck:
-                self.back_off(i, k)
+                # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
+                # retrying the same way unchanged met the same orbit every time
+                path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
+                if not lp.unblock_orbits(k, i, np.vstack([lp.est[i][None, :2], path.sample(20.0)[:, :2],
+                                                          way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
+                    self.back_off(i, k)
                 continue
             if back is not None and not self.in_funnel(i, back):
                 lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")

@@ -258,6 +258,29 @@ class Tuning:
     hold_frames: int = 120
     """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
 
+    # -- single-robot docking: waiting orbits moved off the way (branch gross6, issue 12 goal 1) ----------
+    unblock_margin_um: float = 30.0
+    """um. A waiting orbit whose disc comes within (half body diagonal + ``ControllerOptions.clearance_um``) of a
+    docking robot's aim, approach corridor or (after a blocked attempt) its path is moved until it is this
+    much further: a disc over the aim left no route at all, and every retry hit the same disc."""
+    unblock_max_shift_um: float = 600.0
+    """um. Longest straight move of such an orbit (one wait and one straight drive of the waiting group)."""
+    unblock_moves_per_phase: int = 2
+    unblock_extra_loops: int = 2
+    """Extra loops of the waiting robot an orbit move may wait before its straight: the robots driving straight with it
+    (D_j .. D_k, turning at their own rates) then head elsewhere, and a move that ran one of them into the arena
+    edge or another orbit may find a clear set of tracks."""
+    unblock_heading_tol_deg: float = 15.0
+    """deg. After its wait, a waiting robot more than this off its planned departure heading does not drive the
+    straight: it was held (touched by the docking robot, it cannot turn) and would leave in a direction nobody
+    checked (one ran its orbit 137 um into the arena edge so)."""
+    """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
+    start_park_margin_um: float = 100.0
+    """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
+    are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
+    64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
+    the drift of one G_1 phase."""
+
 
 @dataclass(frozen=True)
 class ControllerOptions:
