@@ -7,13 +7,15 @@ at each frame, then replays the same inputs through three estimators:
 - ``none``: predictions drive straight runs straight (the estimator before the straight-drift identification);
 - ``identified``: :class:`stressbots.control.straight_drift.StraightDrift` identifies each robot's curvature
   from the raw frames and the predictions follow it (what the closed loop does);
-- ``oracle``: the plant's true drift bias (hidden from the controller): the best a bias model can do.
+- ``oracle``: the plant's true drift bias (hidden from the controller): the best a bias model can do;
 
 Reported per variant, over the frames in which a robot drove straight the whole frame (where the drift
 acts) and over all frames in which it moved: the median / 90th percentile of the prediction error (the
 dead-reckoned pose before the frame is taken, against the truth) and of the filtered estimate's error,
 position (um) and heading (deg); and the curvature error |kappa_hat - bias| (deg/mm) at the end of each
-trial for robots that drove straight at least 300 um. The replay is exact: the controller's decisions were
+trial for robots that drove straight at least 300 um. Then the *model-only* error: each frame predicted from
+the true previous pose, by kind of frame (turning, straight, mixed), which separates what the motion model
+misses from the filter's own error. The replay is exact: the controller's decisions were
 made once (with the installed code) and every variant sees the same frames.
 
 Run::
@@ -33,6 +35,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_generality import ProtocolOnly, layout_spec  # noqa: E402
+
+VARIANTS = ("none", "identified", "oracle")
+"""Replayed estimators: the drift model of straight drives (none / identified / the plant's true bias)."""
 
 
 def record_trial(j: int, seed: int, noise_scale: float) -> dict | None:
@@ -88,7 +93,7 @@ def replay(log: dict, variant: str) -> dict:
     ident = StraightDrift(scn.n, drift_rad_per_um=nz.heading_drift_rad_per_um,
                           camera_heading_rad=nz.camera_heading_sd_rad, camera_position_um=nz.camera_position_sd_um)
     ident.frame(log["first"], np.zeros(scn.n, bool), np.zeros(scn.n))
-    if variant == "oracle":
+    if variant.startswith("oracle"):
         est.straight_curvature = np.asarray(log["bias"], float)
     rows = []
     straight_len = np.zeros(scn.n)
@@ -100,7 +105,7 @@ def replay(log: dict, variant: str) -> dict:
         total = math.fsum(d for _, d in steps)
         straight = ~turning_any & ~frozen
         est.update(steps, frozen, frame)
-        if variant == "identified":
+        if variant.startswith("identified"):
             ident.frame(frame, straight, est.speed * total)
             est.straight_curvature = ident.kappa
         straight_len += np.where(straight, est.speed * total, 0.0)
@@ -109,15 +114,42 @@ def replay(log: dict, variant: str) -> dict:
             e_h = np.degrees(np.abs(angle_difference(p[:, 2], truth[:, 2])))
             for i in np.flatnonzero(~frozen):
                 rows.append((name, bool(straight[i]), float(e_pos[i]), float(e_h[i])))
-    kap = ident.kappa if variant == "identified" else est.straight_curvature
+    kap = ident.kappa if variant.startswith("identified") else est.straight_curvature
     k_err = [abs(float(kap[i] - log["bias"][i])) * 180e3 / math.pi for i in range(scn.n) if straight_len[i] >= 300.0]
     return {"rows": rows, "kappa_err": k_err}
 
 
+def model_errors(log: dict) -> dict[str, list[float]]:
+    """Heading error (deg, signed) of one frame's prediction made from the *true* previous pose with the
+    identified model, by kind of frame (``turn``, ``straight``, ``mixed``): what the model itself misses
+    (per-Drive speed/radius jitter, the drift's walk, contacts), with the filter's own error taken out."""
+    from stressbots.estimation import Estimator
+    from stressbots.robots import angle_difference
+
+    scn = log["scn"]
+    est = Estimator(log["first"], scn.starts, scn.speeds_um_s, scn.turn_radii_um)
+    out: dict[str, list[float]] = {"turn": [], "straight": [], "mixed": []}
+    prev = log["truth"][0]
+    for (steps, frozen, frame), truth in zip(log["updates"], log["truth"][1:], strict=True):
+        filtered = est.pose
+        est.pose = prev.copy()
+        pm = est.predict(steps, frozen)
+        est.pose = filtered
+        turn_s = sum(np.where(t, d, 0.0) for t, d in steps)
+        total = math.fsum(d for _, d in steps)
+        err = np.degrees(angle_difference(pm[:, 2], truth[:, 2]))
+        for i in np.flatnonzero(~frozen):
+            kind = "turn" if turn_s[i] >= total - 1e-9 else ("straight" if turn_s[i] <= 1e-9 else "mixed")
+            out[kind].append(float(err[i]))
+        est.update(steps, frozen, frame)
+        prev = truth
+    return out
+
+
 def _stats(vals) -> str:
-    if not vals:
+    a = np.asarray(vals, dtype=np.float64)
+    if a.size == 0:
         return "   -  /   -  "
-    a = np.asarray(vals)
     return f"{np.median(a):5.2f} / {np.percentile(a, 90):5.2f}"
 
 
@@ -137,9 +169,9 @@ def main(argv=None) -> int:
                 logs.append(lg)
                 print(f"  layout {j} seed {s}: {len(lg['updates'])} frames, success {lg['success']}", flush=True)
     print(f"noise x{a.noise_scale:g}, {len(logs)} trials; median / 90th percentile over robot-frames")
-    print(f"{'variant':11s} {'frames':9s} {'pred pos um':>13s} {'pred head deg':>13s} {'filt pos um':>13s} "
+    print(f"{'variant':17s} {'frames':9s} {'pred pos um':>13s} {'pred head deg':>13s} {'filt pos um':>13s} "
           f"{'filt head deg':>13s}  kappa err deg/mm")
-    for variant in ("none", "identified", "oracle"):
+    for variant in VARIANTS:
         out = [replay(lg, variant) for lg in logs]
         rows = [r for o in out for r in o["rows"]]
         kerr = [k for o in out for k in o["kappa_err"]]
@@ -150,7 +182,14 @@ def main(argv=None) -> int:
                 hd = [r[3] for r in rows if r[0] == name and sel(r)]
                 cols += [_stats(pos), _stats(hd)]
             k = _stats(kerr) if label == "straight" else ""
-            print(f"{variant:11s} {label:10s} {cols[0]:>13s} {cols[1]:>13s} {cols[2]:>13s} {cols[3]:>13s}  {k}")
+            print(f"{variant:17s} {label:10s} {cols[0]:>13s} {cols[1]:>13s} {cols[2]:>13s} {cols[3]:>13s}  {k}")
+    print("model-only heading error per frame (deg; prediction from the true previous pose), by kind of frame:")
+    per = [model_errors(lg) for lg in logs]
+    for kind in ("turn", "mixed", "straight"):
+        e = np.array([x for m in per for x in m[kind]])
+        if e.size:
+            print(f"  {kind:9s} {e.size:6d} frames  |err| median / 90th {_stats(np.abs(e))}  signed median {np.median(e):+.2f}"
+                  f"  share over 10 deg {np.mean(np.abs(e) > 10):.3f}")
     return 0
 
 
