@@ -151,3 +151,27 @@ def test_estimator_predicts_along_the_straight_curvature(kappa, theta, step):
         assert np.allclose(est.pose[:, :2], truth[:, :2], atol=1e-7)
         assert abs(math.remainder(float(est.pose[0, 2] - truth[0, 2]), 2 * math.pi)) < 1e-9
     assert math.isclose(float(est.speed[0]), step, rel_tol=1e-9)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(-1.5e-4, 1.5e-4), st.integers(0, 2**31 - 1), st.floats(0.0, 6.283))
+def test_a_mirrored_robot_has_the_opposite_curvature(kappa, seed, theta):
+    """Mirror symmetry: the same noisy frames reflected (x -> -x, heading -> -heading) give exactly the opposite
+    estimate (every gate and weight is symmetric; left and right drifts are identified alike)."""
+    rng = np.random.default_rng(seed)
+    frames, straight = [], []
+    p = np.array([0.0, 0.0, theta])
+    for k in range(30):
+        turn = k % 10 == 9
+        p = p + np.array([0.0, 0.0, 0.8]) if turn else move(p, 90.0, kappa)
+        seen = p + np.array([rng.normal(0, 2.0), rng.normal(0, 2.0), rng.normal(0, CAM_H)])
+        if rng.random() < 0.05:
+            seen = seen + np.array([25.0, 0.0, math.radians(10.0)])  # now and then a contact
+        frames.append(seen)
+        straight.append(not turn)
+    a, b = _ident(), _ident()
+    for f, s in zip(frames, straight, strict=True):
+        a.frame(f[None], np.array([s]), np.array([90.0]))
+        b.frame(np.array([[-f[0], f[1], -f[2]]]), np.array([s]), np.array([90.0]))
+    assert math.isclose(float(a.kappa[0]), -float(b.kappa[0]), rel_tol=1e-9, abs_tol=1e-15)
+    assert math.isclose(float(a.kappa_sd[0]), float(b.kappa_sd[0]), rel_tol=1e-12)
