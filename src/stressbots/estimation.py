@@ -14,6 +14,10 @@ cannot undo an error, so the controller needs better numbers than one frame give
   only turned (turn rate = heading change / time, unwrapped with the prediction), measured on raw frames
   at the run's two ends. The error of a run's estimate falls as 1/T with its length T, so runs are pooled
   with weights T^2: a robot that orbited for a minute knows its turn rate to ~0.1 %.
+- **Straight runs curve**: a robot driving with its arm up follows an arc of its heading drift's bias
+  (rad/um, + = clockwise). The estimator does not identify it (the controller's
+  :class:`stressbots.control.straight_drift.StraightDrift` does, from raw frames); whoever does sets
+  :attr:`Estimator.straight_curvature`, and predictions and the speed identification follow it.
 - **Speed** is identified from every frame, whatever the robot did: with the turn rate fixed, a robot's
   path between two frames is the predicted one scaled by v / v_hat about its start (arc angles depend on
   the turn rate only, every length on the speed), so ``v = v_hat (dm . dp) / |dp|^2`` for measured and
@@ -28,7 +32,7 @@ import math
 
 import numpy as np
 
-from .kinematics import advance
+from .kinematics import move
 from .robots import TWO_PI, angle_difference
 
 __all__ = ["Estimator"]
@@ -100,6 +104,8 @@ class Estimator:
         self._still_sum = np.zeros((self.n, 3))
         self._still_n = np.zeros(self.n, dtype=int)
         self.unseen = np.where(seen, 0, 1)
+        self.straight_curvature = np.zeros(self.n)
+        """Curvature (rad/um, + = clockwise) of each robot's straight drives, used by the predictions."""
 
     @property
     def radius(self) -> np.ndarray:
@@ -110,10 +116,15 @@ class Estimator:
         """Dead-reckoned poses after ``steps`` = [(turning mask (n,), duration_s), ...]; ``frozen`` robots stay."""
         p = self.pose.copy()
         for turning, d in steps:
-            moved = advance(p, turning, self.speed, self.radius, d)
-            p = np.where(frozen[:, None], p, moved)
+            p = np.where(frozen[:, None], p, self._advance(p, turning, d))
         p[:, 2] = np.mod(p[:, 2], TWO_PI)
         return p
+
+    def _advance(self, p, turning, d) -> np.ndarray:
+        """``p`` moved for ``d`` s at the identified speeds: turning robots on their identified circles,
+        the others along arcs of :attr:`straight_curvature`."""
+        curvature = np.where(np.asarray(turning, dtype=bool), self.turn_rate / self.speed, self.straight_curvature)
+        return move(p, self.speed * d, curvature)
 
     def update(self, steps, frozen, frame) -> None:
         """Advance through ``steps`` (as in :meth:`predict`) and take the camera ``frame`` (n, 3)."""
@@ -159,7 +170,7 @@ class Estimator:
             start = np.where(valid[:, None], self._last, 0.0)
             p = start.copy()
             for turning, d in steps:
-                p = advance(p, turning, self.speed, self.radius, d)
+                p = self._advance(p, turning, d)
             dp = p[:, :2] - start[:, :2]
             dm = frame[:, :2] - start[:, :2]
             dp2 = (dp * dp).sum(axis=1)

@@ -62,7 +62,10 @@ class PlantLoop:
         self.events: list[dict] = []
         obs = np.asarray(plant.observe(), dtype=np.float64)
         self.estimator = Estimator(obs, scenario.starts, scenario.speeds_um_s, scenario.turn_radii_um)
-        self.straight_drift = StraightDrift(n)
+        nz = scenario.noise
+        self.straight_drift = StraightDrift(n, drift_rad_per_um=nz.heading_drift_rad_per_um,
+                                            camera_heading_rad=nz.camera_heading_sd_rad,
+                                            camera_position_um=nz.camera_position_sd_um)
         self.straight_drift.frame(obs, np.zeros(n, dtype=bool), np.zeros(n))  # the first frame starts no run
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
@@ -117,6 +120,7 @@ class PlantLoop:
         self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame)
         straight = (self.rank > max(k for k, _ in steps)) & ~self.docked
         self.straight_drift.frame(frame, straight, self.v_hat * total)
+        self.estimator.straight_curvature = self.straight_drift.kappa  # predictions follow the identified drift
         self.t += total
         self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
         self.after_drive(steps)
