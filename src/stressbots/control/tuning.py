@@ -258,6 +258,24 @@ class Tuning:
     hold_frames: int = 120
     """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
 
+    # -- G_1 generality (branch g1six, issue 12): searched escapes, reachable stations, pair rounds ----------
+    escape_search_frames: int = 12
+    """t_x. Longest searched escape of D_n (:meth:`~stressbots.control.pair_recovery.PairRecovery.searched_escape`),
+    re-searched every t_x: a turn of up to a loop (~20 s at the literature's speeds) and a straight."""
+    escape_search_step_deg: float = 15.0
+    """deg. Grid of the turns a searched escape tries before its straight: fine enough that one of them slips
+    between two orbiting bodies (a body passes a point of its orbit in a few degrees of D_n's turn)."""
+    escape_search_straight_um: float = 900.0
+    """um. Longest straight of a searched escape: beyond an orbit disc's diameter (D_n's orbit can overlap one by
+    its whole radius), short of crossing the arena."""
+    hold_centre_tol_um: float = 100.0
+    """um. D_n has reached its holding orbit once it orbits a free centre this close to the chosen one (the
+    hold is a place to wait, not a pose): a quarter of a typical turning radius, well inside the 100 um grid
+    the free orbits are chosen on."""
+    hold_headings: int = 24
+    """Poses on a holding orbit (evenly spaced headings) D_n's way there may end at, re-chosen every t_x: the
+    nearest one needs no loop of a one-way robot (15 deg apart: a few um of path between neighbours)."""
+
 
 @dataclass(frozen=True)
 class ControllerOptions:
