@@ -20,7 +20,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
 from .pairloop import Replan
 from .queries import pose_on_orbit
-from .station import orbit_room, orbit_route
+from .station import Body, orbit_room, orbit_route
 
 if TYPE_CHECKING:
     from .pair import PairPhase
@@ -122,8 +122,14 @@ class StationTransfer:
         cl = self.loop.opts.clearance_um + 10.0  # transfer_option's check of D_{n-1}'s track
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        route = orbit_route(self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um,
-                            clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um)
+        args = (self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um)
+        kw = dict(clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um)
+        route = orbit_route(*args, **kw)
+        if route is None:
+            # no capsule route: what D_{n-1}'s body sweeps passes gaps narrower than its orbit disc
+            body = Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
+                        math.radians(3.0))  # th_dep's left bias in transfer_leg
+            route = orbit_route(*args, **kw, body=body)
         return route if route else [np.asarray(c_star, float)]
 
     def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
