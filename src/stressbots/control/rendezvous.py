@@ -257,7 +257,21 @@ class Rendezvous:
                 break
             self.loop.drive([(n - 1, self.loop.tx)])
         self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        closest = math.inf
+        lower = self.loop.orbiting_below(n - 1)
         for _ in range(60):
+            ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
+            gap_now = float(np.hypot(*(ends[0] - ends[1])))
+            closest = min(closest, gap_now)
+            tr = self.pair.transfer
+            step = self.loop.v_hat[[N, M]] * self.loop.tx
+            if gap_now > closest + self.loop.tune.meet_diverge_um or not (tr.keeps_room(N, float(step[0]), lower)
+                                                                          and tr.keeps_room(M, float(step[1]), lower)):
+                # past each other, or about to lose room to orbit (a one-way pair driven on ran into the arena
+                # edges 3 mm apart at 2x noise, D_(n-1) trapped there): stop while both can still turn away
+                self.loop.log("miss", N, f"{self.loop.scn.names[N]} and {self.loop.scn.names[M]} missed each other "
+                                         f"(closest {closest:.0f} um); the rendezvous is planned again")
+                return False
             before = self.loop.est[[N, M]].copy()
             self.loop.drive([(n - 2, self.loop.tx)])
             moved = np.hypot(*(self.loop.est[[N, M], :2] - before[:, :2]).T)

@@ -13,7 +13,6 @@ graph of the grid), a pure function of the measured orbits.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numpy as np

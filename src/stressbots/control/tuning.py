@@ -275,6 +275,11 @@ class Tuning:
     hold_headings: int = 24
     """Poses on a holding orbit (evenly spaced headings) D_n's way there may end at, re-chosen every t_x: the
     nearest one needs no loop of a one-way robot (15 deg apart: a few um of path between neighbours)."""
+    meet_diverge_um: float = 80.0
+    """um. The pair's front edges this much farther apart than at their closest during the meeting's straight
+    run count as having passed each other: the run stops there (and wherever either robot would lose room to
+    orbit) instead of driving on for 60 t_x into the arena edges. Beyond the camera's noise on two fronts
+    and the self-alignment's sideways limit (80 um)."""
 
 
 @dataclass(frozen=True)
