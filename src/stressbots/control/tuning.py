@@ -280,6 +280,10 @@ class Tuning:
     run count as having passed each other: the run stops there (and wherever either robot would lose room to
     orbit) instead of driving on for 60 t_x into the arena edges. Beyond the camera's noise on two fronts
     and the self-alignment's sideways limit (80 um)."""
+    loop_clearance_um: float = 15.0
+    """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
+    measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
+    ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
 
 
 @dataclass(frozen=True)
