@@ -154,8 +154,8 @@ class Rendezvous:
         s = np.linspace(0.0, float(self.loop.v_hat[N]) * left_s, max(2, int(left_s * 4) + 2))
         rest = move(self.loop.est[N], s, 1.0 / R)
         short = tune.wall_clearance_um - tune.loop_clearance_um
-        return not self.loop.obstacles_hit(rest, N, lower, extra_discs=tight_discs(disc, tune.loop_clearance_um, tune.g1_clearance_um - short),
-                                           clearance=tune.loop_clearance_um)
+        tight = tight_discs(disc, tune.loop_clearance_um, tune.g1_clearance_um - short)
+        return not self.loop.obstacles_hit(rest, N, lower, extra_discs=tight, clearance=tune.loop_clearance_um)
 
     def _tight(self, disc, clearance: float | None = None):
         """D_{n-1}'s orbit disc(s) shrunk so that checks at ``Tuning.wall_clearance_um`` keep ``clearance``
