@@ -246,7 +246,7 @@ class PairRecovery:
         orb = Orbiting(L.est[o], L.v_hat[o], L.r_hat[o], L.L[o], L.W[o], L.rstar[o], need)
         dk = np.flatnonzero(L.docked)
         return escape_manoeuvre(L.est[N], float(L.v_hat[N]), float(L.r_hat[N]), float(L.L[N]), float(L.W[N]), float(L.rstar[N]), orb,
-                                L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=tune.g1_clearance_um,
+                                L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=tune.escape_body_clearance_um,
                                 edge_clearance=tune.wall_clearance_um, docked=(L.est[dk], L.L[dk], L.W[dk]),
                                 turn_step_deg=tune.escape_search_step_deg, max_straight_um=tune.escape_search_straight_um,
                                 lead_ins_um=(0.0, 0.25 * float(L.L[N]), 0.5 * float(L.L[N])))

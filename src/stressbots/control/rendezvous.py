@@ -275,6 +275,7 @@ class Rendezvous:
             self.loop.drive([(n - 1, self.loop.tx)])
         self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
         closest = math.inf
+        free = True
         lower = self.loop.orbiting_below(n - 1)
         for _ in range(60):
             ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
@@ -282,8 +283,9 @@ class Rendezvous:
             closest = min(closest, gap_now)
             tr = self.pair.transfer
             step = self.loop.v_hat[[N, M]] * self.loop.tx
-            if gap_now > closest + self.loop.tune.meet_diverge_um or not (tr.keeps_room(N, float(step[0]), lower)
-                                                                          and tr.keeps_room(M, float(step[1]), lower)):
+            # only while both drive freely: in contact the fronts slide as compliance aligns them
+            if free and (gap_now > closest + self.loop.tune.meet_diverge_um
+                         or not (tr.keeps_room(N, float(step[0]), lower) and tr.keeps_room(M, float(step[1]), lower))):
                 # past each other, or about to lose room to orbit (a one-way pair driven on ran into the arena
                 # edges 3 mm apart at 2x noise, D_(n-1) trapped there): stop while both can still turn away
                 self.loop.log("miss", N, f"{self.loop.scn.names[N]} and {self.loop.scn.names[M]} missed each other "
@@ -292,6 +294,7 @@ class Rendezvous:
             before = self.loop.est[[N, M]].copy()
             self.loop.drive([(n - 2, self.loop.tx)])
             moved = np.hypot(*(self.loop.est[[N, M], :2] - before[:, :2]).T)
+            free = bool((moved >= self.loop.tune.meet_free_fraction * self.loop.v[[N, M]] * self.loop.tx).all())
             if (moved < 0.2 * self.loop.v[[N, M]] * self.loop.tx).all():
                 ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
                 gap = float(np.hypot(*(ends[0] - ends[1])))

@@ -268,6 +268,11 @@ class Tuning:
     escape_search_straight_um: float = 900.0
     """um. Longest straight of a searched escape: beyond an orbit disc's diameter (D_n's orbit can overlap one by
     its whole radius), short of crossing the arena."""
+    escape_body_clearance_um: float = 10.0
+    """um. Gap a searched escape keeps between D_n's body and every other body at the same instants (their
+    poses are predicted over seconds from identified turn rates, a few um off at 2x noise). Smaller than
+    ``g1_clearance_um``: the escape is the last move before G_1 gives up, and at 25 um every candidate
+    was refused with the other body still 108 um away."""
     hold_centre_tol_um: float = 100.0
     """um. D_n has reached its holding orbit once it orbits a free centre this close to the chosen one (the
     hold is a place to wait, not a pose): a quarter of a typical turning radius, well inside the 100 um grid
@@ -280,10 +285,21 @@ class Tuning:
     run count as having passed each other: the run stops there (and wherever either robot would lose room to
     orbit) instead of driving on for 60 t_x into the arena edges. Beyond the camera's noise on two fronts
     and the self-alignment's sideways limit (80 um)."""
+    meet_free_fraction: float = 0.8
+    """The meeting's stop checks (``meet_diverge_um``, room to orbit) apply only after a t_x in which both robots
+    covered at least this fraction of their nominal travel: driving freely, not in contact (where the front
+    edges slide apart while compliance aligns the pair, a meeting that succeeds)."""
     loop_clearance_um: float = 15.0
     """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
     measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
     ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
+    pair_rounds: int = 3
+    """Rounds of pair frames G_1 may try (each up to ``pair_frames``); between rounds D_n goes to wait on a free
+    orbit (or gets clear of the orbits), so a round plans from new poses. Every frame of a round failed at one
+    instant with nothing moved, and the run was given up with time budget left."""
+    round_moved_um: float = 20.0
+    """um. D_n must have moved at least this far between two rounds of pair frames (else the same poses would
+    fail the same way and G_1 gives up): several camera sigmas."""
 
 
 @dataclass(frozen=True)
