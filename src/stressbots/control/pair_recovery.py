@@ -137,10 +137,12 @@ class PairRecovery:
         n, vN, rN, tune = self.loop.n, self.loop.v_hat[N], self.loop.r_hat[N], self.loop.tune
         stalls = 0
         hold_c = turning_centres(np.asarray(hold, float), rN)[0]
-        for _ in range(tune.hold_frames):
-            if arrived(self.loop.est[N], hold, tune) or self.on_hold_orbit(N, hold_c, lower, disc):
+        for frame in range(tune.hold_frames):
+            # on the holding orbit counts once D_n has driven toward it: a D_n already there drives on to the hold
+            # pose as before (that time is its wait)
+            if arrived(self.loop.est[N], hold, tune) or (frame > 0 and self.on_hold_orbit(N, hold_c, lower, disc)):
                 return True
-            path = self.way_onto_orbit(N, hold_c)
+            path = self.way_onto_orbit(N, hold, lambda smp: self.hold_way_clear(N, smp, lower, disc, short))
             if not self.hold_way_clear(N, path.sample(10.0), lower, disc, short):
                 return True
             whole = path.length / vN <= tune.whole_leg_factor * self.loop.tx
@@ -156,16 +158,22 @@ class PairRecovery:
                 return True
         return True
 
-    def way_onto_orbit(self, N: int, centre) -> pathlib.Path:
-        """D_n's shortest path onto the orbit about ``centre`` (its own turning radius), at whichever of
-        ``Tuning.hold_headings`` poses on it is nearest: any pose on a holding orbit will do, and a one-way
-        robot that aims at one exact pose needs a whole loop each time its straight ends a little right of it
-        (at 2x noise D_n circled 110 s toward a hold 2 mm away and ended 1 mm from it)."""
+    def way_onto_orbit(self, N: int, hold, clear) -> pathlib.Path:
+        """D_n's shortest clear path onto its holding orbit (the orbit through pose ``hold``), at whichever of
+        ``Tuning.hold_headings`` poses on it is nearest by a path ``clear(samples)`` accepts (else the path to
+        ``hold`` itself): any pose on a holding orbit will do, and a one-way robot that aims at one exact pose
+        needs a whole loop each time its straight ends a little right of it (at 2x noise D_n circled 110 s
+        toward a hold 2 mm away and ended 1 mm from it)."""
         rN = float(self.loop.r_hat[N])
+        centre = turning_centres(np.asarray(hold, float), rN)[0]
         t = np.radians(np.arange(0.0, 360.0, 360.0 / self.loop.tune.hold_headings))
         poses = np.stack([centre[0] - rN * np.cos(t), centre[1] + rN * np.sin(t), t], axis=1)
         ell = pathlib.shortest_path_lengths(np.broadcast_to(self.loop.est[N], poses.shape), poses, rN)
-        return pathlib.shortest_path(self.loop.est[N], poses[int(np.argmin(ell))], rN)
+        for j in np.argsort(ell)[:4]:
+            path = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
+            if clear(path.sample(10.0)):
+                return path
+        return pathlib.shortest_path(self.loop.est[N], np.asarray(hold, float), rN)
 
     def on_hold_orbit(self, N: int, hold_c, lower, disc) -> bool:
         """Whether D_n already orbits a free centre within ``Tuning.hold_centre_tol_um`` of the holding orbit's
