@@ -102,16 +102,18 @@ class PairPhase:
         for round_no in range(self.loop.tune.pair_rounds):
             if round_no > 0 and not self.between_rounds(N, M, D, lower, last):
                 break
-            done, tried, last = self.form_round(N, M, D, lower, last)
+            done, tried, last = self.form_round(N, M, D, lower, last,
+                                                self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames)
             frames += tried
             if done:
                 return
         raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); last: {last}")
 
-    def form_round(self, N: int, M: int, D: float, lower, last: str) -> tuple[bool, int, str]:
-        """One round of pair frames from where the robots are (:meth:`form`): ``(formed, frames tried, last reason)``."""
+    def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int) -> tuple[bool, int, str]:
+        """One round of at most ``frames_max`` pair frames from where the robots are (:meth:`form`): ``(formed,
+        frames tried, last reason)``."""
         tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] if not last else []
-        for frame_no in range(self.loop.tune.pair_frames):
+        for frame_no in range(frames_max):
             if frame_no > 0 or last:
                 frames = [f for f in self.pair_frames(N, M, D, lower) if all(frames_apart(f, t) for t in tried)]
                 if not frames:

@@ -353,7 +353,9 @@ class StationTransfer:
 
         The end is predicted ``Tuning.track_overshoot`` long (the speed error) and must keep
         ``Tuning.orbit_room_um``; a robot with less room than that already may go on only while its room
-        grows. Checked before every straight frame of the transfer, it stops D_n (and D_{n-1} with it)
+        grows; short of that room from a lower orbit already, it may go on (stopped overlapping an orbit, D_n
+        found no turn that kept it clear of the body on it: tuning 74 at 2x, 19 at 1x). Checked before every
+        straight frame of the transfer, it stops D_n (and D_{n-1} with it)
         where a one-way robot can still wait or turn away, whatever the planned track assumed: at 2x the
         literature's noise D_n's tracks ended against the arena edge, and it was trapped there for good.
         """
@@ -361,8 +363,14 @@ class StationTransfer:
         ends = move(self.loop.est[N], np.array([0.0, run_um * (1.0 + tune.track_overshoot)]), 0.0)
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        now, end = orbit_room(ends, float(self.loop.r_hat[N]), float(self.loop.rstar[N]), self.loop.scn.arena_um, cs, rs)
-        return bool(end >= tune.orbit_room_um or (now < tune.orbit_room_um and end > now))
+        r, rstar = float(self.loop.r_hat[N]), float(self.loop.rstar[N])
+        now, end = orbit_room(ends, r, rstar, self.loop.scn.arena_um, np.zeros((0, 2)), np.zeros(0))
+        if not (end >= tune.orbit_room_um or (now < tune.orbit_room_um and end > now)):
+            return False
+        # the lower orbits: a D_n short of room from one already goes on (its body track is checked clear by the
+        # caller); stopped there, its orbit overlapping another, any turn may sweep it into that robot's body
+        o_now, o_end = orbit_room(ends, r, rstar, None, cs, rs)
+        return bool(o_end >= tune.orbit_room_um or o_now < tune.orbit_room_um)
 
     def track_clear(self, N: int, length: float, lower) -> bool:
         track = move(self.loop.est[N], np.linspace(0.0, max(length, 1.0), 30), 0.0)

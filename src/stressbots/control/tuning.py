@@ -293,13 +293,17 @@ class Tuning:
     """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
     measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
     ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
-    pair_rounds: int = 3
+    pair_rounds: int = 2
     """Rounds of pair frames G_1 may try (each up to ``pair_frames``); between rounds D_n goes to wait on a free
     orbit (or gets clear of the orbits), so a round plans from new poses. Every frame of a round failed at one
     instant with nothing moved, and the run was given up with time budget left."""
     round_moved_um: float = 20.0
     """um. D_n must have moved at least this far between two rounds of pair frames (else the same poses would
     fail the same way and G_1 gives up): several camera sigmas."""
+    round_frames: int = 3
+    """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
+    poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
+    66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
 
 
 @dataclass(frozen=True)
