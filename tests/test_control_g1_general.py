@@ -143,3 +143,35 @@ def test_swept_route_passes_a_gap_narrower_than_the_orbit_disc():
     for a, b in zip(pts[:-1], pts[1:], strict=True):
         assert brute_leg_clear(a, b, RSTAR_N, body, centres, radii, 25.0)
     assert not legs_clear(start[None], goal[None], RSTAR_N, centres, radii, ARENA, 25.0)[0]
+
+
+def fake_transfer(est, r, rstar, arena=ARENA):
+    """A StationTransfer on a hand-built snapshot (robot 0 is D_n; the others orbit below it)."""
+    from types import SimpleNamespace
+
+    from stressbots.control.transfer import StationTransfer
+    from stressbots.control.tuning import Tuning
+
+    loop = SimpleNamespace(est=np.asarray(est, float), r_hat=np.asarray(r, float), rstar=np.asarray(rstar, float),
+                           scn=SimpleNamespace(arena_um=arena), tune=Tuning())
+    return StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed: keeps_room reads only these
+
+
+def test_keeps_room_stops_before_the_edge_but_not_inside_an_orbit_it_overlaps():
+    """Against orbit_room by hand: heading +y toward the top edge D_n stops once its predicted orbit would
+    meet the edge; beside a lower orbit it already overlaps (running tangentially, the overlap unchanged) it
+    goes on (the rule before stopped it there, its room shrinking), where stopping left it inside that orbit."""
+    tr = fake_transfer([[1500.0, 2400.0, 0.0]], [R_N], [RSTAR_N])
+    # centre (1680, 2400): 600 - r* = 353 um of room now; 400 um on (460 predicted) leaves none
+    assert tr.keeps_room(0, 100.0, [])
+    assert not tr.keeps_room(0, 400.0, [])
+    # a lower orbit beside D_n's track, ahead: 1 um of room now, overlapping by 97 um at the predicted end
+    other_c = np.array([1680.0 + 2 * RSTAR_N - 100.0, 1300.0])
+    other = [other_c[0] - 200.0, other_c[1], 0.0]  # heading +y, turning radius 200 um: centre other_c
+    tr = fake_transfer([[1500.0, 1000.0, 0.0], other], [R_N, 200.0], [RSTAR_N, RSTAR_N])
+    from stressbots.control.station import orbit_room
+
+    now, end = orbit_room(move(np.array([1500.0, 1000.0, 0.0]), np.array([0.0, 345.0]), 0.0), R_N, RSTAR_N, None,
+                          other_c[None], [RSTAR_N])
+    assert 0.0 < now < 15.0 and end < now
+    assert tr.keeps_room(0, 300.0, [1])
