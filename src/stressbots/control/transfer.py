@@ -122,14 +122,16 @@ class StationTransfer:
         cl = self.loop.opts.clearance_um + 10.0  # transfer_option's check of D_{n-1}'s track
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        args = (self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um)
-        kw = dict(clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um)
-        route = orbit_route(*args, **kw)
+        def routed(body: Body | None) -> list[np.ndarray] | None:
+            return orbit_route(self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um,
+                               clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um,
+                               body=body)
+
+        route = routed(None)
         if route is None:
             # no capsule route: what D_{n-1}'s body sweeps passes gaps narrower than its orbit disc
-            body = Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
-                        math.radians(3.0))  # th_dep's left bias in transfer_leg
-            route = orbit_route(*args, **kw, body=body)
+            route = routed(Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
+                                math.radians(3.0)))  # th_dep's left bias in transfer_leg
         return route if route else [np.asarray(c_star, float)]
 
     def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
