@@ -97,10 +97,24 @@ class PairPhase:
         N, M = self.loop.by_rank[n], self.loop.by_rank[n - 1]
         lower = self.loop.orbiting_below(n - 1)
         D = self.meet_distance(N, M)
-        tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)]
+        frames = 0
         last = ""
-        for frame_no in range(self.loop.tune.pair_frames):
-            if frame_no > 0:
+        for round_no in range(self.loop.tune.pair_rounds):
+            if round_no > 0 and not self.between_rounds(N, M, D, lower, last):
+                break
+            done, tried, last = self.form_round(N, M, D, lower, last,
+                                                self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames)
+            frames += tried
+            if done:
+                return
+        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); last: {last}")
+
+    def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int) -> tuple[bool, int, str]:
+        """One round of at most ``frames_max`` pair frames from where the robots are (:meth:`form`): ``(formed,
+        frames tried, last reason)``."""
+        tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] if not last else []
+        for frame_no in range(frames_max):
+            if frame_no > 0 or last:
                 frames = [f for f in self.pair_frames(N, M, D, lower) if all(frames_apart(f, t) for t in tried)]
                 if not frames:
                     break
@@ -109,21 +123,33 @@ class PairPhase:
                 self.set_pair_frame(phi, dx, dy)
                 self.loop.replans += 1
                 self.loop.log("replan", N,
-                         f"G_1 re-planned from the measured poses ({last}): the structure turned {math.degrees(phi):.0f} deg and shifted "
-                         f"{math.hypot(dx, dy):.0f} um")
+                              f"G_1 re-planned from the measured poses ({last}): the structure turned {math.degrees(phi):.0f} deg and "
+                              f"shifted {math.hypot(dx, dy):.0f} um")
             try:
                 c_star = self.station(N, M, D)
                 self.transfer.run(N, M, c_star, D, lower)
                 for attempt in range(self.loop.tune.rendezvous_attempts):
                     if self.meeting.rendezvous(N, M, D, lower):
-                        return
+                        return True, len(tried), last
                     self.loop.log("retry", N, f"rendezvous attempt {attempt + 1} missed; {self.loop.scn.names[N]} re-plans its approach")
                 raise Replan(f"G_1 of {self.loop.scn.names[N]} and {self.loop.scn.names[M]} did not form in "
-                             f"{self.loop.tune.rendezvous_attempts} "
-                              "rendezvous attempts")
+                             f"{self.loop.tune.rendezvous_attempts} rendezvous attempts")
             except Replan as exc:
                 last = exc.reason
-        raise self.loop.abort(f"G_1 not formed after {len(tried)} pair frame(s); last: {last}")
+        return False, len(tried), last
+
+    def between_rounds(self, N: int, M: int, D: float, lower, last: str) -> bool:
+        """Before another round of pair frames: D_n waits on a free orbit near its approach (or first gets its
+        orbit clear of the others), so that the next round plans from somewhere else. False (no new round) when
+        D_n moved less than ``Tuning.round_moved_um``: the same poses would fail the same way."""
+        before = self.loop.est[N, :2].copy()
+        self.loop.log("hold", N, f"every pair frame failed ({last}); {self.loop.scn.names[N]} waits on a free orbit and G_1 "
+                                 "is planned again")
+        q = self.approach_pose(N, M, self.centre(M), D)
+        disc = [(self.centre(M), self.loop.rstar[M])]
+        if not self.recovery.to_holding(N, q, lower, disc):
+            self.recovery.escape(N, lower)
+        return bool(np.hypot(*(self.loop.est[N, :2] - before)) >= self.loop.tune.round_moved_um)
 
     def set_pair_frame(self, phi: float, dx: float, dy: float) -> None:
         """Aim at the nominal structure turned clockwise by ``phi`` about the G_1 junction and shifted by (dx, dy)."""

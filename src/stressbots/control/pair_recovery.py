@@ -13,6 +13,7 @@ import numpy as np
 from .. import paths as pathlib
 from ..collision import arena_gap
 from ..robots import TWO_PI, turning_centres
+from .escape_search import Orbiting, escape_manoeuvre
 from .gross import arrived, path_steps
 from .pair_geometry import tight_discs
 from .station import orbit_room
@@ -135,10 +136,13 @@ class PairRecovery:
         the commanded travel: blocked, failure region H)."""
         n, vN, rN, tune = self.loop.n, self.loop.v_hat[N], self.loop.r_hat[N], self.loop.tune
         stalls = 0
-        for _ in range(tune.hold_frames):
-            if arrived(self.loop.est[N], hold, tune):
+        hold_c = turning_centres(np.asarray(hold, float), rN)[0]
+        for frame in range(tune.hold_frames):
+            # on the holding orbit counts once D_n has driven toward it: a D_n already there drives on to the hold
+            # pose as before (that time is its wait)
+            if arrived(self.loop.est[N], hold, tune) or (frame > 0 and self.on_hold_orbit(N, hold_c, lower, disc)):
                 return True
-            path = pathlib.shortest_path(self.loop.est[N], hold, rN)
+            path = self.way_onto_orbit(N, hold, lambda smp: self.hold_way_clear(N, smp, lower, disc, short))
             if not self.hold_way_clear(N, path.sample(10.0), lower, disc, short):
                 return True
             whole = path.length / vN <= tune.whole_leg_factor * self.loop.tx
@@ -153,6 +157,34 @@ class PairRecovery:
             if whole:
                 return True
         return True
+
+    def way_onto_orbit(self, N: int, hold, clear) -> pathlib.Path:
+        """D_n's shortest clear path onto its holding orbit (the orbit through pose ``hold``), at whichever of
+        ``Tuning.hold_headings`` poses on it is nearest by a path ``clear(samples)`` accepts (else the path to
+        ``hold`` itself): any pose on a holding orbit will do, and a one-way robot that aims at one exact pose
+        needs a whole loop each time its straight ends a little right of it (at 2x noise D_n circled 110 s
+        toward a hold 2 mm away and ended 1 mm from it)."""
+        rN = float(self.loop.r_hat[N])
+        centre = turning_centres(np.asarray(hold, float), rN)[0]
+        t = np.radians(np.arange(0.0, 360.0, 360.0 / self.loop.tune.hold_headings))
+        poses = np.stack([centre[0] - rN * np.cos(t), centre[1] + rN * np.sin(t), t], axis=1)
+        ell = pathlib.shortest_path_lengths(np.broadcast_to(self.loop.est[N], poses.shape), poses, rN)
+        for j in np.argsort(ell)[:4]:
+            path = pathlib.shortest_path(self.loop.est[N], poses[j], rN)
+            if clear(path.sample(10.0)):
+                return path
+        return pathlib.shortest_path(self.loop.est[N], np.asarray(hold, float), rN)
+
+    def on_hold_orbit(self, N: int, hold_c, lower, disc) -> bool:
+        """Whether D_n already orbits a free centre within ``Tuning.hold_centre_tol_um`` of the holding orbit's
+        centre ``hold_c``: a holding orbit is where D_n waits, any pose on it will do. Aimed at as an exact pose
+        (25 um, 6 deg) at 2x noise, a one-way D_n looped after it for 110 s of a 120 t_x drive."""
+        tune = self.loop.tune
+        c = turning_centres(self.loop.est[N], self.loop.r_hat[N])
+        if float(np.hypot(*(c[0] - hold_c))) > tune.hold_centre_tol_um:
+            return False
+        discs = [(cc, r + tune.g1_clearance_um - tune.wall_clearance_um - 5.0) for cc, r in disc]
+        return bool(self.pair.orbits_free(N, c, discs, lower, tune.wall_clearance_um)[0])
 
     def escape(self, N: int, lower) -> bool:
         """D_n gets its orbit clear of the orbits around it and the arena edge: ``Tuning.g1_clearance_um`` from
@@ -181,14 +213,51 @@ class PairRecovery:
             if turn >= math.radians(240.0) or turn < 1e-9:  # heading within 60 deg of away: run straight out
                 if not self.pair.transfer.keeps_room(N, self.loop.v_hat[N] * self.loop.tx, lower) or self.meets_others(N, others, 0.0,
                                                                                                                     self.loop.tx):
-                    return False
+                    break
                 self.loop.drive([(n - 1, self.loop.tx)])
             else:
                 dt = min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N]
                 if self.meets_others(N, others, 1.0 / float(self.loop.r_hat[N]), dt):
-                    return False  # turning here would sweep D_n into a robot orbiting beside it
+                    break  # turning here would sweep D_n into a robot orbiting beside it
                 self.loop.drive([(n, dt)])
-        return False
+        # the direct way out is blocked (or ran out): the searched turn-then-straight, body to body in time
+        return self.searched_escape(N, others)
+
+    def searched_escape(self, N: int, others) -> bool:
+        """D_n drives the quickest (straight-)turn-straight that clears its orbit
+        (:func:`~stressbots.control.escape_search.escape_manoeuvre`, searched again from the measured poses every
+        t_x), at most ``Tuning.escape_search_frames`` t_x. True when clear.
+
+        The others keep orbiting meanwhile, so the search compares bodies at the same instants: D_n passes an
+        orbit disc it overlaps while the body on it is elsewhere."""
+        n, tune = self.loop.n, self.loop.tune
+        for _ in range(tune.escape_search_frames):
+            m = self.escape_plan(N, others)
+            if m is None:
+                self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no way out of the orbits around it")
+                return False
+            if m.total_s <= 1e-3:
+                return m.slack_um >= 0.0
+            # the first part, at most a t_x (the rest is searched again from the next frame)
+            k, dt = next((k, d) for k, d in ((n - 1, m.lead_s), (n, m.turn_s), (n - 1, m.straight_s)) if d > 1e-3)
+            self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
+        m = self.escape_plan(N, others)
+        return m is not None and m.total_s <= 1e-3 and m.slack_um >= 0.0
+
+    def escape_plan(self, N: int, others):
+        """D_n's way out from the measured poses (:func:`~stressbots.control.escape_search.escape_manoeuvre`): gaps
+        ``Tuning.g1_clearance_um`` from D_{n-1}'s orbit (``others[0]``), ``Tuning.wall_clearance_um`` from the rest,
+        the arena edge and the docked bodies."""
+        L, tune = self.loop, self.loop.tune
+        o = list(others)
+        need = np.array([tune.g1_clearance_um] + [tune.wall_clearance_um] * (len(o) - 1))
+        orb = Orbiting(L.est[o], L.v_hat[o], L.r_hat[o], L.L[o], L.W[o], L.rstar[o], need)
+        dk = np.flatnonzero(L.docked)
+        return escape_manoeuvre(L.est[N], float(L.v_hat[N]), float(L.r_hat[N]), float(L.L[N]), float(L.W[N]), float(L.rstar[N]), orb,
+                                L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=tune.escape_body_clearance_um,
+                                edge_clearance=tune.wall_clearance_um, docked=(L.est[dk], L.L[dk], L.W[dk]),
+                                turn_step_deg=tune.escape_search_step_deg, max_straight_um=tune.escape_search_straight_um,
+                                lead_ins_um=(0.0, 0.25 * float(L.L[N]), 0.5 * float(L.L[N])))
 
     def meets_others(self, N: int, others, curvature: float, dt: float) -> bool:
         """Whether D_n, driving ``dt`` s at ``curvature`` (1/um; 0 straight) from its measured pose, would come

@@ -144,6 +144,19 @@ class Rendezvous:
                     return tail, goals[kk], float(offset[kk]), float(want), (R, m)
         return None
 
+    def loop_clear(self, N: int, R: float, left_s: float, lower, disc) -> bool:
+        """Whether the rest of D_n's timing loop (radius ``R``, ``left_s`` seconds), from its measured pose, keeps
+        ``Tuning.loop_clearance_um`` from the arena edge, the orbits and the structure (D_{n-1}'s orbit at
+        ``Tuning.g1_clearance_um`` less the same shortfall). Checked every t_x: a loop is driven open loop by
+        interpolation, and at 2x noise two loops drifted 300 um and ended with D_n against the arena edge,
+        where a one-way robot cannot turn."""
+        tune = self.loop.tune
+        s = np.linspace(0.0, float(self.loop.v_hat[N]) * left_s, max(2, int(left_s * 4) + 2))
+        rest = move(self.loop.est[N], s, 1.0 / R)
+        short = tune.wall_clearance_um - tune.loop_clearance_um
+        tight = tight_discs(disc, tune.loop_clearance_um, tune.g1_clearance_um - short)
+        return not self.loop.obstacles_hit(rest, N, lower, extra_discs=tight, clearance=tune.loop_clearance_um)
+
     def _tight(self, disc, clearance: float | None = None):
         """D_{n-1}'s orbit disc(s) shrunk so that checks at ``Tuning.wall_clearance_um`` keep ``clearance``
         (default ``Tuning.g1_clearance_um``) from them."""
@@ -223,6 +236,10 @@ class Rendezvous:
                 self.loop.replans += 1
                 total = m * TWO_PI * R / vN
                 while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
+                    if not self.loop_clear(N, R, total, lower, disc):
+                        self.loop.log("loop", N, f"{self.loop.scn.names[N]}'s timing loop has drifted toward an obstacle; "
+                                                 "it plans again from here")
+                        break
                     d = min(self.loop.tx, total)
                     self.loop.drive(self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1))
                     total -= d
@@ -257,10 +274,27 @@ class Rendezvous:
                 break
             self.loop.drive([(n - 1, self.loop.tx)])
         self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        closest = math.inf
+        free = True
+        lower = self.loop.orbiting_below(n - 1)
         for _ in range(60):
+            ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
+            gap_now = float(np.hypot(*(ends[0] - ends[1])))
+            closest = min(closest, gap_now)
+            tr = self.pair.transfer
+            step = self.loop.v_hat[[N, M]] * self.loop.tx
+            # only while both drive freely: in contact the fronts slide as compliance aligns them
+            if free and (gap_now > closest + self.loop.tune.meet_diverge_um
+                         or not (tr.keeps_room(N, float(step[0]), lower) and tr.keeps_room(M, float(step[1]), lower))):
+                # past each other, or about to lose room to orbit (a one-way pair driven on ran into the arena
+                # edges 3 mm apart at 2x noise, D_(n-1) trapped there): stop while both can still turn away
+                self.loop.log("miss", N, f"{self.loop.scn.names[N]} and {self.loop.scn.names[M]} missed each other "
+                                         f"(closest {closest:.0f} um); the rendezvous is planned again")
+                return False
             before = self.loop.est[[N, M]].copy()
             self.loop.drive([(n - 2, self.loop.tx)])
             moved = np.hypot(*(self.loop.est[[N, M], :2] - before[:, :2]).T)
+            free = bool((moved >= self.loop.tune.meet_free_fraction * self.loop.v[[N, M]] * self.loop.tx).all())
             if (moved < 0.2 * self.loop.v[[N, M]] * self.loop.tx).all():
                 ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
                 gap = float(np.hypot(*(ends[0] - ends[1])))

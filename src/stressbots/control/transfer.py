@@ -20,7 +20,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
 from .pairloop import Replan
 from .queries import pose_on_orbit
-from .station import orbit_room, orbit_route
+from .station import Body, orbit_room, orbit_route
 
 if TYPE_CHECKING:
     from .pair import PairPhase
@@ -122,8 +122,16 @@ class StationTransfer:
         cl = self.loop.opts.clearance_um + 10.0  # transfer_option's check of D_{n-1}'s track
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        route = orbit_route(self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um,
-                            clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um)
+        def routed(body: Body | None) -> list[np.ndarray] | None:
+            return orbit_route(self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um,
+                               clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um,
+                               body=body)
+
+        route = routed(None)
+        if route is None:
+            # no capsule route: what D_{n-1}'s body sweeps passes gaps narrower than its orbit disc
+            route = routed(Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
+                                math.radians(3.0)))  # th_dep's left bias in transfer_leg
         return route if route else [np.asarray(c_star, float)]
 
     def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
@@ -347,7 +355,9 @@ class StationTransfer:
 
         The end is predicted ``Tuning.track_overshoot`` long (the speed error) and must keep
         ``Tuning.orbit_room_um``; a robot with less room than that already may go on only while its room
-        grows. Checked before every straight frame of the transfer, it stops D_n (and D_{n-1} with it)
+        grows; short of that room from a lower orbit already, it may go on (stopped overlapping an orbit, D_n
+        found no turn that kept it clear of the body on it: tuning 74 at 2x, 19 at 1x). Checked before every
+        straight frame of the transfer, it stops D_n (and D_{n-1} with it)
         where a one-way robot can still wait or turn away, whatever the planned track assumed: at 2x the
         literature's noise D_n's tracks ended against the arena edge, and it was trapped there for good.
         """
@@ -355,8 +365,14 @@ class StationTransfer:
         ends = move(self.loop.est[N], np.array([0.0, run_um * (1.0 + tune.track_overshoot)]), 0.0)
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        now, end = orbit_room(ends, float(self.loop.r_hat[N]), float(self.loop.rstar[N]), self.loop.scn.arena_um, cs, rs)
-        return bool(end >= tune.orbit_room_um or (now < tune.orbit_room_um and end > now))
+        r, rstar = float(self.loop.r_hat[N]), float(self.loop.rstar[N])
+        now, end = orbit_room(ends, r, rstar, self.loop.scn.arena_um, np.zeros((0, 2)), np.zeros(0))
+        if not (end >= tune.orbit_room_um or (now < tune.orbit_room_um and end > now)):
+            return False
+        # the lower orbits: a D_n short of room from one already goes on (its body track is checked clear by the
+        # caller); stopped there, its orbit overlapping another, any turn may sweep it into that robot's body
+        o_now, o_end = orbit_room(ends, r, rstar, None, cs, rs)
+        return bool(o_end >= tune.orbit_room_um or o_now < tune.orbit_room_um)
 
     def track_clear(self, N: int, length: float, lower) -> bool:
         track = move(self.loop.est[N], np.linspace(0.0, max(length, 1.0), 30), 0.0)

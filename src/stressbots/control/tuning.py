@@ -17,6 +17,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from ..assessment import SHAPE_TOL_UM
@@ -266,6 +267,7 @@ class Tuning:
     unblock_max_shift_um: float = 600.0
     """um. Longest straight move of such an orbit (one wait and one straight drive of the waiting group)."""
     unblock_moves_per_phase: int = 2
+    """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
     unblock_extra_loops: int = 2
     """Extra loops of the waiting robot an orbit move may wait before its straight: the robots driving straight with it
     (D_j .. D_k, turning at their own rates) then head elsewhere, and a move that ran one of them into the arena
@@ -274,12 +276,58 @@ class Tuning:
     """deg. After its wait, a waiting robot more than this off its planned departure heading does not drive the
     straight: it was held (touched by the docking robot, it cannot turn) and would leave in a direction nobody
     checked (one ran its orbit 137 um into the arena edge so)."""
-    """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
     start_park_margin_um: float = 100.0
     """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
     are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
     64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
     the drift of one G_1 phase."""
+    # -- G_1 generality (branch g1six, issue 12): searched escapes, reachable stations, pair rounds ----------
+    escape_search_frames: int = 12
+    """t_x. Longest searched escape of D_n (:meth:`~stressbots.control.pair_recovery.PairRecovery.searched_escape`),
+    re-searched every t_x: a turn of up to a loop (~20 s at the literature's speeds) and a straight."""
+    escape_search_step_deg: float = 15.0
+    """deg. Grid of the turns a searched escape tries before its straight: fine enough that one of them slips
+    between two orbiting bodies (a body passes a point of its orbit in a few degrees of D_n's turn)."""
+    escape_search_straight_um: float = 900.0
+    """um. Longest straight of a searched escape: beyond an orbit disc's diameter (D_n's orbit can overlap one by
+    its whole radius), short of crossing the arena."""
+    escape_body_clearance_um: float = 10.0
+    """um. Gap a searched escape keeps between D_n's body and every other body at the same instants (their
+    poses are predicted over seconds from identified turn rates, a few um off at 2x noise). Smaller than
+    ``g1_clearance_um``: the escape is the last move before G_1 gives up, and at 25 um every candidate
+    was refused with the other body still 108 um away."""
+    hold_centre_tol_um: float = 100.0
+    """um. D_n has reached its holding orbit once it orbits a free centre this close to the chosen one (the
+    hold is a place to wait, not a pose): a quarter of a typical turning radius, well inside the 100 um grid
+    the free orbits are chosen on."""
+    hold_headings: int = 24
+    """Poses on a holding orbit (evenly spaced headings) D_n's way there may end at, re-chosen every t_x: the
+    nearest one needs no loop of a one-way robot (15 deg apart: a few um of path between neighbours)."""
+    meet_diverge_um: float = math.inf
+    """um. The pair's front edges this much farther apart than at their closest during the meeting's straight
+    run count as having passed each other and the run stops. Off (inf) by default: at 80 um it misfired on
+    the estimate jumps after camera dropouts (tests/test_edr.py, 20 % dropouts: 1 of 3 seeds). The meeting
+    still stops wherever either robot would lose room to orbit (instead of driving on for 60 t_x into the
+    arena edges)."""
+    meet_free_fraction: float = 0.8
+    """The meeting's stop checks (``meet_diverge_um``, room to orbit) apply only after a t_x in which both robots
+    covered at least this fraction of their nominal travel: driving freely, not in contact (where the front
+    edges slide apart while compliance aligns the pair, a meeting that succeeds)."""
+    loop_clearance_um: float = 15.0
+    """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
+    measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
+    ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
+    pair_rounds: int = 2
+    """Rounds of pair frames G_1 may try (each up to ``pair_frames``); between rounds D_n goes to wait on a free
+    orbit (or gets clear of the orbits), so a round plans from new poses. Every frame of a round failed at one
+    instant with nothing moved, and the run was given up with time budget left."""
+    round_moved_um: float = 20.0
+    """um. D_n must have moved at least this far between two rounds of pair frames (else the same poses would
+    fail the same way and G_1 gives up): several camera sigmas."""
+    round_frames: int = 3
+    """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
+    poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
+    66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,177 @@
+"""G_1 made general (issue 12, branch g1six): D_n's searched escape and D_(n-1)'s swept-body station routes,
+checked against brute force (bodies simulated in time, legs sampled densely) on hand-built snapshots."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stressbots.collision import arena_gap, bodies_hit_discs, penetration_depth
+from stressbots.control.escape_search import Orbiting, escape_manoeuvre, orbit_slack
+from stressbots.control.station import Body, legs_clear, orbit_route, swept_legs_clear
+from stressbots.kinematics import move
+from stressbots.robots import orbit_radii, turning_centres
+
+ARENA = (3000.0, 3000.0)
+L_N, W_N, R_N, V_N = 260.0, 60.0, 180.0, 90.0
+RSTAR_N = float(orbit_radii(L_N, W_N, R_N))
+
+
+def one_orbiting(pose, r=200.0, L=280.0, W=60.0, v=80.0, need=25.0) -> Orbiting:
+    return Orbiting(np.array([pose], float), np.array([v]), np.array([r]), np.array([L]), np.array([W]),
+                    np.array([float(orbit_radii(L, W, r))]), np.array([need]))
+
+
+def replay(pose, m, others: Orbiting, dt: float = 0.02):
+    """Brute force: D_n's poses and the others' at the same instants along manoeuvre ``m`` (fine time steps)."""
+    t = np.arange(0.0, m.total_s + dt, dt)
+    t = np.minimum(t, m.total_s)
+    s1 = np.minimum(t, m.lead_s) * V_N
+    s2 = np.clip(t - m.lead_s, 0.0, m.turn_s) * V_N
+    s3 = np.clip(t - m.lead_s - m.turn_s, 0.0, m.straight_s) * V_N
+    p = move(np.asarray(pose, float), s1, 0.0)
+    p = move(p, s2, 1.0 / R_N)
+    p = move(p, s3, 0.0)
+    theirs = [move(others.poses[j], others.speeds[j] * t, 1.0 / others.radii[j]) for j in range(len(others.poses))]
+    return p, theirs
+
+
+def test_orbit_slack_counts_orbits_edge_and_need():
+    o = one_orbiting([1500.0, 1500.0, 0.0])
+    oc = turning_centres(o.poses, o.radii)[0]
+    c = oc + np.array([700.0, 0.0])
+    got = orbit_slack(c[None], RSTAR_N, o, ARENA, 40.0)[0]
+    assert math.isclose(got, 700.0 - RSTAR_N - o.rstar[0] - 25.0)
+    # near the edge the edge decides
+    assert math.isclose(orbit_slack(np.array([[RSTAR_N + 50.0, 1500.0]]), RSTAR_N, o, ARENA, 40.0)[0], 10.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.0, 2 * math.pi), st.floats(0.0, 2 * math.pi), st.floats(0.3, 0.95))
+def test_escape_keeps_bodies_apart_in_time_and_ends_clear(phase_other, heading, overlap):
+    """D_n's orbit overlaps an orbiting robot's disc (by up to most of its radius): any manoeuvre returned keeps the
+    bodies apart at every instant (replayed at 20 ms) and leaves D_n's orbit clear of the other's."""
+    other_c = np.array([1500.0, 1500.0])
+    r_o = 200.0
+    other_pose = np.array([other_c[0] - r_o * math.cos(phase_other), other_c[1] + r_o * math.sin(phase_other), phase_other])
+    o = one_orbiting(other_pose, r=r_o)
+    d = RSTAR_N + o.rstar[0] - overlap * RSTAR_N  # centre distance: discs overlap
+    my_c = other_c + d * np.array([math.cos(0.3), math.sin(0.3)])
+    pose = np.array([my_c[0] - R_N * math.cos(heading), my_c[1] + R_N * math.sin(heading), heading])
+    if (penetration_depth(pose[None], L_N, W_N, other_pose[None], o.lengths[0], o.widths[0]) > -30.0).any():
+        return  # bodies already touching: not the situation the search is for
+    m = escape_manoeuvre(pose, V_N, R_N, L_N, W_N, RSTAR_N, o, ARENA, edge_need=40.0, body_clearance=25.0, edge_clearance=40.0)
+    if m is None:
+        return
+    mine, theirs = replay(pose, m, o)
+    depth = penetration_depth(mine, L_N, W_N, theirs[0], o.lengths[0], o.widths[0])
+    # the search samples D_n every 20 um / 5 deg: between samples the gap may shrink by a little
+    assert depth.max() < -25.0 + 12.0
+    assert arena_gap(mine, L_N, W_N, ARENA).min() > 0.0
+    if m.slack_um >= 0.0:
+        end_c = turning_centres(mine[-1], R_N)[0]
+        oc = turning_centres(o.poses, o.radii)[0]
+        assert np.hypot(*(end_c - oc)) - RSTAR_N - o.rstar[0] - 25.0 >= -1e-6
+
+
+def test_escape_found_where_turning_away_at_once_is_blocked():
+    """The tuning-19 situation: the other body beside D_n's turn. A straight first, or a later turn, gets out."""
+    other_c = np.array([1500.0, 1500.0])
+    o = one_orbiting([other_c[0] - 200.0, other_c[1], 0.0])  # on the left of its orbit, heading +y
+    pose = np.array([other_c[0] - 200.0 + 90.0, 1500.0 - 40.0, 0.0])  # beside it, heading +y, orbits overlap
+    m = escape_manoeuvre(pose, V_N, R_N, L_N, W_N, RSTAR_N, o, ARENA, edge_need=40.0, body_clearance=10.0, edge_clearance=40.0)
+    assert m is not None
+    mine, theirs = replay(pose, m, o)
+    assert penetration_depth(mine, L_N, W_N, theirs[0], o.lengths[0], o.widths[0]).max() < 0.0
+
+
+def test_escape_none_when_walled_in_by_the_arena_corner():
+    """D_n in a corner, its orbit over both edges, heading into the corner: no turn or straight helps."""
+    pose = np.array([L_N / 2 + 5.0, ARENA[1] - 0.5 * L_N - 5.0, 0.0])  # touching the top-left, heading +y (up)
+    none = Orbiting(np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    m = escape_manoeuvre(pose, V_N, R_N, L_N, W_N, RSTAR_N, none, ARENA, edge_need=40.0, body_clearance=25.0, edge_clearance=40.0)
+    assert m is None or m.slack_um < 0.0 or arena_gap(replay(pose, m, none)[0], L_N, W_N, ARENA).min() >= -1e-6
+
+
+def brute_leg_clear(a, b, rstar, body: Body, centres, radii, clearance) -> bool:
+    """Brute force: the body driven from its departure pose along the (biased) leg every 5 um, and its orbit at b."""
+    d = np.asarray(b) - np.asarray(a)
+    th = math.atan2(d[0], d[1]) - body.bias_rad
+    start = np.array([a[0] - body.r_um * math.cos(th), a[1] + body.r_um * math.sin(th), th])
+    ell = float(np.hypot(*d)) + body.overrun_um
+    poses = move(start, np.arange(0.0, ell + 5.0, 5.0), 0.0)
+    if bodies_hit_discs(poses, body.length_um, body.width_um, centres, np.asarray(radii) + clearance - 1e-6).any():
+        return False
+    if (arena_gap(poses, body.length_um, body.width_um, ARENA) < clearance - 1e-6).any():
+        return False
+    gap_b = np.hypot(*(np.asarray(centres) - np.asarray(b)).T) - np.asarray(radii) - rstar
+    return bool((gap_b >= clearance - 1e-6).all())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(400.0, 2600.0), st.floats(400.0, 2600.0), st.floats(400.0, 2600.0), st.floats(400.0, 2600.0),
+       st.lists(st.tuples(st.floats(300.0, 2700.0), st.floats(300.0, 2700.0), st.floats(100.0, 300.0)), min_size=1, max_size=4),
+       st.floats(0.0, 0.06))
+def test_swept_leg_clear_is_sound(ax, ay, bx, by, discs, bias):
+    """Whenever swept_legs_clear passes a leg, the body driven along it (sampled every 5 um) and its orbit at the end
+    keep the clearance: never a clear verdict on a leg that touches."""
+    body = Body(R_N, L_N, W_N, 60.0, bias)
+    centres = np.array([(x, y) for x, y, _ in discs])
+    radii = np.array([r for _, _, r in discs])
+    a, b = np.array([ax, ay]), np.array([bx, by])
+    if np.hypot(*(b - a)) < 50.0:
+        return
+    ok = swept_legs_clear(a[None], b[None], RSTAR_N, body, centres, radii, ARENA, 25.0)[0]
+    if ok:
+        assert brute_leg_clear(a, b, RSTAR_N, body, centres, radii, 25.0)
+
+
+def test_swept_route_passes_a_gap_narrower_than_the_orbit_disc():
+    """A row of orbits across the arena, 300 um apart rim to rim: the capsule (orbit disc 2 r* = 494 um plus
+    clearance) cannot pass, the body (60 um wide) can; the route found is clear by brute force."""
+    start, goal = np.array([1530.0, 600.0]), np.array([1530.0, 2400.0])
+    centres = np.array([[150.0, 1500.0], [950.0, 1500.0], [1750.0, 1500.0], [2550.0, 1500.0]])
+    radii = np.full(4, 250.0)
+    assert orbit_route(start, goal, RSTAR_N, centres, radii, ARENA, clearance=25.0) is None
+    body = Body(R_N, L_N, W_N, 60.0, math.radians(3.0))
+    route = orbit_route(start, goal, RSTAR_N, centres, radii, ARENA, clearance=25.0, body=body)
+    assert route is not None and np.allclose(route[-1], goal)
+    pts = [start, *route]
+    for a, b in zip(pts[:-1], pts[1:], strict=True):
+        assert brute_leg_clear(a, b, RSTAR_N, body, centres, radii, 25.0)
+    assert not legs_clear(start[None], goal[None], RSTAR_N, centres, radii, ARENA, 25.0)[0]
+
+
+def fake_transfer(est, r, rstar, arena=ARENA):
+    """A StationTransfer on a hand-built snapshot (robot 0 is D_n; the others orbit below it)."""
+    from types import SimpleNamespace
+
+    from stressbots.control.transfer import StationTransfer
+    from stressbots.control.tuning import Tuning
+
+    loop = SimpleNamespace(est=np.asarray(est, float), r_hat=np.asarray(r, float), rstar=np.asarray(rstar, float),
+                           scn=SimpleNamespace(arena_um=arena), tune=Tuning())
+    return StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed: keeps_room reads only these
+
+
+def test_keeps_room_stops_before_the_edge_but_not_inside_an_orbit_it_overlaps():
+    """Against orbit_room by hand: heading +y toward the top edge D_n stops once its predicted orbit would
+    meet the edge; beside a lower orbit it already overlaps (running tangentially, the overlap unchanged) it
+    goes on (the rule before stopped it there, its room shrinking), where stopping left it inside that orbit."""
+    tr = fake_transfer([[1500.0, 2400.0, 0.0]], [R_N], [RSTAR_N])
+    # centre (1680, 2400): 600 - r* = 353 um of room now; 400 um on (460 predicted) leaves none
+    assert tr.keeps_room(0, 100.0, [])
+    assert not tr.keeps_room(0, 400.0, [])
+    # a lower orbit beside D_n's track, ahead: 1 um of room now, overlapping by 97 um at the predicted end
+    other_c = np.array([1680.0 + 2 * RSTAR_N - 100.0, 1300.0])
+    other = [other_c[0] - 200.0, other_c[1], 0.0]  # heading +y, turning radius 200 um: centre other_c
+    tr = fake_transfer([[1500.0, 1000.0, 0.0], other], [R_N, 200.0], [RSTAR_N, RSTAR_N])
+    from stressbots.control.station import orbit_room
+
+    now, end = orbit_room(move(np.array([1500.0, 1000.0, 0.0]), np.array([0.0, 345.0]), 0.0), R_N, RSTAR_N, None,
+                          other_c[None], [RSTAR_N])
+    assert 0.0 < now < 15.0 and end < now
+    assert tr.keeps_room(0, 300.0, [1])
