@@ -63,7 +63,7 @@ def orbit_slack(centres, rstar: float, others: Orbiting, arena_um, edge_need: fl
 
     >>> o = Orbiting(np.array([[0.0, 0.0, 0.0]]), np.array([10.0]), np.array([100.0]), np.array([200.0]), np.array([50.0]),
     ...              np.array([150.0]), np.array([25.0]))
-    >>> float(orbit_slack(np.array([[500.0, -100.0]]), 150.0, o, None, 40.0)[0])   # 500 - 150 - 150 - 25
+    >>> float(orbit_slack(np.array([[600.0, 0.0]]), 150.0, o, None, 40.0)[0])  # its centre (100, 0): 500 - 150 - 150 - 25
     175.0
     """
     c = np.atleast_2d(np.asarray(centres, dtype=np.float64))
@@ -115,10 +115,13 @@ def escape_manoeuvre(pose, speed: float, radius: float, L: float, W: float, rsta
 
     >>> o = Orbiting(np.array([[0.0, 0.0, 0.0]]), np.array([10.0]), np.array([100.0]), np.array([200.0]), np.array([50.0]),
     ...              np.array([150.0]), np.array([25.0]))
-    >>> m = escape_manoeuvre(np.array([150.0, 150.0, 0.0]), 10.0, 100.0, 200.0, 50.0, 150.0, o, None, edge_need=40.0,
-    ...                      body_clearance=10.0, edge_clearance=10.0)
-    >>> m is not None and m.slack_um >= 0.0
-    True
+    >>> pose = np.array([150.0, 150.0, 1.0])  # its orbit disc overlaps the other's by ~200 um
+    >>> round(float(orbit_slack(turning_centres(pose, 100.0), 150.0, o, None, 40.0)[0]))
+    -202
+    >>> m = escape_manoeuvre(pose, 10.0, 100.0, 200.0, 50.0, 150.0, o, None, edge_need=40.0, body_clearance=10.0,
+    ...                      edge_clearance=10.0)
+    >>> m.turn_s, m.straight_s, m.slack_um >= 0.0  # straight on for 220 um takes it clear
+    (0.0, 22.0, True)
     """
     pose = np.asarray(pose, dtype=np.float64)
     now = float(orbit_slack(turning_centres(pose, radius), rstar, others, arena_um, edge_need, docked)[0])
