@@ -146,10 +146,17 @@ def _cli_args(out: Path, trials: int = 24, seed: int = 2, *extra) -> list[str]:
     return ["montecarlo", str(SCENARIO), "--trials", str(trials), "--seed", str(seed), "--out", str(out), *extra]
 
 
+def _default_sigint() -> None:
+    """In the child before exec: Ctrl-C handled as in a terminal. A test suite started as a background job of
+    a non-interactive shell (``pytest ... &``) inherits SIGINT ignored, and so would the campaign: it ran
+    to the end through the test's Ctrl-C."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _spawn(args: list[str], trial_s: float) -> subprocess.Popen:
     env = dict(os.environ, STRESSBOTS_FAKE_TRIAL_S=str(trial_s), PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     return subprocess.Popen([sys.executable, "-m", "tests.campaign_fake", *args], env=env, cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
 
 
 def _wait_for_trials(db: Path, at_least: int, proc: subprocess.Popen, timeout_s: float = 30.0) -> int:
