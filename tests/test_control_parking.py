@@ -11,8 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots.control.parking import orbit_gaps, park_move
-from stressbots.kinematics import advance
 from stressbots.robots import orbit_radii, turning_centres
+
+from .plants import replay_orbit_move
 
 ARENA = (3000.0, 3000.0)
 L, W, R, V = 250.0, 60.0, 230.0, 85.0
@@ -24,18 +25,9 @@ def wall_gap(centre) -> float:
     return float(min(centre[0], ARENA[0] - centre[0], centre[1], ARENA[1] - centre[1])) - RSTAR
 
 
-def replay(poses, move, movers, still, dt=0.2):
-    """Replay: everyone turns for ``wait_s`` (P_k), then ``movers`` go straight for ``straight_s`` (P_{j-1});
-    returns the poses along the way (T, n, 3)."""
-    p = np.asarray(poses, float).copy()
-    n = len(p)
-    out = [p.copy()]
-    for turning, total in ((np.ones(n, bool), move.wait_s), (np.isin(np.arange(n), still), move.straight_s)):
-        steps = max(1, int(math.ceil(total / dt)))
-        for _ in range(steps):
-            p = advance(p, turning, np.full(n, V), np.full(n, R), total / steps)
-            out.append(p.copy())
-    return np.array(out)
+def replay(poses, move, still):
+    """The move replayed independently at this module's speed and radius (:func:`tests.plants.replay_orbit_move`)."""
+    return replay_orbit_move(poses, move, still, V, R)
 
 
 @settings(max_examples=15, deadline=None)
@@ -54,7 +46,7 @@ def test_a_robot_drifted_next_to_the_wall_moves_away_and_nobody_hits_anything(th
     assert abs(before[0] - gap) < 1e-6
     move = park_move(0, [0, 1], [2], poses, *args, shift_um=150.0, clearance_um=25.0)
     assert move is not None
-    path = replay(poses, move, [0, 1], [2])
+    path = replay(poses, move, [2])
     end = turning_centres(path[-1], R)
     assert wall_gap(end[0]) >= gap + 75.0 - 1e-6  # D_j's orbit moved at least half the shift away from the wall
     # nobody's orbit disc came closer to a wall or to another than it started (or 25 um)

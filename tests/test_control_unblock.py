@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 
 from stressbots.control.parking import blocking_orbits, unblock_move
 from stressbots.control.single import way_points
-from stressbots.kinematics import advance
 from stressbots.robots import orbit_radii, turning_centres
+
+from .plants import replay_orbit_move
 
 ARENA = (3000.0, 3000.0)
 L, W, R, V = 250.0, 60.0, 230.0, 85.0
@@ -46,17 +47,9 @@ def test_way_points_run_from_the_slot_back_along_the_approach_line_to_the_aim():
     assert np.allclose(np.hypot(*(extra - centre).T), 150.0, atol=1e-6) and len(extra) >= 8
 
 
-def replay(poses, move, still, dt=0.2):
-    """Everyone turns for ``wait_s`` (P_k), then all but ``still`` go straight for ``straight_s`` (P_{j-1})."""
-    p = np.asarray(poses, float).copy()
-    n = len(p)
-    out = [p.copy()]
-    for turning, total in ((np.ones(n, bool), move.wait_s), (np.isin(np.arange(n), still), move.straight_s)):
-        steps = max(1, int(math.ceil(total / dt)))
-        for _ in range(steps):
-            p = advance(p, turning, np.full(n, V), np.full(n, R), total / steps)
-            out.append(p.copy())
-    return np.array(out)
+def replay(poses, move, still):
+    """The move replayed independently at this module's speed and radius (:func:`tests.plants.replay_orbit_move`)."""
+    return replay_orbit_move(poses, move, still, V, R)
 
 
 @settings(max_examples=15, deadline=None)
