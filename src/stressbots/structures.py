@@ -750,6 +750,13 @@ def _bodies(geoms: Sequence[_Geom], poses: np.ndarray) -> _Bodies:
     return _Bodies([g.name for g in geoms], poses, corners, heads, polys, [_shrunk(p) for p in polys])
 
 
+def _slot(g: _Geom, b: _Bodies, k: int, **roles) -> Slot:
+    """The slot of body ``k`` of ``b``: robot ``g``'s name, index and geometry, its pose, and the role fields
+    (``role``, ``contact``, ``supports``, ``neighbours``, ``partner``, ``approach_um``) given."""
+    return Slot(robot=g.name, index=g.index, pose=Pose(*map(float, b.poses[k])), length_um=g.length_um, width_um=g.width_um,
+                orbit_radius_um=g.orbit_radius_um, **roles)
+
+
 def _pair_slots(geoms: Sequence[_Geom], b: _Bodies, approach: np.ndarray) -> list[Slot]:
     """The slots of G_1 (D_n, D_{n-1}), once checked head-on: each one's contact is its partner's front edge."""
     _check_pair(geoms[0], geoms[1], b.poses[0], b.poses[1])
@@ -757,20 +764,9 @@ def _pair_slots(geoms: Sequence[_Geom], b: _Bodies, approach: np.ndarray) -> lis
     for k, partner in ((0, 1), (1, 0)):
         g = geoms[k]
         slots.append(
-            Slot(
-                robot=g.name,
-                index=g.index,
-                pose=Pose(*map(float, b.poses[k])),
-                role="pair",
-                length_um=g.length_um,
-                width_um=g.width_um,
-                orbit_radius_um=g.orbit_radius_um,
-                contact=tuple(map(tuple, b.corners[partner, :2].tolist())),  # type: ignore[arg-type]
-                supports=(b.names[partner],),
-                neighbours=(b.names[partner],),
-                partner=b.names[partner],
-                approach_um=float(approach[k]),
-            )
+            _slot(g, b, k, role="pair", contact=tuple(map(tuple, b.corners[partner, :2].tolist())),
+                  supports=(b.names[partner],), neighbours=(b.names[partner],), partner=b.names[partner],
+                  approach_um=float(approach[k]))
         )
     return slots
 
@@ -809,20 +805,9 @@ def _dock_slot(geoms: Sequence[_Geom], b: _Bodies, k: int, sides: Sequence[Side]
     side, u0, u1 = found
     _check_corridor(geoms, b, k, approach_um)
     g = geoms[k]
-    return Slot(
-        robot=g.name,
-        index=g.index,
-        pose=Pose(*map(float, b.poses[k])),
-        role="dock",
-        length_um=g.length_um,
-        width_um=g.width_um,
-        orbit_radius_um=g.orbit_radius_um,
-        contact=side.segment,
-        supports=side.supports(u0, u1),
-        neighbours=tuple(b.names[j] for j in range(k) if b.polys[k].distance(b.polys[j]) <= POS_TOL_UM),
-        partner=None,
-        approach_um=approach_um,
-    )
+    return _slot(g, b, k, role="dock", contact=side.segment, supports=side.supports(u0, u1),
+                 neighbours=tuple(b.names[j] for j in range(k) if b.polys[k].distance(b.polys[j]) <= POS_TOL_UM),
+                 partner=None, approach_um=approach_um)
 
 
 def _assemble(
