@@ -191,17 +191,12 @@ class _Runner(PlantLoop):
             j = int(self.rank[i])
             if gaps[idx] >= margin or j == k or (i, k) in self._parked:
                 continue
-            movers = [self.by_rank[m] for m in range(j, k + 1)]
-            still = [self.by_rank[m] for m in range(1, j)]
+            park = {"shift_um": self.tune.park_shift_um, "clearance_um": self.tune.park_clearance_um}
             move_ = None
             if gaps[idx] < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
-                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
-                                  clearance_um=self.tune.park_clearance_um, held=True)
+                move_ = self._group_move(park_move, i, k, held=True, **park)
             if move_ is None:
-                move_ = park_move(i, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                                  self.est[docked], self.L[docked], self.W[docked], shift_um=self.tune.park_shift_um,
-                                  clearance_um=self.tune.park_clearance_um)
+                move_ = self._group_move(park_move, i, k, **park)
             if move_ is None:
                 if (i, "park") not in self._warned:  # once: tend_orbits asks every t_x
                     self._warned.add((i, "park"))
@@ -224,6 +219,16 @@ class _Runner(PlantLoop):
         if 1 <= k <= self.n - 2:
             self.park_orbits(k, top=k - 1)
 
+    def _group_move(self, move_fn, i: int, k: int, *extra, **settings):
+        """``move_fn`` (:func:`~stressbots.control.parking.park_move` or ``unblock_move``) for waiting robot ``i``
+        during D_k's phase, from the present estimates: D_j .. D_k (j = rank of ``i``) drive straight under
+        P_{j-1}, D_1 .. D_(j-1) keep orbiting, the docked bodies are obstacles."""
+        j = int(self.rank[i])
+        docked = np.flatnonzero(self.docked)
+        return move_fn(i, [self.by_rank[m] for m in range(j, k + 1)], [self.by_rank[m] for m in range(1, j)], self.est, self.r_hat,
+                       self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um, self.est[docked], self.L[docked], self.W[docked],
+                       *extra, **settings)
+
     def unblock_orbits(self, k: int, i: int, points: np.ndarray) -> bool:
         """During D_k's (robot ``i``'s) phase: move the waiting orbits (D_1 .. D_(k-1)) that block the ``points``
         (P, 2) robot ``i`` needs (:func:`~stressbots.control.parking.blocking_orbits`) off them
@@ -234,19 +239,15 @@ class _Runner(PlantLoop):
             return False
         reach = 0.5 * float(np.hypot(self.L[i], self.W[i])) + self.opts.clearance_um
         blocked = blocking_orbits(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], points, reach)
-        docked = np.flatnonzero(self.docked)
         moved = False
         for idx in np.flatnonzero(blocked):
             b = waiting[int(idx)]
             j = int(self.rank[b])
             if self._unblocks.get((b, k), 0) >= self.tune.unblock_moves_per_phase:
                 continue
-            movers = [self.by_rank[m] for m in range(j, k + 1)]
-            still = [self.by_rank[m] for m in range(1, j)]
-            move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                                 self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
-                                 margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
-                                 clearance_um=self.tune.park_clearance_um, loops=self.tune.unblock_extra_loops)
+            unblock = {"reach_um": reach, "margin_um": self.tune.unblock_margin_um, "max_shift_um": self.tune.unblock_max_shift_um,
+                       "clearance_um": self.tune.park_clearance_um}
+            move_ = self._group_move(unblock_move, b, k, points, loops=self.tune.unblock_extra_loops, **unblock)
             self._unblocks[(b, k)] = self._unblocks.get((b, k), 0) + 1
             if move_ is None:
                 self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way and no clear move takes "
@@ -258,10 +259,7 @@ class _Runner(PlantLoop):
             # a waiting robot touched by the docking one cannot turn: its planned straight would run off in another
             # direction; a straight along the heading it has is taken only if it is checked the same way
             if abs(angle_difference(self.est[b, 2], heading)) > np.radians(self.tune.unblock_heading_tol_deg):
-                move_ = unblock_move(b, movers, still, self.est, self.r_hat, self.omega_hat, self.v_hat, self.rstar, self.scn.arena_um,
-                                     self.est[docked], self.L[docked], self.W[docked], points, reach_um=reach,
-                                     margin_um=self.tune.unblock_margin_um, max_shift_um=self.tune.unblock_max_shift_um,
-                                     clearance_um=self.tune.park_clearance_um, headings=[float(self.est[b, 2])])
+                move_ = self._group_move(unblock_move, b, k, points, headings=[float(self.est[b, 2])], **unblock)
                 if move_ is None:
                     self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but it did not "
                                            "turn to its departure heading: it stays")
