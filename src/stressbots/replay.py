@@ -94,12 +94,11 @@ def replay(
         goals = np.array([plan.goals[nm] if nm in plan.goals else (np.nan,) * 3 for nm in names], dtype=np.float64)
     goals = np.asarray(goals, dtype=np.float64)
 
-    speed, length, width = scenario.speeds_um_s, scenario.lengths_um, scenario.widths_um
+    speed = scenario.speeds_um_s
     pose = scenario.starts.copy()
     pose[:, 2] = np.mod(pose[:, 2], TWO_PI)
     docked = np.zeros(n, dtype=bool)
     dock_time = np.full(n, np.nan)
-    pairs_i, pairs_j = np.triu_indices(n, k=1)
     t_now = 0.0
     trace_t: list[float] = [0.0]
     trace_p: list[np.ndarray] = [pose.copy()]
@@ -114,11 +113,7 @@ def replay(
         traj, t, t_dock, accepted = _step_motion(pose, goals, docked, turning, scenario, step.duration_s,
                                                  max(2, int(math.ceil(vmax * step.duration_s / max_step_um)) + 1),
                                                  tol_um, heading_tol_rad)
-        for key, text in _overlaps(traj, t + t_now, pairs_i, pairs_j, length, width, tol_um, names, f"step {k}, {step.primitive}"):
-            note(key, text)
-        if scenario.arena_um is not None:
-            for key, text in _arena_exits(traj, t + t_now, length, width, scenario.arena_um, tol_um, names, f"step {k}"):
-                note(key, text)
+        _note_contacts(note, traj, t + t_now, scenario, tol_um, f"step {k}", step.primitive)
         pose = traj[-1].copy()
         docked[accepted] = True
         dock_time[accepted] = t_now + t_dock[accepted]
@@ -149,6 +144,19 @@ class _ProblemLog:
         if key not in self.reported:
             self.reported.add(key)
             self.problems.append(text)
+
+
+def _note_contacts(note: _ProblemLog, traj: np.ndarray, t_s: np.ndarray, scenario, tol_um: float, where: str,
+                   primitive: str) -> None:
+    """Note every pair of bodies that interpenetrates, and every body outside the arena, along one step's samples."""
+    names = list(scenario.names)
+    length, width = scenario.lengths_um, scenario.widths_um
+    pairs_i, pairs_j = np.triu_indices(len(names), k=1)
+    for key, text in _overlaps(traj, t_s, pairs_i, pairs_j, length, width, tol_um, names, f"{where}, {primitive}"):
+        note(key, text)
+    if scenario.arena_um is not None:
+        for key, text in _arena_exits(traj, t_s, length, width, scenario.arena_um, tol_um, names, where):
+            note(key, text)
 
 
 def _step_motion(pose: np.ndarray, goals: np.ndarray, docked: np.ndarray, turning: np.ndarray, scenario, dur: float,
