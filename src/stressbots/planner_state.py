@@ -147,6 +147,7 @@ class PlannerState:
             self.opts = wide
         if self.search.budget is not None:  # the failed wide attempt's G_1 schedules are not the fallback's to miss
             self.search.budget += self.search.used - used
+        assert fallback is not None  # ``two``
         self.opts = replace(wide, clearance_um=fallback, fallback_clearance_um=None)
         self._timed_cache.clear()  # both caches hold paths checked at the wider clearance
         self._route_cache.clear()
