@@ -215,3 +215,26 @@ def test_body_outlines_shape_and_geometry():
     np.testing.assert_allclose(out[0, 0, :2, 1], 130.0)
     edges = np.hypot(*(out[..., 1, :] - out[..., 0, :]).T)
     np.testing.assert_allclose(edges, 60.0)
+
+
+segment_lists = st.lists(st.tuples(st.sampled_from([0.0, 0.0, 1.0]), length, radius), min_size=1, max_size=8)
+
+
+@settings(max_examples=200, deadline=None)
+@given(start=poses, segments=segment_lists, s_frac=st.floats(-0.1, 1.1))
+def test_one_path_in_plain_floats_is_bit_identical_to_the_array_composition(start, segments, s_frac):
+    """``follow`` and ``poses_from_joints`` of one path run in plain floats (``_follow_one``, ``_move_one``);
+    truth: ``move`` on arrays, one segment after the other, and on a batch of one query."""
+    lengths = np.array([s for _, s, _ in segments])
+    kappas = np.array([k / r for k, _, r in segments])
+    fast = km.follow(np.array(start), lengths, kappas)
+    pose, slow = np.array(start), [np.array(start)]
+    for s, k in zip(lengths, kappas, strict=True):
+        pose = km.move(pose[None, :], np.array([s]), np.array([k]))[0]
+        slow.append(pose)
+    assert np.array_equal(fast, np.stack(slow))
+    cum = np.concatenate([[0.0], np.cumsum(lengths)])
+    s = s_frac * cum[-1]
+    one = km.poses_from_joints(fast, cum, kappas, s)
+    batch = km.poses_from_joints(fast, cum, kappas, np.array([s]))[0]
+    assert np.array_equal(one, batch)

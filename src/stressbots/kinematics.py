@@ -56,6 +56,7 @@ __all__ = [
     "advance",
     "follow",
     "poses_along",
+    "poses_from_joints",
     "sample_arclengths",
     "trajectory",
     "body_outlines",
@@ -172,6 +173,8 @@ def follow(start, lengths_um, curvatures_per_um) -> np.ndarray:
     lengths = np.asarray(lengths_um, dtype=np.float64)
     kappas = np.asarray(curvatures_per_um, dtype=np.float64)
     lengths, kappas = np.broadcast_arrays(lengths, kappas)
+    if start.shape == (3,) and lengths.ndim == 1:
+        return _follow_one(start, lengths, kappas)
     lead = np.broadcast_shapes(start.shape[:-1], lengths.shape[:-1])
     pose = np.broadcast_to(start, lead + (3,))
     nodes = [pose]
@@ -179,6 +182,38 @@ def follow(start, lengths_um, curvatures_per_um) -> np.ndarray:
         pose = move(pose, lengths[..., k], kappas[..., k])
         nodes.append(np.broadcast_to(pose, lead + (3,)))
     return np.stack(nodes, axis=-2)
+
+
+def _follow_one(start: np.ndarray, lengths: np.ndarray, kappas: np.ndarray) -> np.ndarray:
+    """:func:`follow` for one path, in plain floats (:func:`_move_one`): bit-identical joints without
+    numpy's per-call overhead on 0-d arrays (~40 us per segment; a path's joints are composed each time
+    it is sampled). Checked against :func:`move` by a Hypothesis property in the tests.
+    """
+    out = np.empty((len(lengths) + 1, 3))
+    out[0] = start
+    x, y, th = (float(v) for v in start)
+    for k, (s, kappa) in enumerate(zip(lengths.tolist(), kappas.tolist(), strict=True)):
+        x, y, th = _move_one(x, y, th, s, kappa)
+        out[k + 1] = (x, y, th)
+    return out
+
+
+def _move_one(x: float, y: float, theta: float, s: float, kappa: float) -> tuple[float, float, float]:
+    """:func:`move` of one pose in plain floats: the same operations in the same order (numpy's sin and
+    cos, whose results do not depend on the array's length; Python's float remainder, which is numpy's),
+    so the result is bit-identical."""
+    turn = kappa * s
+    u = math.pi * (turn * (0.5 / math.pi))  # np.sinc's argument times pi
+    if u == 0.0:
+        u = _EPS  # np.sinc(0) = sin(eps) / eps
+    mid = theta + 0.5 * turn
+    sines = np.sin(np.array((u, mid)))
+    chord = s * (float(sines[0]) / u)
+    th = (theta + turn) % TWO_PI
+    return x + chord * float(sines[1]), y + chord * float(np.cos(np.array((mid,)))[0]), 0.0 if th >= TWO_PI else th
+
+
+_EPS = float(np.finfo(np.float64).eps)
 
 
 def poses_along(start, lengths_um, curvatures_per_um, s_um) -> np.ndarray:
@@ -202,11 +237,22 @@ def poses_along(start, lengths_um, curvatures_per_um, s_um) -> np.ndarray:
     start = np.asarray(start, dtype=np.float64)
     if lengths.size == 0:
         return np.broadcast_to(wrap_pose(start), s.shape + (3,)).copy()
-    nodes = follow(start, lengths, kappas)
-    cum = np.concatenate([[0.0], np.cumsum(lengths)])
-    s = np.clip(s, 0.0, cum[-1])
-    idx = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, lengths.size - 1)
-    return move(nodes[idx], s - cum[idx], kappas[idx])
+    return poses_from_joints(follow(start, lengths, kappas), np.concatenate([[0.0], np.cumsum(lengths)]), kappas, s)
+
+
+def poses_from_joints(nodes: np.ndarray, cum_um: np.ndarray, curvatures_per_um: np.ndarray, s_um) -> np.ndarray:
+    """:func:`poses_along` from its segment sequence's joints, already composed: ``nodes`` ``(K + 1, 3)``
+    (:func:`follow`), ``cum_um`` ``(K + 1,)`` the arc lengths (um) at the joints, from 0, and the curvatures
+    ``(K,)`` (K >= 1). A path sampled many times composes its joints once (:attr:`stressbots.paths.Path.nodes`).
+    """
+    s = np.clip(np.asarray(s_um, dtype=np.float64), 0.0, cum_um[-1])
+    idx = np.clip(np.searchsorted(cum_um, s, side="right") - 1, 0, len(curvatures_per_um) - 1)
+    if s.ndim == 0:  # one pose: plain floats, bit-identical to move
+        j = int(idx)
+        node = nodes[j]
+        return np.array(_move_one(float(node[0]), float(node[1]), float(node[2]), float(s) - float(cum_um[j]),
+                                  float(curvatures_per_um[j])))
+    return move(nodes[idx], s - cum_um[idx], curvatures_per_um[idx])
 
 
 def wrap_pose(pose) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -33,11 +34,15 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         blocked = obst.hits(line, self.L[i], self.W[i], self.opts.clearance_um)
         return float(probe[np.argmax(blocked)] - self.opts.sample_um) if blocked.any() else float(probe[-1])
 
-    def form_pair(self) -> None:
+    def form_pair(self, stage: str = "all") -> None:
         """Step 1: D_n and D_{n-1} form G_1 (see :mod:`stressbots.planning` for the scheme).
 
-        First without D_n orbiting before its whole-period paths (those schedules are shorter); when
-        that finds no schedule, again with it (:meth:`~stressbots.timed_paths.TimedPaths._orbit_first`): more layouts are plannable.
+        In the extended search D_n may orbit before its whole-period paths
+        (:meth:`~stressbots.timed_paths.TimedPaths._orbit_first`): more layouts are plannable.
+        ``stage`` selects part of the search: ``"overlap"`` the overlapped schedules alone (around the
+        direct routes of D_{n-1}, then around the first ``overlap.roadmap_routes`` routes its roadmap
+        search finds: the cheap part, which mostly succeeds), ``"pieces"`` the piece scheme alone
+        (:meth:`form_pair_staged` runs them in turn).
         """
         # Everything the G_1 search depends on besides the scenario, which all variants share: the
         # pair's slots and approach lengths, the options and the pass (each planner starts from the
@@ -45,25 +50,48 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         n = self.n
         N, M = self.by_rank[n], self.by_rank[n - 1]
         key = (tuple(np.round(self.goals[[N, M]], 9).ravel()), approach_length(self.struct, self.scn.names[N], self.opts),
-               approach_length(self.struct, self.scn.names[M], self.opts), self.extended, self.opts)
+               approach_length(self.struct, self.scn.names[M], self.opts), self.extended, self.opts, stage)
         if key in self.search.pair_failures:
             raise NoRoute(self.search.pair_failures[key])
+        self._pair_stage = stage
         try:
             self._form_pair_search()
         except NoRoute as exc:
             self.search.pair_failures[key] = exc.reason
             raise
+        finally:
+            self._pair_stage = "all"
+
+    def form_pair_staged(self) -> None:
+        """Step 1 with the clearance fallback (:meth:`~stressbots.planner_state.PlannerState.step_with_fallback`),
+        cheapest search first: the overlapped G_1 at the planner's clearance, then at the fallback
+        clearance, and only then the piece scheme at the planner's clearance, then at the fallback one.
+
+        The piece scheme is the expensive part (``pair_schedules`` G_1 schedules, ~0.1 s each, before it
+        gives up) and its G_1 is 2-5x longer, so an overlapped G_1 at the narrower clearance is preferred
+        to the piece scheme at the wider one (bench_planner: where the overlapped G_1 needs the narrower
+        clearance, the piece scheme at the wider one failed anyway, after ~1-3 s). Without a fallback
+        clearance, or without overlapped schedules, this is :meth:`form_pair` with the fallback.
+        """
+        fallback = self.opts.fallback_clearance_um
+        if not self.opts.overlap_pair or fallback is None or fallback >= self.opts.clearance_um:
+            self.step_with_fallback(self.form_pair, "G_1")
+            return
+        try:
+            self.step_with_fallback(partial(self.form_pair, "overlap"), "G_1 (overlapped)")
+            return
+        except NoRoute:
+            pass
+        self.step_with_fallback(partial(self.form_pair, "pieces"), "G_1")
 
     def _form_pair_search(self) -> None:
-        self._orbit_first_on = False
-        try:
-            self._form_pair_once()
-        except NoRoute:
-            if self.opts.orbit_phases <= 0 or not self.extended or self.search.spent:
-                raise
-            self._orbit_first_on = True
-            self._timed_cache.clear()
-            self._form_pair_once()
+        """One G_1 search; in the extended search D_n's whole-period paths may first orbit at their start
+        (:meth:`~stressbots.timed_paths.TimedPaths._orbit_first`) from the outset. The orbit is a timed
+        path's last resort, so each schedule a search without it finds, this search finds too: a first
+        pass without it (as before) repeated its failures in full before the pass with it (gap-16: 64
+        failed schedules, 7 s, before the 18 of the pass that planned it)."""
+        self._orbit_first_on = self.extended and self.opts.orbit_phases > 0
+        self._form_pair_once()
 
     def _form_pair_once(self) -> None:
         n = self.n
@@ -93,7 +121,7 @@ class PairPlanning(PieceSchedules, OverlappedPair):
         parks = self._parking_tracks(N, M, obst_low, span)
         self._overlap_sched = None
         self._overlap_routes_tried = 0
-        if opts.overlap_pair and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
+        if opts.overlap_pair and self._pair_stage != "pieces" and self._overlap_first(N, M, sourcesM, waits, preM, approachM, obst_low):
             return
         self._piece_search(N, M, sourcesM, waits, preM, approachM, obst_low, lower, parks, d_free, aM)
 
@@ -131,6 +159,10 @@ class PairPlanning(PieceSchedules, OverlappedPair):
             """Can D_n be scheduled around this route of D_{n-1}? Records the schedule when it can."""
             if overlap_routes[0] and self._overlap_route(N, M, routeM, approachM, float(waits[sidx]), obst_low):
                 return None
+            if self._pair_stage == "overlap":  # overlapped schedules only: end once their routes are spent
+                if self._overlap_routes_tried >= opts.overlap.roadmap_routes:
+                    raise SearchSpent("no overlapped schedule")
+                return "no overlapped schedule"
             fullM = routeM.then(*approachM.segments)
             T = fullM.length / vM
             for park in parks[:1] if one_piece[0] else parks:
@@ -148,8 +180,9 @@ class PairPlanning(PieceSchedules, OverlappedPair):
             return attempts[-1] if attempts else f"{whoM}'s route is too long for {whoN}'s free corridor ({d_free:.0f} um)"
 
         self._pair_schedule = None
-        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route) if opts.pair_candidates > 1 else None
-        if opts.pair_candidates > 1 and (best is None or len(best[4]) > 1):
+        pieces_first = opts.pair_candidates > 1 and self._pair_stage != "overlap"
+        best = self._best_direct_pair(sourcesM, preM, rM, M, obst_low, try_route) if pieces_first else None
+        if pieces_first and (best is None or len(best[4]) > 1):
             # A detour of D_{n-1} that D_n's corridor covers in one piece is often faster than pieces.
             one_piece[0], budget[0] = True, opts.pair_schedules
             light = replace(opts, roadmap_nodes=opts.roadmap_nodes[:2])
@@ -165,7 +198,7 @@ class PairPlanning(PieceSchedules, OverlappedPair):
             self._run_pair_schedule()
             return
         budget[0] = opts.pair_schedules
-        overlap_routes[0] = opts.overlap_pair
+        overlap_routes[0] = opts.overlap_pair and self._pair_stage != "pieces"  # "pieces": the overlap stage tried them
         try:
             route(sourcesM, waits * vM, preM, rM, self.L[M], self.W[M], obst_low, opts, self.rng, whoM, extra_check=try_route)
         except NoRoute as exc:

@@ -85,7 +85,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .kinematics import TWO_PI, follow, poses_along, sample_arclengths, wrap
+from .kinematics import TWO_PI, follow, poses_along, poses_from_joints, sample_arclengths, wrap
 from .robots import Pose
 
 __all__ = [
@@ -218,9 +218,21 @@ class Path:
         """End pose (heading in ``[0, 2 pi)``)."""
         return Pose(*(float(v) for v in self.nodes[-1]))
 
+    @cached_property
+    def _joints(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """:attr:`nodes`, the arc lengths at them (um) and the segment curvatures (1/um), for
+        :meth:`pose_at` (a path is sampled many times: its joints are composed once); None if empty."""
+        if not self.segments:
+            return None
+        return self.nodes, np.concatenate([[0.0], np.cumsum(self.lengths)]), self.curvatures
+
     def pose_at(self, s_um):
         """Pose(s) after driving ``s_um`` (clipped to ``[0, length]``): a Pose, or (M, 3) for arrays."""
-        out = poses_along(np.array(self.start), self.lengths, self.curvatures, s_um)
+        joints = self._joints
+        if joints is None:
+            out = poses_along(np.array(self.start), self.lengths, self.curvatures, s_um)
+        else:
+            out = poses_from_joints(*joints, s_um)
         return Pose(*(float(v) for v in out)) if np.ndim(s_um) == 0 else out
 
     def sample(self, step_um: float) -> np.ndarray:

@@ -90,6 +90,11 @@ class PlannerOptions:
         approach (which starts ~``approach_um`` behind the slot): arcs that start beside the slot, for a
         slot whose rear lies near the arena edge (a long stem's tip). A radius just above the turning
         radius leaves the fine motion little room to correct, so they are only a fallback; () never.
+    timed_roadmaps:
+        How many of ``roadmap_nodes``' roadmaps D_n's routed timed paths of G_1 search (the first ones):
+        a leg whose route fails in the 80-node roadmap mostly fails in the larger one too, and a G_1 search
+        has other cuts and routes to try (2 until issue 15's speed work: gap-16's nominal plan 30 -> 16 s of
+        CPU, three other seeds 10-15 % faster).
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike
@@ -117,6 +122,7 @@ class PlannerOptions:
     tight_approach_deg: tuple[float, ...] = (90.0, 60.0, 45.0)
     tight_approach_radius: float = 1.1
     search_budget: int | None = SEARCH_BUDGET_DEFAULT
+    timed_roadmaps: int = 1
     overlap_pair: bool = True
     overlap: OverlapSettings = OverlapSettings()
     preposition: bool = True

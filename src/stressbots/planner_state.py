@@ -80,6 +80,7 @@ class PlannerState:
                  search: SharedSearch | None = None):
         self.search = search or SharedSearch(opts.search_budget)  # shared by every variant of one plan_assembly call
         self.extended = extended  # the wider G_1 search (leg stretch, orbit first, ...): after all variants failed
+        self._wide_schedules = opts.pair_schedules  # G_1 schedules of an attempt at the wider of two clearances
         if extended:  # the wider G_1 search: more pieces (the seed's one-piece scheme stays one), more schedules
             pieces = max(opts.max_pieces, opts.extended_max_pieces) if opts.max_pieces > 1 else opts.max_pieces
             opts = replace(opts, max_pieces=pieces, pair_schedules=max(opts.pair_schedules, opts.extended_pair_schedules))
@@ -109,6 +110,7 @@ class PlannerState:
         self._overlap_sched: PairSchedule | None = None  # an overlapped schedule accepted around a roadmap route
         self._overlap_routes_tried = 0  # roadmap routes tried overlapped in this G_1 search
         self._pair_schedule: tuple | None = None  # the piece scheme's accepted schedule
+        self._pair_stage = "all"  # which part of the G_1 search runs: "all", "overlap" or "pieces" (form_pair_staged)
 
     def lab(self, i: int) -> str:
         return robot_label(self.scn, i, self.rank[i])
@@ -124,17 +126,28 @@ class PlannerState:
         at the cost of one search instead of two. The G_1 schedules the failed wide attempt tried are
         added to the search budget, so the fallback searches as far as a search at its clearance alone
         would. Raises the fallback attempt's :class:`NoRoute`.
+
+        The wide clearance is a preference: in the extended search its attempt gets the standard search's
+        G_1 schedules per G_1 search (:attr:`PlannerOptions.pair_schedules`), the extended search's
+        (``extended_pair_schedules``) being for the fallback, where completeness is at stake (gap-16:
+        63 schedules, 12 s, failed at 40 um before 5 planned it at 10 um).
         """
         wide, fallback = self.opts, self.opts.fallback_clearance_um
+        two = fallback is not None and fallback < wide.clearance_um
         used = self.search.used
+        if two and wide.pair_schedules > self._wide_schedules:
+            self.opts = replace(wide, pair_schedules=self._wide_schedules)
         try:
             step()
             return
         except NoRoute:
-            if fallback is None or fallback >= wide.clearance_um:
+            if not two:
                 raise
+        finally:
+            self.opts = wide
         if self.search.budget is not None:  # the failed wide attempt's G_1 schedules are not the fallback's to miss
             self.search.budget += self.search.used - used
+        assert fallback is not None  # ``two``
         self.opts = replace(wide, clearance_um=fallback, fallback_clearance_um=None)
         self._timed_cache.clear()  # both caches hold paths checked at the wider clearance
         self._route_cache.clear()

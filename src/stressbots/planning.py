@@ -160,7 +160,7 @@ def _plan_structure(scn, analysis: ControlAnalysis, st: Structure, lb: float, ca
         for k in planner.search.bottlenecks:  # fail fast where an earlier variant failed to dock
             planner.step_with_fallback(partial(planner.dock_check, k), "")
         say(f"forming G_1 ({planner.lab(planner.by_rank[scn.n])}, {planner.lab(planner.by_rank[scn.n - 1])})")
-        planner.step_with_fallback(planner.form_pair, "G_1")
+        planner.form_pair_staged()
     except NoRoute as exc:
         return exc.reason
     try:
@@ -238,7 +238,8 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
             continue
         scored.append((lower_bound_s(scn, st, rank), len(scored), st))
     if not scored:
-        raise PlanningError(first_reason or "no structure fits", source=scn.source)
+        reason = first_reason or "no structure fits"
+        raise PlanningError(reason + advice(reason), source=scn.source)
     scored.sort(key=lambda x: (x[0], x[1]))
     failures: list[str] = []
     t_start = time.perf_counter()
@@ -293,6 +294,11 @@ def _best_variant(scn, analysis, scored, candidates: int, opts: PlannerOptions, 
 
 
 _ADVICE = (
+    (re.compile(r"orbits of (D\d+ \('[^']*'\)) and (D\d+ \('[^']*'\)) overlap"),
+     "move the start of {0} or {1} so that their orbit discs are apart (they orbit at their starts)"),
+    (re.compile(r"start bodies of (D\d+ \('[^']*'\)) and (D\d+ \('[^']*'\)) overlap"), "move the start of {0} or {1}"),
+    (re.compile(r"the slot of (D\d+ \('[^']*'\)) is [\d.]+ um outside the arena"),
+     "move the structure (or {0}'s goal) inside the arena, or enlarge the arena"),
     (re.compile(r"the orbit of (D\d+ \('[^']*'\))"), "move the start of {0} (its orbit disc is in the way) or enlarge the arena"),
     (re.compile(r"too long for (D\d+ \('[^']*'\))'s free corridor"),
      "start the G_1 robots closer to their slots, or clear the line behind {0}'s slot"),

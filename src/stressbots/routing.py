@@ -41,18 +41,34 @@ class NearPairs(NamedTuple):
     arena: np.ndarray
 
 
-def _sample_pairs(mask: np.ndarray, e_of: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Expand a segment mask ``(E, S, K)`` to the ``(sample, obstacle)`` pairs of samples on segment
-    ``(e_of[m], seg[m])``, without a ``(samples, K)`` array (most segments reach one obstacle or none)."""
+class _MaskRows(NamedTuple):
+    """A segment mask ``(E, S, K)`` as the sorted obstacle indices per segment (:func:`_mask_rows`)."""
+
+    nseg: int
+    obj: np.ndarray  # obstacle indices, grouped by flat segment e * S + s
+    per_segment: np.ndarray  # obstacles per flat segment
+    first: np.ndarray  # offset of each flat segment's group in ``obj``
+
+
+def _mask_rows(mask: np.ndarray) -> _MaskRows:
+    """Group a segment mask ``(E, S, K)`` by segment, once for all the sampling passes of one check."""
     e, nseg, k = mask.shape
     fseg, obj = np.nonzero(mask.reshape(e * nseg, k))  # sorted by segment
     count = np.bincount(fseg, minlength=e * nseg)
-    first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    fs = e_of * nseg + seg
-    rep = count[fs]
+    return _MaskRows(nseg, obj, count, np.concatenate([[0], np.cumsum(count)[:-1]]))
+
+
+def _sample_pairs(rows: _MaskRows | np.ndarray, e_of: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Expand a segment mask ``(E, S, K)`` (or its :func:`_mask_rows`) to the ``(sample, obstacle)`` pairs of
+    samples on segment ``(e_of[m], seg[m])``, without a ``(samples, K)`` array (most segments reach one
+    obstacle or none)."""
+    if not isinstance(rows, _MaskRows):
+        rows = _mask_rows(rows)
+    fs = e_of * rows.nseg + seg
+    rep = rows.per_segment[fs]
     si = np.repeat(np.arange(len(fs)), rep)
     j = np.arange(si.size) - np.repeat(np.cumsum(rep) - rep, rep)
-    return si, obj[first[fs][si] + j]
+    return si, rows.obj[rows.first[fs][si] + j]
 
 
 def _pairs(samples: np.ndarray, centres: np.ndarray, reach: np.ndarray,
@@ -210,31 +226,65 @@ def _batch_samples(starts: np.ndarray, seg_lengths: np.ndarray, words: np.ndarra
     of the segments it marks False (the sample positions of the others do not change). ``part = (q, Q)``
     returns only every Q-th sample of each path, from its q-th (a coarse pass first, for early exits).
     """
-    e, nseg = seg_lengths.shape
     curv, joints = _segment_joints(starts, seg_lengths, words, radius)
+    owner, index, seg, local = _sample_positions(seg_lengths, step_um, keep)
+    if part[1] > 1:
+        pick = index % part[1] == part[0]
+        owner, seg, local = owner[pick], seg[pick], local[pick]
+    poses = move(joints[owner, seg], local, curv[owner, seg])
+    return poses, owner, seg
+
+
+def _sample_positions(seg_lengths: np.ndarray, step_um: float, keep: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """Where :func:`_batch_samples` samples paths of segments ``seg_lengths`` ``(E, S)``: per sample its path,
+    its index along the path, its segment and its arc length (um) from that segment's start.
+
+    Samples are equally spaced (at most ``step_um``) along each path, both ends included; ``keep``
+    (``(E, S)`` bool) drops the samples of the segments it marks False. The poses follow by one
+    :func:`~stressbots.kinematics.move` from the segment joints, for any subset of the samples.
+    """
+    cand = _sample_candidates(seg_lengths, step_um, keep)
+    kept, owner, seg, local = _place_samples(cand, np.arange(len(cand.owner)))
+    return owner, cand.position[kept], seg, local
+
+
+class _SampleCandidates(NamedTuple):
+    """The samples of :func:`_sample_positions` before they are placed on their segments: per candidate
+    its path and index along it (``position``), and the segment it must fall in (``wanted``; None: any)."""
+
+    owner: np.ndarray
+    position: np.ndarray  # sample index along its path
+    wanted: np.ndarray | None
+    counts: np.ndarray  # samples per path
+    cum: np.ndarray  # (E, S) arc length at each segment's start
+    total: np.ndarray  # (E,) path lengths
+
+
+def _sample_candidates(seg_lengths: np.ndarray, step_um: float, keep: np.ndarray | None) -> _SampleCandidates:
+    e, _ = seg_lengths.shape
     total = seg_lengths.sum(axis=1)
     counts = np.maximum(2, np.ceil(total / step_um).astype(int) + 1)
     cum = np.concatenate([np.zeros((e, 1)), np.cumsum(seg_lengths, axis=1)[:, :-1]], axis=1)  # (E, S)
     if keep is None:
         owner = np.repeat(np.arange(e), counts)
         offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
-        index = np.arange(owner.size) - offsets[owner]
-    else:
-        owner, index, wanted = _kept_indices(keep, counts, cum, total)
-    if part[1] > 1:
-        pick = index % part[1] == part[0]
-        owner, index = owner[pick], index[pick]
-        if keep is not None:
-            wanted = wanted[pick]
-    s = index / (counts[owner] - 1) * total[owner]
-    seg = np.sum(s[:, None] >= cum[owner] - 1e-12, axis=1) - 1
-    seg = np.clip(seg, 0, nseg - 1)
-    if keep is not None:
-        sel = seg == wanted
-        owner, seg, s = owner[sel], seg[sel], s[sel]
-    local = s - cum[owner, seg]
-    poses = move(joints[owner, seg], local, curv[owner, seg])
-    return poses, owner, seg
+        return _SampleCandidates(owner, np.arange(owner.size) - offsets[owner], None, counts, cum, total)
+    owner, index, wanted = _kept_indices(keep, counts, cum, total)
+    return _SampleCandidates(owner, index, wanted, counts, cum, total)
+
+
+def _place_samples(cand: _SampleCandidates, pick: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Place the candidates ``pick`` (indices) on their segments, dropping those outside their wanted
+    segment: ``(kept, path, segment, local)``, the kept candidates' indices, paths, segments and arc
+    lengths (um) from their segment's start. Placing a subset gives the same values as placing all."""
+    owner, index = cand.owner[pick], cand.position[pick]
+    s = index / (cand.counts[owner] - 1) * cand.total[owner]
+    seg = np.sum(s[:, None] >= cand.cum[owner] - 1e-12, axis=1) - 1
+    seg = np.clip(seg, 0, cand.cum.shape[1] - 1)
+    if cand.wanted is not None:
+        sel = seg == cand.wanted[pick]
+        pick, owner, seg, s = pick[sel], owner[sel], seg[sel], s[sel]
+    return pick, owner, seg, s - cand.cum[owner, seg]
 
 
 def _kept_indices(keep: np.ndarray, counts: np.ndarray, cum: np.ndarray, total: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -304,6 +354,8 @@ def _segments_near(obst: Obstacles, joints: np.ndarray, seg_lengths: np.ndarray,
 
 
 _SAMPLE_PASSES = 4  # interleaved sampling passes per edge check (every 4th sample first): blocked edges exit early
+_PASS_ORDER = (-1, 0, 2, 1, 3)  # the ends (-1), then coarse to fine: each pass halves the spacing
+_END_FIRST_UM = 200.0  # samples this close to an edge's ends are tested first: a cramped source or target blocks there
 
 
 def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: PlannerOptions, recheck=None) -> np.ndarray:
@@ -328,18 +380,30 @@ def _edges_clear(obst: Obstacles, starts, goals, radius, length, width, opts: Pl
         near = _segments_near(obst, joints[idx], seg[idx], curv[idx], radius, hd, clearance)
         any_near = near.discs.any(axis=2) | near.boxes.any(axis=2) | near.arena  # (E, S)
         live = np.flatnonzero(any_near.any(axis=1))
-        for q in range(_SAMPLE_PASSES):  # interleaved passes: an edge found blocked is not sampled further
-            if len(live) == 0:
+        if len(live) == 0:
+            return out
+        e = idx[live]
+        # the candidate samples once; each pass places, moves to and tests only its share of the live edges' samples
+        cand = _sample_candidates(seg[e], step, keep=any_near[live])
+        joints_e, curv_e = joints[e], curv[e]
+        disc_rows, box_rows = _mask_rows(near.discs), _mask_rows(near.boxes)
+        pass_of = cand.position % _SAMPLE_PASSES
+        spacing = cand.total / np.maximum(cand.counts - 1, 1)  # (E,) um between samples
+        near_end = np.ceil(_END_FIRST_UM / np.maximum(spacing, 1e-9))[cand.owner]
+        pass_of[(cand.position < near_end) | (cand.position > cand.counts[cand.owner] - 1 - near_end)] = -1
+        alive = np.ones(len(live), dtype=bool)
+        for q in _PASS_ORDER:  # ends first, then interleaved passes: an edge found blocked is not sampled further
+            _, o, sg, local = _place_samples(cand, np.flatnonzero((pass_of == q) & alive[cand.owner]))
+            if len(o) == 0:
+                continue
+            poses = move(joints_e[o, sg], local, curv_e[o, sg])
+            e_of = live[o]
+            cand_pairs = NearPairs(_sample_pairs(disc_rows, e_of, sg), _sample_pairs(box_rows, e_of, sg), near.arena[e_of, sg])
+            bad = obst.hits(poses, length, width, clearance, near=cand_pairs)
+            alive[o[bad]] = False
+            if not alive.any():
                 break
-            e = idx[live]
-            poses, owner, sseg = _batch_samples(starts[e], seg[e], words[e], radius, step, keep=any_near[live], part=(q, _SAMPLE_PASSES))
-            e_of = live[owner]
-            cand = NearPairs(_sample_pairs(near.discs, e_of, sseg), _sample_pairs(near.boxes, e_of, sseg), near.arena[e_of, sseg])
-            bad = obst.hits(poses, length, width, clearance, near=cand)
-            hit = np.zeros(len(live), dtype=bool)
-            hit[owner[bad]] = True
-            out[live[hit]] = True
-            live = live[~hit]
+        out[live[~alive]] = True
         return out
 
     step = 4.0 * opts.sample_um
