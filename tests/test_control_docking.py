@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -159,3 +160,44 @@ def test_line_approach_merges_from_the_right_and_docks():
     outcome = run_policy(rig, opts)
     assert outcome is DockOutcome.DOCKED
     assert abs(rig.pose[0]) <= 4.0
+
+
+# -- the random walk's lead (branch dock7) ------------------------------------------------------------------
+
+
+def walk_offsets_mc(s_um: float, L: float, w: float, rng: np.random.Generator, runs: int = 4000, steps: int = 200) -> np.ndarray:
+    """Independent truth: Brownian headings W (variance ``w`` per um) sampled on a grid, the centre line's
+    lateral drift ``int_0^s W`` (trapezoid) plus docking compliance's ``(L/2) W(s)``, for ``runs`` walks."""
+    ds = s_um / steps
+    W = np.cumsum(rng.normal(0.0, math.sqrt(w * ds), size=(runs, steps)), axis=1)
+    W = np.concatenate([np.zeros((runs, 1)), W], axis=1)
+    lateral = ds * (W[:, 1:] + W[:, :-1]).sum(axis=1) / 2.0
+    return lateral + 0.5 * L * W[:, -1]
+
+
+@settings(max_examples=8, deadline=None)
+@given(s=st.floats(20.0, 500.0), L=st.floats(150.0, 350.0), w=st.floats(5e-7, 2e-5), seed=st.integers(0, 2**16))
+def test_walk_lead_is_the_sd_of_the_walks_docking_offset(s, L, w, seed):
+    from stressbots.control.docking import walk_lead_um
+
+    sd = float(np.std(walk_offsets_mc(s, L, w, np.random.default_rng(seed))))
+    assert walk_lead_um(s, L, w, 1.0) == pytest.approx(sd, rel=0.08)  # 4000 walks: sd known to ~1 %
+    assert walk_lead_um(s, L, w, 2.0) == pytest.approx(2.0 * walk_lead_um(s, L, w, 1.0))
+    assert walk_lead_um(-5.0, L, w, 1.0) == 0.0  # at or past the face nothing is left to drift
+
+
+def test_a_robot_right_of_its_aim_within_the_walk_lead_drives_on():
+    """The walk lead is room, not a miss: 3 um right of its slot (15 um right of an aim led 12 um left), the
+    final run drives in; without the lead's allowance the same robot loops back (a loop is clear)."""
+    from stressbots.control.docking import _frame
+
+    opts = ControllerOptions()
+    view = DockView(np.zeros(3), 100.0, 150.0, 0.6, np.array([0.0, 200.0, 0.0]), 250.0, 100.0)
+    fix = LineFix(180.0, 15.0, 0.0, contact_offset(180.0, 15.0, 0.0, 250.0))
+
+    def no_log(*_):
+        return None
+
+    steps = _frame(fix, view, 2, opts, 1.0, lambda: False, no_log, 0, 12.0)
+    assert steps is not None and all(k == 1 for k, _ in steps)  # straight on (P_(k-1)), no burst
+    assert _frame(fix, view, 2, opts, 1.0, lambda: False, no_log, 0, 0.0) is None  # judged a miss: loops back

@@ -39,7 +39,7 @@ from .queries import interpolated_steps, line_coords, merge
 from .tuning import ControllerOptions
 
 __all__ = ["DockOutcome", "DockView", "LineFix", "contact_offset", "lead_um", "reaim_turn_rad", "stopped_verdict", "line_approach",
-           "settle"]
+           "settle", "walk_lead_um"]
 
 
 
@@ -139,6 +139,9 @@ class DockView:
     nominal_speed_um_s: float
     drift_rad_per_um: float = 0.0
     """Identified straight-line curvature (+ = clockwise; :class:`~stressbots.control.straight_drift.StraightDrift`)."""
+    walk_var_rad2_per_um: float = 0.0
+    """Heading variance (rad^2) the drift's random walk adds per um driven (the scenario's declared drift,
+    :mod:`stressbots.drift`): the part of the drift no identification predicts."""
 
 
 def _fix(view: DockView, aim_left_um: float) -> LineFix:
@@ -160,6 +163,25 @@ def lead_um(behind_um: float, length_um: float, kappa_deg_per_mm: float, base_um
     """
     s = max(behind_um, 0.0)
     return float(base_um + math.radians(kappa_deg_per_mm) / 1000.0 * (0.5 * s * s + 0.5 * length_um * s))
+
+
+def walk_lead_um(behind_um: float, length_um: float, walk_var_rad2_per_um: float, sigmas: float) -> float:
+    """How far left of its slot (um) a robot ``behind_um`` out aims for the heading drift's random walk:
+    ``sigmas`` standard deviations of the docking offset the walk adds before it docks.
+
+    The walk ``W`` (variance ``w`` per um) moves the point where the centre line meets the face by
+    ``int_0^s W`` and, through docking compliance, the centre by ``(L/2) W(s)`` more, so the offset's
+    variance is ``w (s^3 / 3 + (L/2) s^2 + (L/2)^2 s)``. A one-way robot fixes a miss to the left with a
+    clockwise burst but never one to the right, so it aims left by this much; the lead shrinks as the
+    slot nears, and the bursts follow it.
+
+    >>> round(walk_lead_um(0.0, 250.0, 2e-6, 1.0), 6)
+    0.0
+    >>> round(walk_lead_um(200.0, 250.0, 2e-6, 1.0), 2)   # 2e-6 rad^2/um: the literature's 3.7 deg/mm, half walk
+    4.65
+    """
+    s, h = max(behind_um, 0.0), 0.5 * length_um
+    return float(sigmas * math.sqrt(max(walk_var_rad2_per_um, 0.0) * (s**3 / 3.0 + h * s * s + h * h * s)))
 
 
 def line_approach(
@@ -191,9 +213,12 @@ def line_approach(
         # ... and by the docking offset a heading estimate off by ``aim_heading_sigma_deg`` would cause: a burst
         # planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left
         lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind, 0.0) + 0.5 * view.length_um)
+        # ... and by what the drift's random walk may still carry it right (the larger the declared noise, the more)
+        walk = walk_lead_um(behind, view.length_um, view.walk_var_rad2_per_um, tune.aim_walk_sigmas)
+        lead += walk
         # line coordinates about the aim point, ``lead`` left of the slot
         fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
-        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt)
+        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt, walk)
         if steps is None:
             return DockOutcome.MISSED
         yield steps
@@ -204,8 +229,12 @@ def line_approach(
     return (yield from settle(see, k, opts, tx))
 
 
-def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0) -> Steps | None:
-    """The steps of one frame along the line (``fix`` relative to the aim point); None: loop back."""
+def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0,
+           walk_um: float = 0.0) -> Steps | None:
+    """The steps of one frame along the line (``fix`` relative to the aim point); None: loop back.
+
+    Misses to the right are judged ``walk_um`` (:func:`walk_lead_um`) right of the aim point: that lead is
+    room for the random walk to use, not an error (a loop would not dock any closer)."""
     tune = opts.tuning
     relax_um = tune.miss_relax_um * attempt
     burst_max = math.radians(tune.reaim_max_deg * (1 + attempt))
@@ -225,13 +254,14 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
                 return None
             turn = burst_max
         burst = [(k, turn / view.turn_rate_rad_s)]
-    elif fix.offset_um > (tune.final_right_um + relax_um if final else tune.aligned_um):
+    elif fix.offset_um - walk_um > (tune.final_right_um + relax_um if final else tune.aligned_um):
         m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
         if m is not None:
             return _merge_steps(m, fix, view, k, opts, tx)
-        small = fix.offset_um <= tune.small_miss_um + relax_um and abs(fix.right_um) <= tune.small_miss_um + relax_um
+        off_r, right_r = fix.offset_um - walk_um, fix.right_um - walk_um
+        small = off_r <= tune.small_miss_um + relax_um and abs(right_r) <= tune.small_miss_um + relax_um
         blocked = loop_blocked()
-        if not small and fix.offset_um <= tune.late_miss_um and blocked:
+        if not small and off_r <= tune.late_miss_um and blocked:
             # a loop from here would meet the structure (a turning robot cannot pivot off it): drive on
             log("late", f"drives on {fix.offset_um:.0f} um off its line: a loop here would meet the structure")
             small = True

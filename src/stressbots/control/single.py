@@ -315,7 +315,8 @@ class SingleDocking:
         """A frozen view of robot ``i`` for the docking policy (estimates as of the last frame)."""
         lp = self.loop
         return DockView(lp.est[i].copy(), float(lp.v_hat[i]), float(lp.r_hat[i]), float(lp.omega_hat[i]),
-                        lp.goals[i].copy(), float(lp.L[i]), float(lp.v[i]), float(lp.straight_drift.kappa[i]))
+                        lp.goals[i].copy(), float(lp.L[i]), float(lp.v[i]), float(lp.straight_drift.kappa[i]),
+                        float(lp.straight_drift.walk_var_per_um))
 
     def play(self, policy) -> Any:
         """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""

@@ -328,6 +328,13 @@ class Tuning:
     """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
     poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
     66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
+    # -- docking precision at the declared noise (branch dock7, issue 12: 2x noise) -------------------------
+    aim_walk_sigmas: float = 1.0
+    """Standard deviations of the heading drift's random walk (:func:`~stressbots.control.docking.walk_lead_um`)
+    a robot on its approach line aims left of its slot by, on top of ``lead_drift_deg_per_mm`` and
+    ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
+    grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
+    robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
 
 
 @dataclass(frozen=True)
