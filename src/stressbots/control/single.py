@@ -50,6 +50,10 @@ class SingleLoop(DockingLoop, Protocol):
 
     def unblock_orbits(self, k: int, i: int, points: np.ndarray) -> bool: ...
 
+    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int]) -> bool: ...
+
+    def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool: ...
+
 
 # -- pure geometry ------------------------------------------------------------------------------------
 
@@ -394,6 +398,19 @@ class SingleDocking:
         return outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT)
 
     def back_off(self, i: int, k: int) -> None:
-        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
+        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear.
+
+        The way off is checked (:meth:`stressbots.control.gross.GrossMotion.escape`: the cheapest turn-then-straight
+        that goes no deeper and ends clear, and keeps a robot that can orbit where it can). With none, a robot
+        that can still move on from where it is stays there (the next attempt plans from there); only one already
+        boxed in backs off blindly, a quarter turn and 150 um: driven blindly, robots that had stopped short of an
+        obstacle turned into it and were pinned for good.
+        """
         lp = self.loop
+        orbiting = lp.orbiting_below(k)
+        if lp.escape(i, k, k - 1, orbiting):
+            return
+        if not lp.boxed_in(i, orbiting):
+            lp.log("hold", i, f"{lp.scn.names[i]} finds no clear way off and stays where it can still move on")
+            return
         lp.drive([(k, 0.5 * math.pi * lp.r[i] / lp.v[i]), (k - 1, 150.0 / lp.v[i])])

@@ -328,6 +328,22 @@ class Tuning:
     """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
     poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
     66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
+    # route7: one-way robots are never driven into a dead end
+    viable_clearance_um: float = 5.0
+    """um. A robot is *boxed in* at a pose when none of its escapes (``escape_turns`` of a loop, then one body
+    length straight) keeps this far from the orbits, the docked bodies and the arena edge: it can neither turn
+    nor drive on. The clear part of a blocked path is driven only up to its last pose that does not box the
+    robot in, an escape of a free robot must end free, and a failed attempt's back-off leaves a free robot where
+    it is: on the tuning set most "no route ... gives up this target" failures had driven the clear part of
+    their path to a stop 10-50 um short of the structure, the arena edge or a waiting robot, heading into it,
+    and were pinned there by the next blind move. Above the camera's and one t_x of drift's error (a few um),
+    well below the controller's 15 um clearance."""
+    viable_step_um: float = 25.0
+    """um. Spacing of the ends tried back along the clear part for one that does not box the robot in (a fifth
+    of a body length)."""
+    viable_checks_max: int = 40
+    """Most ends tried (each up to ``len(escape_turns)`` swept-body checks): 1 mm of path back from the clear
+    part's end."""
 
 
 @dataclass(frozen=True)
