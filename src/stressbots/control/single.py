@@ -30,7 +30,7 @@ from ..robots import TWO_PI, angle_difference
 from . import docking
 from .docking import DockOutcome, DockView
 from .loopview import DockingLoop
-from .queries import in_funnel, line_coords, line_pose, merge, turn_fraction
+from .queries import in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
 __all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget",
            "way_points"]
@@ -255,7 +255,11 @@ class SingleDocking:
                 if lp.stuck:
                     break
             waypoints = []
-            if lp.stuck:
+            if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back):
+                b, r, psi = self.line_coords(i)
+                lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
+                                      f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
+            elif lp.stuck:
                 # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
                 # retrying the same way unchanged met the same orbit every time
                 path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
@@ -263,7 +267,7 @@ class SingleDocking:
                                                           way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
                     self.back_off(i, k)
                 continue
-            if back is not None and not self.in_funnel(i, back):
+            elif back is not None and not self.in_funnel(i, back):
                 lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
             if back is not None:
@@ -304,6 +308,10 @@ class SingleDocking:
     def line_coords(self, i: int) -> tuple[float, float, float]:
         """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""
         return line_coords(self.loop.goals[i], self.loop.est[i])
+
+    def in_corridor(self, i: int, back: float) -> bool:
+        """Whether robot ``i`` is already in its approach corridor, heading along it (:func:`~stressbots.control.queries.in_corridor`)."""
+        return in_corridor(*self.line_coords(i), back, self.loop.tune)
 
     def merge(self, i: int, behind: float, right: float, psi: float):
         """The merge of robot ``i`` onto its approach line (:func:`~stressbots.control.queries.merge`)."""

@@ -344,6 +344,14 @@ class Tuning:
     viable_checks_max: int = 40
     """Most ends tried (each up to ``len(escape_turns)`` swept-body checks): 1 mm of path back from the clear
     part's end."""
+    corridor_miss_um: float = 30.0
+    """um. A robot whose gross motion stopped outside the approach funnel but already *in* the approach corridor
+    (:func:`~stressbots.control.queries.in_corridor`), heading for a lateral miss at the slot within this, goes
+    on with the line approach instead of steering back to the funnel's aim behind it: the approach fixes such a
+    miss (a left one by clockwise bursts, a right one up to ``late_miss_um`` by driving in where a loop would
+    meet the structure), while the gross motion's loop back met the structure and gave up six times."""
+    corridor_psi_deg: float = 12.0
+    """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
 
 
 @dataclass(frozen=True)
