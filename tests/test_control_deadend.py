@@ -148,10 +148,10 @@ def test_a_robot_heading_into_the_arena_edge_a_few_um_ahead_is_boxed_in_one_alon
 # -- back_off: a free robot is never driven blindly --------------------------------------------------
 
 class BackOffLoop:
-    """A closed loop for SingleDocking.back_off that records what it drives; ``escape``/``boxed_in`` as told."""
+    """A closed loop for SingleDocking.back_off that records what it drives; ``escape``/``free_move`` as told."""
 
-    def __init__(self, escapes: bool, boxed: bool):
-        self.escapes, self.boxed = escapes, boxed
+    def __init__(self, escapes: bool, free: tuple[float, float] | None):
+        self.escapes, self.free = escapes, free
         self.driven: list = []
         self.logged: list = []
         self.r, self.v = np.array([R, R]), np.array([V, V])
@@ -163,8 +163,8 @@ class BackOffLoop:
     def escape(self, i, turn_k, straight_k, orbiting):
         return self.escapes
 
-    def boxed_in(self, i, orbiting):
-        return self.boxed
+    def free_move(self, i, orbiting):
+        return self.free
 
     def drive(self, steps):
         self.driven.append(list(steps))
@@ -176,12 +176,15 @@ class BackOffLoop:
 def test_back_off_never_drives_a_robot_that_can_still_move_on_blindly():
     from stressbots.control.single import SingleDocking
 
-    free = BackOffLoop(escapes=False, boxed=False)
+    free = BackOffLoop(escapes=False, free=(0.7, 2.5))  # no escape ends clear: the checked move on, P_2 then P_1
     SingleDocking(free).back_off(1, 2)  # type: ignore[arg-type]
-    assert free.driven == [] and free.logged == ["hold"]
-    boxed = BackOffLoop(escapes=False, boxed=True)  # pinned already: the quarter turn and 150 um, as before
+    assert free.driven == [[(2, 0.7), (1, 2.5)]] and free.logged == ["move-on"]
+    straight = BackOffLoop(escapes=False, free=(0.0, 2.5))  # a move on straight ahead: no zero-length turn step
+    SingleDocking(straight).back_off(1, 2)  # type: ignore[arg-type]
+    assert straight.driven == [[(1, 2.5)]]
+    boxed = BackOffLoop(escapes=False, free=None)  # boxed in already: the quarter turn and 150 um, as before
     SingleDocking(boxed).back_off(1, 2)  # type: ignore[arg-type]
     assert boxed.driven == [[(2, 0.5 * math.pi * R / V), (1, 150.0 / V)]]
-    escaped = BackOffLoop(escapes=True, boxed=False)  # the checked escape drove it (through the loop): nothing more
+    escaped = BackOffLoop(escapes=True, free=None)  # the checked escape drove it (through the loop): nothing more
     SingleDocking(escaped).back_off(1, 2)  # type: ignore[arg-type]
     assert escaped.driven == []

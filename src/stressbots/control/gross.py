@@ -13,7 +13,7 @@ the routes' random stream) and drives through it; :func:`path_steps` and :func:`
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -256,18 +256,22 @@ class GrossMotion:
             return False, quiet, escapes
         return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes
 
-    def boxed_in(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> bool:
-        """Whether robot ``i`` at ``pose`` cannot move on: every escape of the kind :meth:`escape` drives (turn
-        clockwise ``Tuning.escape_turns`` of a loop, none included, then one body length straight) comes within
-        ``Tuning.viable_clearance_um`` of an orbit, a docked body or the arena edge. A robot heading into an
-        obstacle a few tens of um ahead is boxed in (it can neither turn nor drive off); one driving along the
-        structure is not."""
+    def free_moves(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> Iterator[tuple[float, float]]:
+        """The escapes of the kind :meth:`escape` drives (turn clockwise ``Tuning.escape_turns`` of a loop, none
+        included, then one body length straight; ``(turn_s, straight_s)``, in that order) that keep
+        ``Tuning.viable_clearance_um`` from every orbit, docked body and the arena edge from ``pose``; lazily."""
         v, r, length = float(self.loop.v_hat[i]), float(self.loop.r_hat[i]), float(self.loop.L[i])
         for f in self.loop.tune.escape_turns:
-            sweep = escape_sweep(np.asarray(pose, float), (2.0 * math.pi * r * f / v, length / v), v, r, step_um=15.0)
+            m = (2.0 * math.pi * r * f / v, length / v)
+            sweep = escape_sweep(np.asarray(pose, float), m, v, r, step_um=15.0)
             if not self.obstacles_hit(sweep[1:], i, orbiting, extra_discs=extra_discs, clearance=self.loop.tune.viable_clearance_um):
-                return False
-        return True
+                yield m
+
+    def boxed_in(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> bool:
+        """Whether robot ``i`` at ``pose`` cannot move on: it has no :meth:`free_moves`. A robot heading into an
+        obstacle a few tens of um ahead is boxed in (it can neither turn nor drive off); one driving along the
+        structure is not."""
+        return next(self.free_moves(i, pose, orbiting, extra_discs), None) is None
 
     def _viable(self, i: int, path, ahead: float, orbiting: Sequence[int], extra_discs) -> float:
         """How much of the ``ahead`` um clear beginning of ``path`` robot ``i`` may drive: all of it when it is

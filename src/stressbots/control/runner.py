@@ -57,7 +57,7 @@ from ..collision import point_rectangle_distance
 from ..errors import PlanningError
 from ..kinematics import move
 from ..robots import angle_difference, turning_centres
-from .gross import GrossMotion
+from .gross import GrossMotion, escape_sweep
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import blocking_orbits, orbit_gaps, park_move, unblock_move
@@ -291,6 +291,17 @@ class _Runner(PlantLoop):
     def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int]) -> bool:
         """A checked escape of robot ``i`` (:meth:`stressbots.control.gross.GrossMotion.escape`); True if it moved."""
         return self.gross.escape(i, turn_k, straight_k, orbiting)
+
+    def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None:
+        """A checked move on for robot ``i`` from where it is, ``(turn_s, straight_s)``: of its
+        :meth:`~stressbots.control.gross.GrossMotion.free_moves`, the cheapest that does not box it in at its end,
+        else the cheapest; None when it is boxed in."""
+        moves = list(self.gross.free_moves(i, self.est[i], orbiting))
+        v, r = float(self.v_hat[i]), float(self.r_hat[i])
+        for m in moves:
+            if not self.gross.boxed_in(i, escape_sweep(self.est[i], m, v, r)[-1], orbiting):
+                return m
+        return moves[0] if moves else None
 
     def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool:
         """Whether robot ``i`` cannot move on from where it is (:meth:`~stressbots.control.gross.GrossMotion.boxed_in`)."""

@@ -54,6 +54,8 @@ class SingleLoop(DockingLoop, Protocol):
 
     def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool: ...
 
+    def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None: ...
+
 
 # -- pure geometry ------------------------------------------------------------------------------------
 
@@ -409,16 +411,20 @@ class SingleDocking:
         """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear.
 
         The way off is checked (:meth:`stressbots.control.gross.GrossMotion.escape`: the cheapest turn-then-straight
-        that goes no deeper and ends clear, and keeps a robot that can orbit where it can). With none, a robot
-        that can still move on from where it is stays there (the next attempt plans from there); only one already
-        boxed in backs off blindly, a quarter turn and 150 um: driven blindly, robots that had stopped short of an
-        obstacle turned into it and were pinned for good.
+        that goes no deeper and ends clear, and keeps a robot that can move on where it can). With none, a robot
+        that can still move on from where it is takes the cheapest such move (a turn, then one body length; the
+        next attempt plans from there: staying put, every later attempt failed at the same instant); only one
+        already boxed in backs off blindly, a quarter turn and 150 um: driven blindly, robots that had stopped
+        short of an obstacle turned into it and were pinned for good.
         """
         lp = self.loop
         orbiting = lp.orbiting_below(k)
         if lp.escape(i, k, k - 1, orbiting):
             return
-        if not lp.boxed_in(i, orbiting):
-            lp.log("hold", i, f"{lp.scn.names[i]} finds no clear way off and stays where it can still move on")
+        m = lp.free_move(i, orbiting)
+        if m is not None:
+            lp.log("move-on", i, f"{lp.scn.names[i]} finds no clear way off; turns {m[0]:.1f} s, then {m[1]:.1f} s straight where it "
+                                 "can still move on")
+            lp.drive([(kk, d) for kk, d in ((k, m[0]), (k - 1, m[1])) if d > 0.0])
             return
         lp.drive([(k, 0.5 * math.pi * lp.r[i] / lp.v[i]), (k - 1, 150.0 / lp.v[i])])
