@@ -13,7 +13,7 @@ the routes' random stream) and drives through it; :func:`path_steps` and :func:`
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Protocol
 
 import numpy as np
@@ -27,7 +27,8 @@ from .loopview import LoopView, Steps
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "contact_clearance", "escape_moves", "escape_sweep", "path_steps"]
+__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "contact_clearance", "escape_moves", "escape_sweep", "path_steps",
+           "viable_prefix"]
 
 
 
@@ -76,6 +77,22 @@ def clear_prefix(path: pathlib.Path, hits: Callable[[np.ndarray], bool], step_um
         else:
             lo = mid
     return float(s[lo - 1]) if lo > 0 else 0.0
+
+
+def viable_prefix(path: pathlib.Path, clear_um: float, boxed_in: Callable[[np.ndarray], bool], step_um: float = 25.0,
+                  checks: int = 40) -> float:
+    """The longest beginning of ``path``, at most ``clear_um`` (um) long, whose end pose is not ``boxed_in`` (pose
+    (3,) -> bool: can the robot not move on from there?).
+
+    A one-way robot can neither reverse nor turn left: one that stops short of an obstacle while heading into
+    it (the clear part of a blocked path usually ends so) is trapped for good once anything nudges it. Ends
+    are tried back from ``clear_um`` every ``step_um``, at most ``checks`` of them; 0 when none will do (the
+    robot stays where it is).
+    """
+    for s in np.arange(clear_um, 0.0, -step_um)[:checks]:
+        if not boxed_in(np.asarray(path.pose_at(float(s)), float)):
+            return float(s)
+    return 0.0
 
 
 def escape_moves(v: float, r: float, length: float, turn_fractions: Sequence[float],
@@ -230,6 +247,7 @@ class GrossMotion:
             ahead = clear_prefix(path, hit, 10.0)
             if ahead >= self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
                 break
+        ahead = self._viable(i, path, ahead, orbiting, extra_discs)
         if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
             if escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
                 return None, quiet, escapes - 1  # off the obstacle: re-plan from there
@@ -237,6 +255,33 @@ class GrossMotion:
             self.loop.stuck = True  # failure region H: the caller's recovery (backing off) takes over
             return False, quiet, escapes
         return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes
+
+    def free_moves(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> Iterator[tuple[float, float]]:
+        """The escapes of the kind :meth:`escape` drives (turn clockwise ``Tuning.escape_turns`` of a loop, none
+        included, then one body length straight; ``(turn_s, straight_s)``, in that order) that keep
+        ``Tuning.viable_clearance_um`` from every orbit, docked body and the arena edge from ``pose``; lazily."""
+        v, r, length = float(self.loop.v_hat[i]), float(self.loop.r_hat[i]), float(self.loop.L[i])
+        for f in self.loop.tune.escape_turns:
+            m = (2.0 * math.pi * r * f / v, length / v)
+            sweep = escape_sweep(np.asarray(pose, float), m, v, r, step_um=15.0)
+            if not self.obstacles_hit(sweep[1:], i, orbiting, extra_discs=extra_discs, clearance=self.loop.tune.viable_clearance_um):
+                yield m
+
+    def boxed_in(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> bool:
+        """Whether robot ``i`` at ``pose`` cannot move on: it has no :meth:`free_moves`. A robot heading into an
+        obstacle a few tens of um ahead is boxed in (it can neither turn nor drive off); one driving along the
+        structure is not."""
+        return next(self.free_moves(i, pose, orbiting, extra_discs), None) is None
+
+    def _viable(self, i: int, path, ahead: float, orbiting: Sequence[int], extra_discs) -> float:
+        """How much of the ``ahead`` um clear beginning of ``path`` robot ``i`` may drive: all of it when it is
+        :meth:`boxed_in` where it is now (it needs the way out), else the longest beginning whose end does not box
+        it in (:func:`viable_prefix`): the clear part of a blocked path drove robots to a stop 10-50 um short of
+        the structure, the arena edge or a waiting robot, heading into it, and the next nudge pinned them for good."""
+        if ahead <= 0.0 or self.boxed_in(i, self.loop.est[i], orbiting, extra_discs):
+            return ahead
+        return viable_prefix(path, ahead, lambda pose: self.boxed_in(i, pose, orbiting, extra_discs), self.loop.tune.viable_step_um,
+                             self.loop.tune.viable_checks_max)
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
@@ -312,9 +357,11 @@ class GrossMotion:
             return self.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=c)
 
         now = contact_clearance(lambda c: hit(p[None, :], c), high=lp.tune.escape_clearance_um)
+        free = not self.boxed_in(i, p, orbiting, extra_discs)  # a robot that can move on escapes only to where it still can
         for m in escape_moves(v, r, float(lp.L[i]), lp.tune.escape_turns, lp.tune.escape_straights):
             sweep = escape_sweep(p, m, v, r)
-            if not hit(sweep[1:], now - 0.5) and not hit(sweep[-1:], lp.tune.escape_clearance_um):
+            if not hit(sweep[1:], now - 0.5) and not hit(sweep[-1:], lp.tune.escape_clearance_um) and \
+                    not (free and self.boxed_in(i, sweep[-1], orbiting, extra_discs)):
                 lp.log("escape", i, f"{now:.0f} um from an obstacle: turns {m[0]:.1f} s, then {m[1]:.1f} s straight off it")
                 lp.drive([(k, d) for k, d in ((turn_k, m[0]), (straight_k, m[1])) if d > 0.0])
                 return True

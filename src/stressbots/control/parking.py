@@ -116,8 +116,8 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     away = _away(centres[j], everyone.index(j), centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)
     straight_s = shift_um / speeds[j]
 
-    def accept(end_c: np.ndarray) -> bool:
-        end = orbit_gaps(end_c[None, :], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
+    def accept(ends: np.ndarray) -> bool:
+        end = orbit_gaps(ends[movers.index(j)][None, :], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
         return bool(end > gap0[j] + 0.5 * shift_um)
 
     cands = [(float(poses[j, 2]), straight_s)] if held else None
@@ -128,7 +128,8 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
 def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
                straight_s: float, gap0: dict, clearance_um: float, accept, candidates=None, loops: int = 0) -> ParkMove | None:
     """The cheapest move of D_j's orbit whose movers' discs keep ``clearance_um`` (or do not get closer) and whose
-    end centre passes ``accept``. Candidates: ``(heading, straight_s)`` pairs (shortest wait + straight wins), by
+    end centres (M, 2), in the order of ``movers``, pass ``accept``. Candidates: ``(heading, straight_s)`` pairs
+    (shortest wait + straight wins), by
     default headings within 60 deg of ``away`` for ``straight_s`` s (shortest wait wins); each also after up to
     ``loops`` extra loops of D_j."""
     everyone = movers + still
@@ -151,7 +152,7 @@ def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um,
         wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
         cost = wait if candidates is None else wait + straight
         clear = (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all()
-        if clear and accept(tracks[movers.index(j), -1]) and cost < best_cost:
+        if clear and accept(tracks[:, -1]) and cost < best_cost:
             best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
 
@@ -184,7 +185,9 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
     robot is not needed until its own phase: moving its orbit costs one wait and one straight, while a
     route around it may not exist (its disc covers the aim) at all. ``headings`` (rad) replaces the 24
     candidate headings (e.g. only the one D_j has: a straight from where it is, no wait); each heading is
-    also tried after up to ``loops`` extra loops of D_j (the other movers then head elsewhere).
+    also tried after up to ``loops`` extra loops of D_j (the other movers then head elsewhere). The last of
+    ``movers`` is the docking robot (D_k); every other mover must not end its disc on the ``points`` (within its
+    orbit radius + ``reach_um``) unless it started closer, and then not closer than it started.
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -203,8 +206,20 @@ def unblock_move(j: int, movers: list[int], still: list[int], poses, radii, rate
         if ok.any():
             cands.append((float(th), float(steps[int(np.argmax(ok))] + margin_um) / speeds[j]))
 
-    def accept(end_c: np.ndarray) -> bool:
-        return bool(np.hypot(*(q - end_c).T).min() >= need)
+    def dist(c: np.ndarray) -> float:
+        return float(np.hypot(*(q - c).T).min())
+
+    # the other waiting movers (not D_j, not the last: the docking robot itself) go straight too: none may end
+    # its disc on the way when it started off it, nor closer to it when it started on it (an unblock move that
+    # carried D_(j+1)'s orbit onto the docking robot's aim left it pinned there)
+    others = [a for a, m in enumerate(movers[:-1]) if m != j]
+    start = {a: dist(centres[movers[a]]) for a in others}
+    reach = {a: float(rstar[movers[a]]) + reach_um for a in others}
+
+    def accept(ends: np.ndarray) -> bool:
+        if dist(ends[movers.index(j)]) < need:
+            return False
+        return all(dist(ends[a]) >= min(reach[a], start[a]) for a in others)
 
     return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, None, 0.0,
                       gap0, clearance_um, accept, cands, loops)

@@ -13,8 +13,8 @@ import numpy as np
 from .. import paths as pathlib
 from ..robots import TWO_PI, angle_difference
 
-__all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "best_departure",
-           "interpolated_steps"]
+__all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "in_corridor",
+           "best_departure", "interpolated_steps"]
 
 
 def turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um: float = 3.0):
@@ -116,6 +116,27 @@ def in_funnel(behind: float, right: float, psi: float, back: float, r: float, tu
     if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0) and abs(right) <= 5.0:
         return True
     return merge(behind, right, psi + math.radians(tuning.merge_heading_margin_deg), r) is not None
+
+
+def in_corridor(behind: float, right: float, psi: float, back: float, tuning) -> bool:
+    """Whether a robot at line coordinates ``(behind, right, psi)`` (um, um, rad) is already *in* the approach
+    corridor of a ``back`` um long line, heading along it: between the funnel's nearest and farthest
+    distances behind the slot, no more than ``Tuning.funnel_right_um`` right of the line, within
+    ``Tuning.corridor_psi_deg`` of its heading, and heading for a lateral miss at the slot
+    (``right + behind tan(psi)``) within ``Tuning.corridor_miss_um`` either way. The line approach takes such
+    a robot from there (clockwise bursts fix a left miss, a right one is driven in or looped back where a
+    loop is free); gross motion cannot: its aim lies behind the robot, and the loop back to it meets the
+    structure, so it gave up (six times) a robot already on its line.
+
+    >>> from stressbots.control.tuning import Tuning
+    >>> in_corridor(300.0, 14.0, math.radians(-4.0), 450.0, Tuning()), in_corridor(300.0, 14.0, math.radians(30.0), 450.0, Tuning())
+    (True, False)
+    """
+    if not (tuning.funnel_min_behind_um <= behind <= back + tuning.funnel_extra_um) or right > tuning.funnel_right_um:
+        return False
+    if abs(psi) > math.radians(tuning.corridor_psi_deg):
+        return False
+    return abs(right + behind * math.tan(psi)) <= tuning.corridor_miss_um
 
 
 def best_departure(pN, vN: float, LN: float, cM, rM: float, thM: float, wM: float, vM: float, LM: float, rstarM: float, cost_max: float):

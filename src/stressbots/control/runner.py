@@ -55,8 +55,9 @@ import numpy as np
 
 from ..collision import point_rectangle_distance
 from ..errors import PlanningError
+from ..kinematics import move
 from ..robots import angle_difference, turning_centres
-from .gross import GrossMotion
+from .gross import GrossMotion, escape_sweep
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import blocking_orbits, orbit_gaps, park_move, unblock_move
@@ -253,6 +254,10 @@ class _Runner(PlantLoop):
                 self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way and no clear move takes "
                                        "it off")
                 continue
+            if self.sweeps_into_contact(i, move_.wait_s):
+                self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but {self.scn.names[i]} "
+                                       "would turn into something while it waits: it stays")
+                continue
             self.replans += 1
             heading = float(np.mod(self.est[b, 2] + self.omega_hat[b] * move_.wait_s, 2.0 * np.pi))
             self.drive([(k, move_.wait_s)])
@@ -269,6 +274,38 @@ class _Runner(PlantLoop):
             self.drive([(j - 1, move_.straight_s)])
             moved = True
         return moved
+
+    def sweeps_into_contact(self, i: int, turn_s: float) -> bool:
+        """Whether robot ``i``, clear of everything now, would touch a waiting orbit, a docked body or the arena edge
+        turning clockwise for ``turn_s`` s (the wait of a group move turns the docking robot as well: one such wait
+        turned it into the very orbit being moved, and both were pinned). False when it touches something already
+        (nothing to lose)."""
+        k = int(self.rank[i])
+        waiting = self.orbiting_below(k)
+        if self.obstacles_hit(self.est[i][None, :], i, waiting, clearance=0.0):
+            return False
+        r = float(self.r_hat[i])
+        arc = move(self.est[i], np.linspace(0.0, min(float(self.v_hat[i]) * turn_s, 2.0 * np.pi * r), 48), 1.0 / r)
+        return self.obstacles_hit(arc, i, waiting, clearance=0.0)
+
+    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int]) -> bool:
+        """A checked escape of robot ``i`` (:meth:`stressbots.control.gross.GrossMotion.escape`); True if it moved."""
+        return self.gross.escape(i, turn_k, straight_k, orbiting)
+
+    def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None:
+        """A checked move on for robot ``i`` from where it is, ``(turn_s, straight_s)``: of its
+        :meth:`~stressbots.control.gross.GrossMotion.free_moves`, the cheapest that does not box it in at its end,
+        else the cheapest; None when it is boxed in."""
+        moves = list(self.gross.free_moves(i, self.est[i], orbiting))
+        v, r = float(self.v_hat[i]), float(self.r_hat[i])
+        for m in moves:
+            if not self.gross.boxed_in(i, escape_sweep(self.est[i], m, v, r)[-1], orbiting):
+                return m
+        return moves[0] if moves else None
+
+    def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool:
+        """Whether robot ``i`` cannot move on from where it is (:meth:`~stressbots.control.gross.GrossMotion.boxed_in`)."""
+        return self.gross.boxed_in(i, self.est[i], orbiting)
 
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]

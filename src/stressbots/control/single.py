@@ -30,7 +30,7 @@ from ..robots import TWO_PI, angle_difference
 from . import docking
 from .docking import DockOutcome, DockView
 from .loopview import DockingLoop
-from .queries import in_funnel, line_coords, line_pose, merge, turn_fraction
+from .queries import in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
 __all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget",
            "way_points"]
@@ -49,6 +49,12 @@ class SingleLoop(DockingLoop, Protocol):
     def park_orbits(self, k: int) -> None: ...
 
     def unblock_orbits(self, k: int, i: int, points: np.ndarray) -> bool: ...
+
+    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int]) -> bool: ...
+
+    def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool: ...
+
+    def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None: ...
 
 
 # -- pure geometry ------------------------------------------------------------------------------------
@@ -251,7 +257,11 @@ class SingleDocking:
                 if lp.stuck:
                     break
             waypoints = []
-            if lp.stuck:
+            if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back):
+                b, r, psi = self.line_coords(i)
+                lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
+                                      f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
+            elif lp.stuck:
                 # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
                 # retrying the same way unchanged met the same orbit every time
                 path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
@@ -259,7 +269,7 @@ class SingleDocking:
                                                           way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
                     self.back_off(i, k)
                 continue
-            if back is not None and not self.in_funnel(i, back):
+            elif back is not None and not self.in_funnel(i, back):
                 lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
                 continue
             if back is not None:
@@ -300,6 +310,10 @@ class SingleDocking:
     def line_coords(self, i: int) -> tuple[float, float, float]:
         """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""
         return line_coords(self.loop.goals[i], self.loop.est[i])
+
+    def in_corridor(self, i: int, back: float) -> bool:
+        """Whether robot ``i`` is already in its approach corridor, heading along it (:func:`~stressbots.control.queries.in_corridor`)."""
+        return in_corridor(*self.line_coords(i), back, self.loop.tune)
 
     def merge(self, i: int, behind: float, right: float, psi: float):
         """The merge of robot ``i`` onto its approach line (:func:`~stressbots.control.queries.merge`)."""
@@ -395,6 +409,23 @@ class SingleDocking:
         return outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT)
 
     def back_off(self, i: int, k: int) -> None:
-        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear."""
+        """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear.
+
+        The way off is checked (:meth:`stressbots.control.gross.GrossMotion.escape`: the cheapest turn-then-straight
+        that goes no deeper and ends clear, and keeps a robot that can move on where it can). With none, a robot
+        that can still move on from where it is takes the cheapest such move (a turn, then one body length; the
+        next attempt plans from there: staying put, every later attempt failed at the same instant); only one
+        already boxed in backs off blindly, a quarter turn and 150 um: driven blindly, robots that had stopped
+        short of an obstacle turned into it and were pinned for good.
+        """
         lp = self.loop
+        orbiting = lp.orbiting_below(k)
+        if lp.escape(i, k, k - 1, orbiting):
+            return
+        m = lp.free_move(i, orbiting)
+        if m is not None:
+            lp.log("move-on", i, f"{lp.scn.names[i]} finds no clear way off; turns {m[0]:.1f} s, then {m[1]:.1f} s straight where it "
+                                 "can still move on")
+            lp.drive([(kk, d) for kk, d in ((k, m[0]), (k - 1, m[1])) if d > 0.0])
+            return
         lp.drive([(k, 0.5 * math.pi * lp.r[i] / lp.v[i]), (k - 1, 150.0 / lp.v[i])])

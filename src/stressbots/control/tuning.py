@@ -335,6 +335,30 @@ class Tuning:
     ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
     grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
     robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
+    # route7: one-way robots are never driven into a dead end
+    viable_clearance_um: float = 5.0
+    """um. A robot is *boxed in* at a pose when none of its escapes (``escape_turns`` of a loop, then one body
+    length straight) keeps this far from the orbits, the docked bodies and the arena edge: it can neither turn
+    nor drive on. The clear part of a blocked path is driven only up to its last pose that does not box the
+    robot in, an escape of a free robot must end free, and a failed attempt's back-off leaves a free robot where
+    it is: on the tuning set most "no route ... gives up this target" failures had driven the clear part of
+    their path to a stop 10-50 um short of the structure, the arena edge or a waiting robot, heading into it,
+    and were pinned there by the next blind move. Above the camera's and one t_x of drift's error (a few um),
+    well below the controller's 15 um clearance."""
+    viable_step_um: float = 25.0
+    """um. Spacing of the ends tried back along the clear part for one that does not box the robot in (a fifth
+    of a body length)."""
+    viable_checks_max: int = 40
+    """Most ends tried (each up to ``len(escape_turns)`` swept-body checks): 1 mm of path back from the clear
+    part's end."""
+    corridor_miss_um: float = 30.0
+    """um. A robot whose gross motion stopped outside the approach funnel but already *in* the approach corridor
+    (:func:`~stressbots.control.queries.in_corridor`), heading for a lateral miss at the slot within this, goes
+    on with the line approach instead of steering back to the funnel's aim behind it: the approach fixes such a
+    miss (a left one by clockwise bursts, a right one up to ``late_miss_um`` by driving in where a loop would
+    meet the structure), while the gross motion's loop back met the structure and gave up six times."""
+    corridor_psi_deg: float = 12.0
+    """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
 
 
 @dataclass(frozen=True)

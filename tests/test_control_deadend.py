@@ -1,0 +1,190 @@
+"""One-way robots are never driven into a dead end (branch route7): pure queries on hand-built snapshots,
+checked against independent truth (brute force, straight-line kinematics, replayed group moves).
+
+- ``gross.viable_prefix``: the longest clear beginning of a path whose end is not boxed in;
+- ``queries.in_corridor``: a robot already on its approach line, heading along it, with a small lateral miss;
+- ``parking.unblock_move``: the other waiting robots driven straight with the moved one do not end on the way;
+- ``GrossMotion.boxed_in`` on a hand-built loop: a robot heading into a wall a few um ahead is boxed in, one
+  driving along it is not.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stressbots import paths as pathlib
+from stressbots.control.gross import GrossMotion, viable_prefix
+from stressbots.control.parking import unblock_move
+from stressbots.control.queries import in_corridor, line_coords, line_pose
+from stressbots.control.tuning import ControllerOptions, Tuning
+from stressbots.kinematics import move
+from stressbots.robots import Pose, orbit_radii, turning_centres
+
+from .plants import replay_orbit_move
+
+L, W, R, V = 250.0, 60.0, 200.0, 100.0
+RSTAR = float(orbit_radii(L, W, R))
+
+
+# -- viable_prefix ----------------------------------------------------------------------------------
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(50.0, 2000.0), st.floats(0.0, 2000.0), st.floats(5.0, 60.0))
+def test_viable_prefix_is_the_last_free_end_found_stepping_back(length, wall_y, step):
+    """A straight path north; ends beyond ``wall_y`` count as boxed in. The answer is the largest multiple-step
+    end (stepping back from the clear length) below the wall, checked against a brute-force scan."""
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("S", length),))
+    calls = []
+
+    def boxed(pose: np.ndarray) -> bool:
+        calls.append(float(pose[1]))
+        return bool(pose[1] > wall_y)
+
+    got = viable_prefix(path, length, boxed, step_um=step, checks=10_000)
+    ends = np.arange(length, 0.0, -step)
+    free = [float(s) for s in ends if s <= wall_y]
+    assert got == (free[0] if free else 0.0)
+    assert all(c > wall_y for c in calls[:-1])  # it stops at the first free end
+
+
+def test_viable_prefix_gives_up_after_its_check_budget():
+    path = pathlib.Path(Pose(0.0, 0.0, 0.0), R, (("S", 1000.0),))
+    assert viable_prefix(path, 1000.0, lambda pose: pose[1] > 100.0, step_um=25.0, checks=5) == 0.0
+    assert viable_prefix(path, 1000.0, lambda pose: pose[1] > 100.0, step_um=25.0, checks=40) == 100.0
+
+
+# -- in_corridor ------------------------------------------------------------------------------------
+
+def lateral_miss(goal: np.ndarray, pose: np.ndarray) -> float:
+    """Independent truth: drive ``pose`` straight (kinematics) until it reaches the slot's line across the
+    approach (behind = 0); its right offset there (um)."""
+    s = np.linspace(0.0, 3000.0, 30001)
+    track = move(pose, s, 0.0)
+    behind = np.array([line_coords(goal, p)[0] for p in track[::10]])
+    k = int(np.argmax(behind <= 0.0)) * 10
+    return line_coords(goal, track[k])[1]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(0.0, 2 * math.pi), st.floats(130.0, 650.0), st.floats(-60.0, 55.0), st.floats(-11.0, 11.0))
+def test_in_corridor_matches_the_straight_line_miss(theta, behind, right, psi_deg):
+    tune = Tuning()
+    goal = np.array([1500.0, 1500.0, theta])
+    pose = line_pose(goal, behind, right, math.radians(psi_deg))
+    miss = lateral_miss(goal, pose)
+    got = in_corridor(*line_coords(goal, pose), 450.0, tune)
+    if abs(abs(miss) - tune.corridor_miss_um) > 0.5:  # away from the boundary (0.1 um steps of the replay)
+        assert got == (abs(miss) <= tune.corridor_miss_um)
+
+
+def test_in_corridor_rejects_robots_off_the_funnels_range_or_heading():
+    tune = Tuning()
+    goal = np.array([0.0, 0.0, 0.0])
+    assert in_corridor(*line_coords(goal, line_pose(goal, 300.0, 10.0, -0.05)), 450.0, tune)
+    assert not in_corridor(*line_coords(goal, line_pose(goal, 60.0, 0.0, 0.0)), 450.0, tune)  # too close to the slot
+    assert not in_corridor(*line_coords(goal, line_pose(goal, 800.0, 0.0, 0.0)), 450.0, tune)  # beyond the funnel
+    assert not in_corridor(*line_coords(goal, line_pose(goal, 300.0, 0.0, math.radians(20.0))), 450.0, tune)  # heading off
+    assert not in_corridor(*line_coords(goal, line_pose(goal, 300.0, 80.0, math.radians(-12.0))), 450.0, tune)  # too far right
+
+
+# -- unblock_move: the other movers stay off the way -----------------------------------------------
+
+def test_unblock_move_keeps_the_other_waiting_movers_off_the_way():
+    """D_j's orbit covers the aim; D_(j+1) waits beside the way and drives straight with it. Every move the
+    query returns, replayed independently, leaves D_(j+1)'s disc off the way points (it started off them), and
+    D_j's the margin clear."""
+    rng = np.random.default_rng(7)
+    pts = np.stack([np.linspace(1000.0, 1900.0, 37), np.full(37, 1500.0)], axis=1)
+    reach = 0.5 * math.hypot(L, W) + 15.0
+    found = 0
+    for _ in range(25):
+        th = rng.uniform(0.0, 2 * math.pi, 3)
+        cj = np.array([1450.0, 1500.0 + rng.uniform(-100.0, 100.0)])
+        cm = np.array([1450.0 + rng.uniform(-400.0, 400.0), 1500.0 - RSTAR - reach - rng.uniform(5.0, 80.0)])
+        ck = np.array([600.0, 700.0])
+        centres = np.array([cj, cm, ck])
+        poses = np.column_stack([centres[:, 0] - R * np.cos(th), centres[:, 1] + R * np.sin(th), th])
+        assert np.allclose(turning_centres(poses, np.full(3, R)), centres)
+        mv = unblock_move(0, [0, 1, 2], [], poses, np.full(3, R), np.full(3, V / R), np.full(3, V), np.full(3, RSTAR), (3000.0, 3000.0),
+                          np.zeros((0, 3)), [], [], pts, reach_um=reach, margin_um=30.0, max_shift_um=900.0, clearance_um=25.0)
+        if mv is None:
+            continue
+        found += 1
+        end = turning_centres(replay_orbit_move(poses, mv, [], V, R)[-1], np.full(3, R))
+        d = np.hypot(*(pts[:, None, :] - end[None, :, :]).transpose(2, 0, 1)).min(axis=0)
+        assert d[0] >= RSTAR + reach + 30.0 - 2.0  # D_j clear of the way (replay to ~1 um)
+        assert d[1] >= RSTAR + reach - 2.0  # D_(j+1) not carried onto it
+    assert found >= 5
+
+
+# -- boxed_in on a hand-built loop ---------------------------------------------------------------------
+
+def hand_loop(pose: np.ndarray, arena=(2000.0, 2000.0)):
+    """The least of a closed loop GrossMotion.boxed_in reads: one robot, nothing docked, nobody orbiting."""
+    return SimpleNamespace(
+        est=np.array([pose], float), v_hat=np.array([V]), r_hat=np.array([R]), L=np.array([L]), W=np.array([W]),
+        docked=np.zeros(1, bool), rstar=np.array([RSTAR]), scn=SimpleNamespace(arena_um=arena),
+        opts=ControllerOptions(), tune=Tuning(),
+    )
+
+
+def test_a_robot_heading_into_the_arena_edge_a_few_um_ahead_is_boxed_in_one_along_it_is_not():
+    # heading +y (north), its front 20 um from the top edge: it can neither turn (the front swings forward) nor go on
+    into = np.array([1000.0, 2000.0 - 0.5 * L - 20.0, 0.0])
+    gm = GrossMotion(hand_loop(into))
+    assert gm.boxed_in(0, into, [])
+    # the same distance from the edge, driving along it (heading west: the edge on its right) - straight on is free
+    along = np.array([1000.0, 2000.0 - 0.5 * W - 20.0, 1.5 * math.pi])
+    assert not gm.boxed_in(0, along, [])
+    # in the open: free
+    assert not gm.boxed_in(0, np.array([1000.0, 1000.0, 0.3]), [])
+
+
+# -- back_off: a free robot is never driven blindly --------------------------------------------------
+
+class BackOffLoop:
+    """A closed loop for SingleDocking.back_off that records what it drives; ``escape``/``free_move`` as told."""
+
+    def __init__(self, escapes: bool, free: tuple[float, float] | None):
+        self.escapes, self.free = escapes, free
+        self.driven: list = []
+        self.logged: list = []
+        self.r, self.v = np.array([R, R]), np.array([V, V])
+        self.scn = SimpleNamespace(names=("A", "B"))
+
+    def orbiting_below(self, k):
+        return [0] if k > 1 else []
+
+    def escape(self, i, turn_k, straight_k, orbiting):
+        return self.escapes
+
+    def free_move(self, i, orbiting):
+        return self.free
+
+    def drive(self, steps):
+        self.driven.append(list(steps))
+
+    def log(self, kind, robot=None, detail=""):
+        self.logged.append(kind)
+
+
+def test_back_off_never_drives_a_robot_that_can_still_move_on_blindly():
+    from stressbots.control.single import SingleDocking
+
+    free = BackOffLoop(escapes=False, free=(0.7, 2.5))  # no escape ends clear: the checked move on, P_2 then P_1
+    SingleDocking(free).back_off(1, 2)  # type: ignore[arg-type]
+    assert free.driven == [[(2, 0.7), (1, 2.5)]] and free.logged == ["move-on"]
+    straight = BackOffLoop(escapes=False, free=(0.0, 2.5))  # a move on straight ahead: no zero-length turn step
+    SingleDocking(straight).back_off(1, 2)  # type: ignore[arg-type]
+    assert straight.driven == [[(1, 2.5)]]
+    boxed = BackOffLoop(escapes=False, free=None)  # boxed in already: the quarter turn and 150 um, as before
+    SingleDocking(boxed).back_off(1, 2)  # type: ignore[arg-type]
+    assert boxed.driven == [[(2, 0.5 * math.pi * R / V), (1, 150.0 / V)]]
+    escaped = BackOffLoop(escapes=True, free=None)  # the checked escape drove it (through the loop): nothing more
+    SingleDocking(escaped).back_off(1, 2)  # type: ignore[arg-type]
+    assert escaped.driven == []
