@@ -328,6 +328,18 @@ class Tuning:
     """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
     poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
     66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
+    # -- g1seven (issue 12, goal 1): D_n's group escape -------------------------------------------------------
+    group_escape_waits: int = 24
+    """Waits (evenly spaced fractions of D_n's orbit period, everyone orbiting) a group escape tries before its
+    group straight (:func:`~stressbots.control.group_escape.group_escape`): 15 deg of D_n's turn apart, like
+    ``escape_search_step_deg``."""
+    group_escape_straight_um: float = 600.0
+    """um. Longest straight of D_n in a group escape: the other movers (D_{n-1}, waiting robots) drive as far at
+    their own speeds, so shorter than ``escape_search_straight_um``; an orbit disc's diameter is ~500-600 um."""
+    group_disc_clearance_um: float = 25.0
+    """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
+    the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
+    since the move is a park move of the group."""
 
 
 @dataclass(frozen=True)
