@@ -14,8 +14,8 @@ from .. import paths as pathlib
 from ..collision import arena_gap
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, escape_manoeuvre
-from .group_escape import Group, group_escape
 from .gross import arrived, path_steps
+from .group_escape import Group, group_escape
 from .pair_geometry import tight_discs
 from .station import orbit_room
 
@@ -252,7 +252,7 @@ class PairRecovery:
         n, tune, names = self.loop.n, self.loop.tune, self.loop.scn.names
         said = False
         for _ in range(tune.escape_search_frames):
-            m = self.group_plan(N)
+            m = self.group_plan()
             if m is None or m.total_s <= 1e-3:
                 break
             if not said:
@@ -261,13 +261,13 @@ class PairRecovery:
                                            f"drive straight together {m.straight_s:.1f} s (P_{m.k})")
             k, dt = (n, m.wait_s) if m.wait_s > 1e-3 else (m.k, m.straight_s)
             self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
-        m = self.group_plan(N)
+        m = self.group_plan()
         if m is None or m.total_s > 1e-3:
             self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
             return False
         return True
 
-    def group_plan(self, N: int):
+    def group_plan(self):
         """D_n's group way out from the measured poses (:func:`~stressbots.control.group_escape.group_escape`), the
         gaps as in :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``."""
         L, tune = self.loop, self.loop.tune

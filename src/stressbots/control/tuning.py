@@ -340,6 +340,12 @@ class Tuning:
     """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
     the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
     since the move is a park move of the group."""
+    leg_stall_frames: int = 4
+    """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
+    (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
+    leg_stall_fraction: float = 0.3
+    """Progress of a leg frame below this fraction of the commanded travel counts as none: a robot pushed by another
+    still creeps, camera noise is a few um of a ~100 um frame."""
 
 
 @dataclass(frozen=True)
