@@ -266,3 +266,50 @@ def test_a_waiting_orbit_on_the_approach_line_is_moved_off_it():
     assert not hits, hits
     assert result.success, (result.failure, result.events[-6:])
     assert sim.docked.all()
+
+
+class Stuck(ProtocolOnly):
+    """Fault injection: while ``armed`` (set by the test when D_(n-1)'s straight transfer leg starts), robot
+    ``robot`` does not move for ``frames`` commands (as if pushed against a body: its pose is restored after each
+    command). Then it obeys again."""
+
+    def __init__(self, inner, robot: int, frames: int):
+        super().__init__(inner)
+        self.robot, self.left, self.armed, self.held = robot, frames, False, 0
+
+    def apply(self, waveform):
+        sim = self._inner
+        if self.armed and self.left > 0:
+            before = sim._bodies.pose[self.robot].copy()
+            super().apply(waveform)
+            sim._bodies.pose[self.robot] = before
+            self.left -= 1
+            self.held += 1
+            return
+        super().apply(waveform)
+
+
+def test_a_stalled_transfer_leg_stops_and_g1_goes_on(pair, monkeypatch):
+    """D_(n-1) held still during its straight transfer leg (pushed against something) ends the leg within
+    ``Tuning.leg_stall_frames`` frames (one leg ran 242 s before) and the transfer moves on from there; the pair
+    still forms, as the simulator itself records."""
+    from stressbots.control import transfer as transfer_mod
+
+    scn = pair.with_noise(Noise())
+    sim = SimulatedPlant(scn, seed=1)
+    plant = Stuck(sim, robot=-1, frames=12)
+    original = transfer_mod.StationTransfer.straight_leg
+
+    def armed(self, N, M, c_next, lower):
+        if plant.robot < 0:
+            plant.robot, plant.armed = M, True
+        return original(self, N, M, c_next, lower)
+
+    monkeypatch.setattr(transfer_mod.StationTransfer, "straight_leg", armed)
+    result = assemble(scn, plant, seed=1, plan=structure_targets(scn))
+    assert plant.armed, "no straight transfer leg in this scenario"
+    stalled = [e for e in result.events if e["kind"] == "transfer" and "stalled" in e["detail"]]
+    assert stalled, result.events[:8]
+    assert plant.held <= 12
+    assert result.success, (result.failure, result.events[-5:])
+    assert any(e.kind == "self_align" for e in sim.events)

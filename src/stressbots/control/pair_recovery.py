@@ -15,6 +15,7 @@ from ..collision import arena_gap
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, escape_manoeuvre
 from .gross import arrived, path_steps
+from .group_escape import Group, group_escape
 from .pair_geometry import tight_discs
 from .station import orbit_room
 
@@ -233,9 +234,8 @@ class PairRecovery:
         n, tune = self.loop.n, self.loop.tune
         for _ in range(tune.escape_search_frames):
             m = self.escape_plan(N, others)
-            if m is None:
-                self.loop.log("hold", N, f"{self.loop.scn.names[N]} has no way out of the orbits around it")
-                return False
+            if m is None:  # no way out alone: with the robots beside it (a group manoeuvre), else none
+                return self.group_escape(N)
             if m.total_s <= 1e-3:
                 return m.slack_um >= 0.0
             # the first part, at most a t_x (the rest is searched again from the next frame)
@@ -243,6 +243,43 @@ class PairRecovery:
             self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
         m = self.escape_plan(N, others)
         return m is not None and m.total_s <= 1e-3 and m.slack_um >= 0.0
+
+    def group_escape(self, N: int) -> bool:
+        """D_n leaves together with the robots hemming it in (:func:`~stressbots.control.group_escape.group_escape`:
+        wait under P_n, then P_k drives D_(k+1) .. D_n straight), searched again from the measured poses every t_x,
+        at most ``Tuning.escape_search_frames`` t_x. True when D_n's orbit is clear. D_{n-1}'s station is planned
+        again from wherever its orbit ends (every pair frame plans from the measured poses)."""
+        n, tune, names = self.loop.n, self.loop.tune, self.loop.scn.names
+        said = False
+        for _ in range(tune.escape_search_frames):
+            m = self.group_plan()
+            if m is None or m.total_s <= 1e-3:
+                break
+            if not said:
+                said = True
+                self.loop.log("escape", N, f"{names[N]} has no way out alone: after {m.wait_s:.1f} s, D_{m.k + 1} .. D_{n} "
+                                           f"drive straight together {m.straight_s:.1f} s (P_{m.k})")
+            k, dt = (n, m.wait_s) if m.wait_s > 1e-3 else (m.k, m.straight_s)
+            self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
+        m = self.group_plan()
+        if m is None or m.total_s > 1e-3:
+            self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
+            return False
+        return True
+
+    def group_plan(self):
+        """D_n's group way out from the measured poses (:func:`~stressbots.control.group_escape.group_escape`), the
+        gaps as in :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``."""
+        L, tune = self.loop, self.loop.tune
+        order = tuple(L.by_rank[r] for r in range(1, L.n + 1) if not L.docked[L.by_rank[r]])
+        need = np.full(L.n, tune.wall_clearance_um)
+        need[L.by_rank[L.n - 1]] = tune.g1_clearance_um
+        g = Group(order, L.est, L.v_hat, L.r_hat, L.L, L.W, L.rstar, need)
+        dk = np.flatnonzero(L.docked)
+        return group_escape(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=tune.escape_body_clearance_um,
+                            edge_clearance=tune.wall_clearance_um, disc_clearance=tune.group_disc_clearance_um,
+                            docked=(L.est[dk], L.L[dk], L.W[dk]), wait_steps=tune.group_escape_waits,
+                            max_straight_um=tune.group_escape_straight_um)
 
     def escape_plan(self, N: int, others):
         """D_n's way out from the measured poses (:func:`~stressbots.control.escape_search.escape_manoeuvre`): gaps

@@ -284,8 +284,11 @@ class Rendezvous:
             tr = self.pair.transfer
             step = self.loop.v_hat[[N, M]] * self.loop.tx
             # only while both drive freely: in contact the fronts slide as compliance aligns them
-            if free and (gap_now > closest + self.loop.tune.meet_diverge_um
-                         or not (tr.keeps_room(N, float(step[0]), lower) and tr.keeps_room(M, float(step[1]), lower))):
+            # fronts within meet_gap_um: about to touch, and compliance needs the push (stopped there at 5 um, the pair
+            # orbited into a lock no escape left)
+            touching = gap_now <= self.loop.tune.meet_gap_um
+            if free and not touching and (gap_now > closest + self.loop.tune.meet_diverge_um
+                                          or not (tr.keeps_room(N, float(step[0]), lower) and tr.keeps_room(M, float(step[1]), lower))):
                 # past each other, or about to lose room to orbit (a one-way pair driven on ran into the arena
                 # edges 3 mm apart at 2x noise, D_(n-1) trapped there): stop while both can still turn away
                 self.loop.log("miss", N, f"{self.loop.scn.names[N]} and {self.loop.scn.names[M]} missed each other "

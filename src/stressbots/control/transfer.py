@@ -18,6 +18,7 @@ from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
+from .leg_watch import LegProgress, leg_stop_s, pair_gaps
 from .pairloop import Replan
 from .queries import pose_on_orbit
 from .station import Body, orbit_room, orbit_route
@@ -215,13 +216,26 @@ class StationTransfer:
 
     def straight_leg(self, N: int, M: int, c_next, lower) -> None:
         """D_{n-1} straight (P_{n-2}) until its turning centre reaches ``c_next``; clockwise bearing fixes."""
-        n = self.loop.n
+        n, tune = self.loop.n, self.loop.tune
+        progress = LegProgress(tune.leg_stall_frames, tune.leg_stall_fraction)
         for _ in range(200):
             c = self.pair.centre(M)
             to = c_next - c
             h = np.array([math.sin(self.loop.est[M, 2]), math.cos(self.loop.est[M, 2])])
             rem = float(to @ h)
             if rem <= 5.0:
+                return
+            if progress.update(rem, min(rem, self.loop.v_hat[M] * self.loop.tx)):
+                self.loop.log("transfer", M, f"{self.loop.scn.names[M]}'s straight leg stalled {rem:.0f} um short; it moves on from there")
+                return
+            if self.bodies_meet(N, M, min(rem / self.loop.v_hat[M], self.loop.tx)):
+                self.loop.log("transfer", M, f"{self.loop.scn.names[N]} and {self.loop.scn.names[M]} would touch; "
+                                             f"{self.loop.scn.names[M]} stops {rem:.0f} um short and moves on from there")
+                return
+            stop = self.leg_end_clear(N, M, rem)
+            if stop is not None and stop < 0.5 * self.loop.tx:
+                self.loop.log("transfer", M, f"{self.loop.scn.names[N]} would end its leg inside {self.loop.scn.names[M]}'s orbit; "
+                                             f"{self.loop.scn.names[M]} stops {rem:.0f} um short, both orbits apart")
                 return
             bearing = float(angle_difference(math.atan2(to[0], to[1]), self.loop.est[M, 2]))
             steps = []
@@ -230,6 +244,8 @@ class StationTransfer:
             dt = rem / self.loop.v_hat[M]
             if dt > 1.6 * self.loop.tx:
                 dt = self.loop.tx
+            if stop is not None:
+                dt = min(dt, stop)
             steps.append((n - 2, dt))
             run = sum(d for _, d in steps) * self.loop.v_hat[N]
             if not self.track_clear(N, run + 40.0, lower) or not self.keeps_room(N, run, lower):
@@ -237,6 +253,28 @@ class StationTransfer:
                                              "on from there")
                 return
             self.loop.drive(steps)
+
+    def bodies_meet(self, N: int, M: int, dt: float) -> bool:
+        """Whether D_n's and D_{n-1}'s bodies, both driving straight ``dt`` s from the measured poses, come within
+        ``Tuning.escape_body_clearance_um`` (and closer than they are): the track was checked apart when planned,
+        but a pair that meets pushes itself into a lock no escape leaves."""
+        L = self.loop
+        ts = np.linspace(0.0, dt, 8)
+        a = move(L.est[N], L.v_hat[N] * ts, 0.0)
+        b = move(L.est[M], L.v_hat[M] * ts, 0.0)
+        depth = penetration_depth(a, L.L[N], L.W[N], b, L.L[M], L.W[M])
+        return bool(depth.max() > max(-L.tune.escape_body_clearance_um, float(depth[0])))
+
+    def leg_end_clear(self, N: int, M: int, rem: float) -> float | None:
+        """How long (s) the straight leg may still run so that D_n's orbit ends ``Tuning.g1_clearance_um`` clear of
+        D_{n-1}'s (:func:`~stressbots.control.leg_watch.leg_stop_s`, both predicted straight from the measured poses
+        to the leg's end, ``rem`` um of D_{n-1}'s travel); None: run on as planned."""
+        L = self.loop
+        hd = np.stack([np.sin(L.est[[N, M], 2]), np.cos(L.est[[N, M], 2])], axis=1)
+        taus = np.linspace(0.0, rem / float(L.v_hat[M]), 24)
+        gaps = pair_gaps(self.pair.centre(N), hd[0], float(L.v_hat[N]), float(L.rstar[N]), self.pair.centre(M), hd[1],
+                         float(L.v_hat[M]), float(L.rstar[M]), taus)
+        return leg_stop_s(gaps, taus, L.tune.g1_clearance_um)
 
     def transfer_run(self, N: int, M: int, leg: float, th_dep: float, lower, c_next, q_next) -> np.ndarray | None:
         """A start pose for D_n's straight track during a leg of D_{n-1}, reachable in time; or None.

@@ -359,6 +359,24 @@ class Tuning:
     meet the structure), while the gross motion's loop back met the structure and gave up six times."""
     corridor_psi_deg: float = 12.0
     """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
+    # -- g1seven (issue 12, goal 1): D_n's group escape -------------------------------------------------------
+    group_escape_waits: int = 24
+    """Waits (evenly spaced fractions of D_n's orbit period, everyone orbiting) a group escape tries before its
+    group straight (:func:`~stressbots.control.group_escape.group_escape`): 15 deg of D_n's turn apart, like
+    ``escape_search_step_deg``."""
+    group_escape_straight_um: float = 600.0
+    """um. Longest straight of D_n in a group escape: the other movers (D_{n-1}, waiting robots) drive as far at
+    their own speeds, so shorter than ``escape_search_straight_um``; an orbit disc's diameter is ~500-600 um."""
+    group_disc_clearance_um: float = 25.0
+    """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
+    the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
+    since the move is a park move of the group."""
+    leg_stall_frames: int = 4
+    """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
+    (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
+    leg_stall_fraction: float = 0.3
+    """Progress of a leg frame below this fraction of the commanded travel counts as none: a robot pushed by another
+    still creeps, camera noise is a few um of a ~100 um frame."""
 
 
 @dataclass(frozen=True)
