@@ -22,225 +22,50 @@ from dataclasses import dataclass, field
 
 from ..assessment import SHAPE_TOL_UM
 
-__all__ = ["ControllerOptions", "Tuning"]
+__all__ = ["ControllerOptions", "DockingTuning", "GrossTuning", "PairTuning", "ParkingTuning", "Tuning"]
 
 
 @dataclass(frozen=True)
-class Tuning:
-    """Thresholds of the closed loop (seed App. 3), with their reasons.
-
-    Attributes
-    ----------
-    g1_clearance_um:
-        Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it).
-    wall_clearance_um:
-        Clearance of D_n's timed paths from the arena edge and the other orbits (a robot against the edge
-        is stuck: it cannot pivot off it).
-    final_leg_s:
-        D_n drives the last seconds of a timed path open loop when re-planning them would cost a loop.
-    station_tol_um:
-        After a first leg, D_{n-1} moves its orbit again only if farther than this from its station: the
-        rendezvous adapts to the orbit it is on.
-    early_s:
-        D_n arrives on its approach line this long before D_{n-1} passes the tangent point.
-    pair_frames:
-        How many pair frames (the nominal one, then re-planned ones) G_1 may be tried in.
-    frame_turns_deg:
-        Turns of the structure about the G_1 junction tried when G_1 is re-planned (clockwise).
-    frame_shifts_um:
-        Shifts of the structure tried when G_1 is re-planned (each in 8 directions).
-    frame_slot_clearance_um:
-        Clearance of a re-planned frame's slots and station orbit from the measured orbits.
-    track_overshoot:
-        D_n's straight runs during a transfer may end this fraction (plus 40 um) further than planned
-        (3 sigma of the literature's 5 % speed error, and the bearing fixes): it must have room to orbit there.
-    rendezvous_attempts:
-        Rendezvous tries at one station before G_1 is re-planned.
-    departure_cost_max:
-        Largest accepted max(|w_y| / 80 um, |alpha| / 60 deg) of D_{n-1}'s departure (self-alignment limits).
-    meet_gap_um:
-        Front edges of the stopped pair at most this far apart count as G_1 formed.
-    gross_docked_clearance_um:
-        Clearance of gross motion from the docked structure away from its target: a robot grazing the
-        structure is turned flush against the wrong edge by docking compliance and is trapped there.
-    arrive_um, arrive_deg:
-        A gross-motion target region (the seed's regions instead of points).
-    left_bias_deg:
-        A turn into a long straight is cut short by up to this much (one-way robots correct clockwise).
-    whole_leg_factor:
-        A path shorter than this many t_x runs whole (stopping short and overshooting would cost a loop).
-    stall_fraction:
-        A robot that moved less than this fraction of its commanded distance stalled (failure region H).
-    stall_count:
-        Consecutive stalls after which gross motion gives up (stuck) and recovery begins.
-    dock_attempts:
-        Docking attempts of a single robot before the run fails.
-    approach_lengths_um:
-        Candidate clear corridor lengths behind a slot, longest first.
-    funnel_min_behind_um, funnel_extra_um, funnel_right_um:
-        The approach funnel: at least this far behind the slot, at most the corridor plus the extra, at
-        most this far right of the line.
-    merge_heading_margin_deg:
-        The merge onto the approach line must survive this much less left heading than measured.
-    small_miss_um:
-        A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS).
-    late_miss_um:
-        A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would
-        meet the structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um).
-    orbit_watch_um:
-        An orbit closer than this to another orbit, a docked body or the arena edge is logged.
-    via_tol_um:
-        D_{n-1}'s orbit counts as at an intermediate orbit of its route (and, on the first try, at its
-        station) within this.
-    station_grid_um:
-        Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through.
-    station_leg_cost_um:
-        Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length.
-    no_route_quiet_cycles:
-        After the roadmap found no way around the obstacles, gross motion drives on this many t_x before it
-        asks again (each failed query costs a full roadmap build: failing runs spent minutes there).
-    park_margin_um:
-        Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or
-        another orbit is moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading
-        noise, and one that reaches an obstacle traps its robot.
-    park_shift_um:
-        How far such an orbit is moved.
-    park_clearance_um:
-        Clearance every robot driving straight during that move keeps (or, if closer already, does not lose).
-    approach_frames:
-        Frames the fine motion along an approach line may take before it gives up.
-    aligned_um, aligned_deg:
-        On the approach line: predicted docking offset (:func:`~stressbots.control.docking.contact_offset`)
-        and heading error below these need no merge.
-    aim_left_um:
-        A robot on its approach line aims at least this far left of its slot (see ``lead_drift_deg_per_mm``).
-    final_run_um:
-        The last stretch before the slot is driven in short frames with clockwise re-aim bursts: heading
-        drift over it (3.7 deg/mm at the literature's noise) moves the docking point by several um.
-    final_frame_s:
-        Frame length (s) of the final run: shorter than t_x, so a drift is seen while it can be corrected.
-    reaim_tol_um:
-        In the final run, a predicted offset further left than this is corrected by a clockwise burst.
-    lead_drift_deg_per_mm:
-        On its approach line a robot aims left of its slot by what a clockwise heading drift of this much
-        would add before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then
-        carries it onto the slot, one to the left is corrected by a clockwise burst (about half the
-        literature's 3.7 deg/mm: the random part of the drift goes either way).
-    aim_heading_sigma_deg:
-        The aim also leads left by the docking offset a heading estimate error of this much would cause,
-        ``(behind + L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per
-        frame, filtered), and only what ends up left is fixed later.
-    reaim_max_deg:
-        Largest single clockwise re-aim burst (a larger one means the robot is not on its line).
-    final_right_um:
-        In the final run, a predicted offset further right than this loops back when a loop is clear
-        (a one-way robot cannot turn left; a robot that docks off its slot cannot leave it).
-    miss_relax_um:
-        After each miss of the same robot, the offsets its approach accepts without looping back grow by
-        this much (and its largest re-aim burst by ``reaim_max_deg``): precision first, then docking at all.
-    settle_frames:
-        Push frames after the run in, waiting for the robot to stop.
-    settle_fraction:
-        A pushing robot that moved less than this fraction of a frame's nominal travel has stopped.
-    flush_um:
-        A robot stopped within this of its slot's face line, heading within the docking tolerance, is flush
-        against the face it was to dock on.
-    off_slot_um:
-        ... and counts as docked off its slot up to this far along the face: its front touches the structure,
-        so it can neither turn (every front point moves forward) nor reverse; recovery is impossible.
-
-    Gross-motion reachability and stall recovery (issue 12, gross motion):
-
-    approach_lead_in_radii:
-        An approach corridor counts only if its line goes on this many of the robot's turn radii beyond
-        the funnel, clear of the structure and the arena edge: a one-way robot enters the funnel from
-        behind, so a funnel backed against the edge is a target no path reaches (those robots drove on
-        along blocked paths into the edge, where turning and driving both push into it: trapped).
-    escape_clearance_um:
-        Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot
-        (its loop 12 um from the edge, say) has no route at 15-20 um from where it is, and the clear part
-        of a route at a few um is safer than the blocked shortest path (5 sigma of the 2 um camera error).
-    route_searches_max:
-        Failed roadmap searches (each at up to three clearances) a robot may spend on one target (same
-        structure and orbits) in a run; each costs up to six roadmap builds (0.1-0.5 s each), and failing
-        8-robot runs spent 40-80 s asking again and again.
-    min_clear_run_s:
-        With no route, a robot drives the clear beginning of its blocked path only if it is at least this
-        many seconds of travel; otherwise it gives up the target (the caller re-plans) instead of driving
-        into what blocks it.
-    escapes_per_steer:
-        Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact
-        or a stall before it reports the robot stuck (each is a turn and a straight: a few seconds).
-    escape_turns:
-        Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse). Fine
-        steps first (1/32 = 11 deg): a robot beside a wall swings its rear corner out by tens of um when it
-        turns further, so the way off is often a slight turn, then straight.
-    escape_straights:
-        Lengths of an escape's straight, in body lengths (one clears a body it touched end to end).
-    """
+class PairTuning:
+    """G_1: D_(n-1)'s station transfer, D_n's timed rendezvous, the meeting, holding orbits, searched escapes and pair
+    rounds (seed App. 3.3; :mod:`~stressbots.control.pair` and its parts)."""
 
     g1_clearance_um: float = 25.0
+    """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
     wall_clearance_um: float = 40.0
+    """Clearance of D_n's timed paths from the arena edge and the other orbits (a robot against the edge is stuck: it
+    cannot pivot off it)."""
     final_leg_s: float = 3.0
+    """D_n drives the last seconds of a timed path open loop when re-planning them would cost a loop."""
     station_tol_um: float = 150.0
+    """After a first leg, D_{n-1} moves its orbit again only if farther than this from its station: the rendezvous
+    adapts to the orbit it is on."""
     early_s: float = 1.2
+    """D_n arrives on its approach line this long before D_{n-1} passes the tangent point."""
     pair_frames: int = 6
+    """How many pair frames (the nominal one, then re-planned ones) G_1 may be tried in."""
     frame_turns_deg: tuple[float, ...] = (0.0, 20.0, -20.0, 45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0)
+    """Turns of the structure about the G_1 junction tried when G_1 is re-planned (clockwise)."""
     frame_shifts_um: tuple[float, ...] = (0.0, 200.0, 400.0)
+    """Shifts of the structure tried when G_1 is re-planned (each in 8 directions)."""
     frame_slot_clearance_um: float = 30.0
+    """Clearance of a re-planned frame's slots and station orbit from the measured orbits."""
     track_overshoot: float = 0.15
+    """D_n's straight runs during a transfer may end this fraction (plus 40 um) further than planned (3 sigma of the
+    literature's 5 % speed error, and the bearing fixes): it must have room to orbit there."""
     rendezvous_attempts: int = 4
+    """Rendezvous tries at one station before G_1 is re-planned."""
     departure_cost_max: float = 0.6
+    """Largest accepted max(|w_y| / 80 um, |alpha| / 60 deg) of D_{n-1}'s departure (self-alignment limits)."""
     meet_gap_um: float = 25.0
-    gross_docked_clearance_um: float = 40.0
-    arrive_um: float = 25.0
-    arrive_deg: float = 6.0
-    left_bias_deg: float = 3.0
-    whole_leg_factor: float = 1.6
-    stall_fraction: float = 0.15
-    stall_count: int = 3
-    dock_attempts: int = 6
-    approach_lengths_um: tuple[float, ...] = (450.0, 350.0, 250.0, 150.0)
-    funnel_min_behind_um: float = 120.0
-    funnel_extra_um: float = 250.0
-    funnel_right_um: float = 60.0
-    merge_heading_margin_deg: float = 1.5
-    small_miss_um: float = 12.0
-    late_miss_um: float = 25.0
-    orbit_watch_um: float = 10.0
+    """Front edges of the stopped pair at most this far apart count as G_1 formed."""
     via_tol_um: float = 60.0
+    """D_{n-1}'s orbit counts as at an intermediate orbit of its route (and, on the first try, at its station) within
+    this."""
     station_grid_um: float = 150.0
+    """Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through."""
     station_leg_cost_um: float = 300.0
-    no_route_quiet_cycles: int = 5
-    park_margin_um: float = 40.0
-    park_shift_um: float = 150.0
-    park_clearance_um: float = 25.0
-    approach_frames: int = 80
-    aligned_um: float = 3.0
-    aligned_deg: float = 1.0
-    aim_left_um: float = 0.0
-    final_run_um: float = 220.0
-    final_frame_s: float = 0.3
-    reaim_tol_um: float = 1.0
-    lead_drift_deg_per_mm: float = 2.0
-    aim_heading_sigma_deg: float = 0.6
-    reaim_max_deg: float = 4.0
-    final_right_um: float = 6.0
-    miss_relax_um: float = 5.0
-    settle_frames: int = 6
-    settle_fraction: float = 0.2
-    flush_um: float = 15.0
-    off_slot_um: float = 90.0
-    # -- gross-motion reachability and stall recovery (issue 12) --
-    approach_lead_in_radii: float = 1.0
-    escape_clearance_um: float = 10.0
-    route_searches_max: int = 3
-    min_clear_run_s: float = 1.0
-    escapes_per_steer: int = 2
-    escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
-    escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
-
-    # -- G_1 (control/transfer.py, pair_recovery.py): room to orbit, safe holding (issue 12, 2x noise) ----
+    """Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length."""
     orbit_room_um: float = 15.0
     """um. Room to orbit (gap of its orbit disc to the arena edge and the lower orbits) D_n keeps at the
     predicted end of every straight frame of a station transfer: a one-way robot that loses it while the
@@ -258,30 +83,6 @@ class Tuning:
     2x noise D_n looped 45 times (700 s simulated, 100 s wall) without arriving."""
     hold_frames: int = 120
     """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
-
-    # -- single-robot docking: waiting orbits moved off the way (branch gross6, issue 12 goal 1) ----------
-    unblock_margin_um: float = 30.0
-    """um. A waiting orbit whose disc comes within (half body diagonal + ``ControllerOptions.clearance_um``) of a
-    docking robot's aim, approach corridor or (after a blocked attempt) its path is moved until it is this
-    much further: a disc over the aim left no route at all, and every retry hit the same disc."""
-    unblock_max_shift_um: float = 600.0
-    """um. Longest straight move of such an orbit (one wait and one straight drive of the waiting group)."""
-    unblock_moves_per_phase: int = 2
-    """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
-    unblock_extra_loops: int = 2
-    """Extra loops of the waiting robot an orbit move may wait before its straight: the robots driving straight with it
-    (D_j .. D_k, turning at their own rates) then head elsewhere, and a move that ran one of them into the arena
-    edge or another orbit may find a clear set of tracks."""
-    unblock_heading_tol_deg: float = 15.0
-    """deg. After its wait, a waiting robot more than this off its planned departure heading does not drive the
-    straight: it was held (touched by the docking robot, it cannot turn) and would leave in a direction nobody
-    checked (one ran its orbit 137 um into the arena edge so)."""
-    start_park_margin_um: float = 100.0
-    """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
-    are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
-    64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
-    the drift of one G_1 phase."""
-    # -- G_1 generality (branch g1six, issue 12): searched escapes, reachable stations, pair rounds ----------
     escape_search_frames: int = 12
     """t_x. Longest searched escape of D_n (:meth:`~stressbots.control.pair_recovery.PairRecovery.searched_escape`),
     re-searched every t_x: a turn of up to a loop (~20 s at the literature's speeds) and a straight."""
@@ -328,14 +129,83 @@ class Tuning:
     """Pair frames a later round (after the first's ``pair_frames``) may try: the nearest frames from the new
     poses. A frame costs seconds of wall time in the timed-track searches; a whole second round of six cost
     66 s on one trial (issue 12, goal 5: no failing trial 10x a normal one)."""
-    # -- docking precision at the declared noise (branch dock7, issue 12: 2x noise) -------------------------
-    aim_walk_sigmas: float = 1.0
-    """Standard deviations of the heading drift's random walk (:func:`~stressbots.control.docking.walk_lead_um`)
-    a robot on its approach line aims left of its slot by, on top of ``lead_drift_deg_per_mm`` and
-    ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
-    grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
-    robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
-    # route7: one-way robots are never driven into a dead end
+    group_escape_waits: int = 24
+    """Waits (evenly spaced fractions of D_n's orbit period, everyone orbiting) a group escape tries before its
+    group straight (:func:`~stressbots.control.group_escape.group_escape`): 15 deg of D_n's turn apart, like
+    ``escape_search_step_deg``."""
+    group_escape_straight_um: float = 600.0
+    """um. Longest straight of D_n in a group escape: the other movers (D_{n-1}, waiting robots) drive as far at
+    their own speeds, so shorter than ``escape_search_straight_um``; an orbit disc's diameter is ~500-600 um."""
+    group_disc_clearance_um: float = 25.0
+    """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
+    the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
+    since the move is a park move of the group."""
+    leg_stall_frames: int = 4
+    """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
+    (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
+    leg_stall_fraction: float = 0.3
+    """Progress of a leg frame below this fraction of the commanded travel counts as none: a robot pushed by another
+    still creeps, camera noise is a few um of a ~100 um frame."""
+
+
+@dataclass(frozen=True)
+class GrossTuning:
+    """Gross motion of a single robot to its approach funnel: regions, routes, stalls and escapes (seed App. 3.1,
+    sigma_1; :mod:`~stressbots.control.gross`, :mod:`~stressbots.control.single`)."""
+
+    gross_docked_clearance_um: float = 40.0
+    """Clearance of gross motion from the docked structure away from its target: a robot grazing the structure is
+    turned flush against the wrong edge by docking compliance and is trapped there."""
+    arrive_um: float = 25.0
+    arrive_deg: float = 6.0
+    """(arrive_um, arrive_deg) A gross-motion target region (the seed's regions instead of points)."""
+    left_bias_deg: float = 3.0
+    """A turn into a long straight is cut short by up to this much (one-way robots correct clockwise)."""
+    whole_leg_factor: float = 1.6
+    """A path shorter than this many t_x runs whole (stopping short and overshooting would cost a loop)."""
+    stall_fraction: float = 0.15
+    """A robot that moved less than this fraction of its commanded distance stalled (failure region H)."""
+    stall_count: int = 3
+    """Consecutive stalls after which gross motion gives up (stuck) and recovery begins."""
+    dock_attempts: int = 6
+    """Docking attempts of a single robot before the run fails."""
+    approach_lengths_um: tuple[float, ...] = (450.0, 350.0, 250.0, 150.0)
+    """Candidate clear corridor lengths behind a slot, longest first."""
+    funnel_min_behind_um: float = 120.0
+    funnel_extra_um: float = 250.0
+    funnel_right_um: float = 60.0
+    """(funnel_min_behind_um, funnel_extra_um, funnel_right_um) The approach funnel: at least this far behind the slot,
+    at most the corridor plus the extra, at most this far right of the line."""
+    merge_heading_margin_deg: float = 1.5
+    """The merge onto the approach line must survive this much less left heading than measured."""
+    no_route_quiet_cycles: int = 5
+    """After the roadmap found no way around the obstacles, gross motion drives on this many t_x before it asks again
+    (each failed query costs a full roadmap build: failing runs spent minutes there)."""
+    approach_lead_in_radii: float = 1.0
+    """An approach corridor counts only if its line goes on this many of the robot's turn radii beyond the funnel,
+    clear of the structure and the arena edge: a one-way robot enters the funnel from behind, so a funnel backed
+    against the edge is a target no path reaches (those robots drove on along blocked paths into the edge, where
+    turning and driving both push into it: trapped)."""
+    escape_clearance_um: float = 10.0
+    """Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot (its loop 12 um
+    from the edge, say) has no route at 15-20 um from where it is, and the clear part of a route at a few um is
+    safer than the blocked shortest path (5 sigma of the 2 um camera error)."""
+    route_searches_max: int = 3
+    """Failed roadmap searches (each at up to three clearances) a robot may spend on one target (same structure and
+    orbits) in a run; each costs up to six roadmap builds (0.1-0.5 s each), and failing 8-robot runs spent 40-80 s
+    asking again and again."""
+    min_clear_run_s: float = 1.0
+    """With no route, a robot drives the clear beginning of its blocked path only if it is at least this many seconds
+    of travel; otherwise it gives up the target (the caller re-plans) instead of driving into what blocks it."""
+    escapes_per_steer: int = 2
+    """Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact or a
+    stall before it reports the robot stuck (each is a turn and a straight: a few seconds)."""
+    escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
+    """Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse). Fine steps first
+    (1/32 = 11 deg): a robot beside a wall swings its rear corner out by tens of um when it turns further, so the
+    way off is often a slight turn, then straight."""
+    escape_straights: tuple[float, ...] = (0.5, 1.0, 1.5)
+    """Lengths of an escape's straight, in body lengths (one clears a body it touched end to end)."""
     viable_clearance_um: float = 5.0
     """um. A robot is *boxed in* at a pose when none of its escapes (``escape_turns`` of a loop, then one body
     length straight) keeps this far from the orbits, the docked bodies and the arena edge: it can neither turn
@@ -359,24 +229,114 @@ class Tuning:
     meet the structure), while the gross motion's loop back met the structure and gave up six times."""
     corridor_psi_deg: float = 12.0
     """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
-    # -- g1seven (issue 12, goal 1): D_n's group escape -------------------------------------------------------
-    group_escape_waits: int = 24
-    """Waits (evenly spaced fractions of D_n's orbit period, everyone orbiting) a group escape tries before its
-    group straight (:func:`~stressbots.control.group_escape.group_escape`): 15 deg of D_n's turn apart, like
-    ``escape_search_step_deg``."""
-    group_escape_straight_um: float = 600.0
-    """um. Longest straight of D_n in a group escape: the other movers (D_{n-1}, waiting robots) drive as far at
-    their own speeds, so shorter than ``escape_search_straight_um``; an orbit disc's diameter is ~500-600 um."""
-    group_disc_clearance_um: float = 25.0
-    """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
-    the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
-    since the move is a park move of the group."""
-    leg_stall_frames: int = 4
-    """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
-    (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
-    leg_stall_fraction: float = 0.3
-    """Progress of a leg frame below this fraction of the commanded travel counts as none: a robot pushed by another
-    still creeps, camera noise is a few um of a ~100 um frame."""
+
+
+@dataclass(frozen=True)
+class DockingTuning:
+    """Fine motion along a slot's approach line and the push into it (seed App. 3.2, sigma_2;
+    :mod:`~stressbots.control.docking`)."""
+
+    small_miss_um: float = 12.0
+    """A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS)."""
+    late_miss_um: float = 25.0
+    """A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would meet the
+    structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um)."""
+    approach_frames: int = 80
+    """Frames the fine motion along an approach line may take before it gives up."""
+    aligned_um: float = 3.0
+    aligned_deg: float = 1.0
+    """(aligned_um, aligned_deg) On the approach line: predicted docking offset
+    (:func:`~stressbots.control.docking.contact_offset`) and heading error below these need no merge."""
+    aim_left_um: float = 0.0
+    """A robot on its approach line aims at least this far left of its slot (see ``lead_drift_deg_per_mm``)."""
+    final_run_um: float = 220.0
+    """The last stretch before the slot is driven in short frames with clockwise re-aim bursts: heading drift over it
+    (3.7 deg/mm at the literature's noise) moves the docking point by several um."""
+    final_frame_s: float = 0.3
+    """Frame length (s) of the final run: shorter than t_x, so a drift is seen while it can be corrected."""
+    reaim_tol_um: float = 1.0
+    """In the final run, a predicted offset further left than this is corrected by a clockwise burst."""
+    lead_drift_deg_per_mm: float = 2.0
+    """On its approach line a robot aims left of its slot by what a clockwise heading drift of this much would add
+    before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then carries it onto the
+    slot, one to the left is corrected by a clockwise burst (about half the literature's 3.7 deg/mm: the random part
+    of the drift goes either way)."""
+    aim_heading_sigma_deg: float = 0.6
+    """The aim also leads left by the docking offset a heading estimate error of this much would cause, ``(behind +
+    L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per frame, filtered), and
+    only what ends up left is fixed later."""
+    reaim_max_deg: float = 4.0
+    """Largest single clockwise re-aim burst (a larger one means the robot is not on its line)."""
+    final_right_um: float = 6.0
+    """In the final run, a predicted offset further right than this loops back when a loop is clear (a one-way robot
+    cannot turn left; a robot that docks off its slot cannot leave it)."""
+    miss_relax_um: float = 5.0
+    """After each miss of the same robot, the offsets its approach accepts without looping back grow by this much (and
+    its largest re-aim burst by ``reaim_max_deg``): precision first, then docking at all."""
+    settle_frames: int = 6
+    """Push frames after the run in, waiting for the robot to stop."""
+    settle_fraction: float = 0.2
+    """A pushing robot that moved less than this fraction of a frame's nominal travel has stopped."""
+    flush_um: float = 15.0
+    """A robot stopped within this of its slot's face line, heading within the docking tolerance, is flush against the
+    face it was to dock on."""
+    off_slot_um: float = 90.0
+    """... and counts as docked off its slot up to this far along the face: its front touches the structure, so it can
+    neither turn (every front point moves forward) nor reverse; recovery is impossible."""
+    aim_walk_sigmas: float = 1.0
+    """Standard deviations of the heading drift's random walk (:func:`~stressbots.control.docking.walk_lead_um`)
+    a robot on its approach line aims left of its slot by, on top of ``lead_drift_deg_per_mm`` and
+    ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
+    grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
+    robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
+
+
+@dataclass(frozen=True)
+class ParkingTuning:
+    """Robots waiting on their orbits: watching, parking and moving them off a docking robot's way
+    (:mod:`~stressbots.control.parking`)."""
+
+    orbit_watch_um: float = 10.0
+    """An orbit closer than this to another orbit, a docked body or the arena edge is logged."""
+    park_margin_um: float = 40.0
+    """Before each docking phase, a waiting orbit closer than this to the arena edge, the structure or another orbit is
+    moved away (:mod:`~stressbots.control.parking`): orbits drift with the heading noise, and one that reaches an
+    obstacle traps its robot."""
+    park_shift_um: float = 150.0
+    """How far such an orbit is moved."""
+    park_clearance_um: float = 25.0
+    """Clearance every robot driving straight during that move keeps (or, if closer already, does not lose)."""
+    unblock_margin_um: float = 30.0
+    """um. A waiting orbit whose disc comes within (half body diagonal + ``ControllerOptions.clearance_um``) of a
+    docking robot's aim, approach corridor or (after a blocked attempt) its path is moved until it is this
+    much further: a disc over the aim left no route at all, and every retry hit the same disc."""
+    unblock_max_shift_um: float = 600.0
+    """um. Longest straight move of such an orbit (one wait and one straight drive of the waiting group)."""
+    unblock_moves_per_phase: int = 2
+    """Moves of one waiting orbit per docking phase: a move that did not free the way is not repeated forever."""
+    unblock_extra_loops: int = 2
+    """Extra loops of the waiting robot an orbit move may wait before its straight: the robots driving straight with it
+    (D_j .. D_k, turning at their own rates) then head elsewhere, and a move that ran one of them into the arena
+    edge or another orbit may find a clear set of tracks."""
+    unblock_heading_tol_deg: float = 15.0
+    """deg. After its wait, a waiting robot more than this off its planned departure heading does not drive the
+    straight: it was held (touched by the docking robot, it cannot turn) and would leave in a direction nobody
+    checked (one ran its orbit 137 um into the arena edge so)."""
+    start_park_margin_um: float = 100.0
+    """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
+    are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
+    64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
+    the drift of one G_1 phase."""
+
+
+@dataclass(frozen=True)
+class Tuning(PairTuning, GrossTuning, DockingTuning, ParkingTuning):
+    """Thresholds of the closed loop (seed App. 3), each a named field with its units and reason.
+
+    One frozen dataclass with every field of its phases' groups (:class:`PairTuning`, :class:`GrossTuning`,
+    :class:`DockingTuning`, :class:`ParkingTuning`): ``Tuning().pair_frames``, ``replace(t, dock_attempts=3)``.
+    Angles in deg and lengths in um unless the name says; ``t_x`` is the control period.
+    """
 
 
 @dataclass(frozen=True)
