@@ -94,7 +94,9 @@ class PlannerOptions:
         How many of ``roadmap_nodes``' roadmaps D_n's routed timed paths of G_1 search (the first ones):
         a leg whose route fails in the 80-node roadmap mostly fails in the larger one too, and a G_1 search
         has other cuts and routes to try (2 until issue 15's speed work: gap-16's nominal plan 30 -> 16 s of
-        CPU, three other seeds 10-15 % faster).
+        CPU, three other seeds 10-15 % faster). A layout no search plans is planned again with one more
+        roadmap (up to all of them) before it is refused, unless ``search_budget`` was spent (each such pass
+        has its own budget): gap-14 of ``bench_planner.py`` needs the second.
     search_budget:
         G_1 schedules tried over the whole search (every structure variant, standard and extended): a
         deterministic bound on the time spent on a layout that cannot be planned (unlike

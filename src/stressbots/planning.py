@@ -250,6 +250,11 @@ def plan_assembly(scenario, options: PlannerOptions | None = None, *, progress: 
         best = _best_variant(scn, analysis, scored, len(structures), opts, say, failures, t_start, extended=True, search=search)
     if best is not None:
         return best
+    if opts.timed_roadmaps < len(opts.roadmap_nodes) and not search.spent:
+        # D_n's timed legs searched only the first roadmap(s) (fast, and enough on almost every layout): plan
+        # again with one more before refusing (bench_planner's gap-14 needs the second for D_n's way around an
+        # orbit); a layout refused with every roadmap is refused with that search's reasons
+        return plan_assembly(scenario, replace(opts, timed_roadmaps=opts.timed_roadmaps + 1), progress=progress)
     # the extended search's reasons, when it ran: what still blocks after the wider search
     last = failures[standard:] or failures
     reason = max(dict.fromkeys(last), key=last.count) if last else "no plan found"
