@@ -16,12 +16,15 @@ from stressbots.control.docking import (
     DockOutcome,
     DockView,
     LineFix,
+    compliant_aim,
     contact_offset,
     line_approach,
     reaim_turn_rad,
     stopped_verdict,
 )
+from stressbots.control.queries import turn_fraction
 from stressbots.control.tuning import ControllerOptions
+from stressbots.kinematics import move
 
 
 def flush_by_rotation(e: float, psi: float, L: float, W: float) -> float:
@@ -63,6 +66,43 @@ def test_reaim_turn_brings_a_left_offset_back_to_the_slot(behind, right, psi_deg
     assert d > 0.0
     after = contact_offset(behind, right, psi + d, L)
     assert abs(after) <= 0.05 * abs(fix.offset_um) + 0.05
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.floats(120.0, 500.0), st.floats(-60.0, 60.0), st.floats(-25.0, 25.0), st.floats(80.0, 300.0), st.floats(150.0, 320.0))
+def test_compliant_aim_ends_the_robot_in_its_slot_after_compliance(behind, right, psi_deg, r, L):
+    # slot frame as in flush_by_rotation: face y = 0, slot centre (0, -L/2), heading +y; right = +x
+    W = 60.0
+    goal = np.array([0.0, -0.5 * L, 0.0])
+    start = np.array([right, -0.5 * L - behind, math.radians(psi_deg)])
+    aim = compliant_aim(start, goal, r, L)
+    if aim is None:
+        return
+    rho, length, _ = turn_fraction(start, aim, r)
+    end = move(start, length, rho / r)  # the interpolated arc, driven by independent kinematics
+    assert abs(aim[1] - goal[1]) < 1e-9  # the aim lies on the slot's face line
+    # the arc passes through the aim (a point within turn_fraction's 3 um of straight ahead is driven straight)
+    straight = rho == 0.0
+    assert np.hypot(*(end[:2] - aim)) < (3.0 if straight else 1e-6 * max(1.0, length))
+    psi_end = float((end[2] + math.pi) % (2 * math.pi) - math.pi)
+    # docking compliance about the leading corner then leaves the centre on the slot (to the bisection's tolerance
+    # and the second-order (W/2)(1 - cos psi) the aim leaves out)
+    tol = 0.5 + 0.5 * W * (1.0 - math.cos(psi_end)) + (3.0 / math.cos(psi_end) if straight else 0.0)
+    e = float(start[0] + behind * math.tan(start[2])) if straight else float(end[0])  # centre line meets the face
+    assert abs(flush_by_rotation(e, psi_end, L, W)) <= tol
+
+
+def test_an_arc_through_the_slot_itself_would_end_off_it():
+    # why compliant_aim exists: 200 um out, pointing 10 deg left, an arc through the slot arrives 15.7 deg
+    # clockwise and compliance moves the robot 34 um right; the compliant aim ends within a micrometre
+    L, W, r = 250.0, 60.0, 100.0
+    goal = np.array([0.0, -0.5 * L, 0.0])
+    start = np.array([-10.0, -0.5 * L - 200.0, math.radians(-10.0)])
+    through = turn_fraction(start, goal, r)[2]
+    assert flush_by_rotation(0.0, through, L, W) > 30.0
+    aim = compliant_aim(start, goal, r, L)
+    assert aim is not None and aim[0] < -10.0  # aimed left, it arrives turned less (7 deg)
+    assert abs(flush_by_rotation(float(aim[0]), turn_fraction(start, aim, r)[2], L, W)) < 1.0
 
 
 def test_stopped_verdict_tells_docked_off_slot_and_stuck_apart():

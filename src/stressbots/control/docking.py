@@ -35,11 +35,11 @@ import numpy as np
 
 from ..robots import angle_difference
 from .loopview import Steps
-from .queries import interpolated_steps, line_coords, merge
+from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions
 
-__all__ = ["DockOutcome", "DockView", "LineFix", "contact_offset", "lead_um", "reaim_turn_rad", "stopped_verdict", "line_approach",
-           "settle", "walk_lead_um"]
+__all__ = ["DockOutcome", "DockView", "LineFix", "compliant_aim", "contact_offset", "lead_um", "reaim_turn_rad",
+           "stopped_verdict", "line_approach", "settle", "walk_lead_um"]
 
 
 
@@ -82,6 +82,55 @@ def contact_offset(behind_um: float, right_um: float, psi_rad: float, length_um:
     7.36
     """
     return float(right_um + max(behind_um, 0.0) * math.tan(psi_rad) + 0.5 * length_um * math.sin(psi_rad))
+
+
+def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.25) -> np.ndarray | None:
+    """The point (um, 2,) an S_2f arc from ``pose`` should pass through so that the robot, turned flush by
+    docking compliance, ends in the slot ``goal``; None when no clockwise arc of radius >= ``r`` does.
+
+    One arc cannot fix both position and heading: an arc through the slot itself arrives turned by ``e``
+    (rad, + = clockwise) from the slot's heading, and compliance then moves the centre ``(L/2) sin e`` along
+    the face (:func:`contact_offset`): 29 um for a 250 um robot arriving 13 deg off, which alone failed the
+    shape tolerance at twice the literature's noise. So the arc aims ``x`` um along the face with
+    ``x + (L/2) sin e(x) = 0``. Aiming further right turns the arrival further clockwise, so the left side
+    grows with ``x`` and the root is found by bisection over ``|x| <= L`` to ``tol_um`` (a fixed-point
+    iteration oscillates: its gain is about ``L / behind``, over 1 close to the slot). Points the arc
+    cannot reach count as too far left (left of the heading) or too far right (radius below ``r``); when
+    the side changes only by that jump (a robot already pointing right of where it must arrive), None.
+
+    >>> g = np.array([0.0, 0.0, 0.0])
+    >>> start = np.array([-10.0, -200.0, math.radians(-10.0)])   # 200 um behind, pointing 10 deg left
+    >>> a = compliant_aim(start, g, 100.0, 250.0)
+    >>> heading = turn_fraction(start, a, 100.0)[2]
+    >>> round(math.degrees(turn_fraction(start, g[:2], 100.0)[2]), 1)   # an arc through the slot: 15.7 deg off
+    15.7
+    >>> bool(abs(contact_offset(0.0, line_coords(g, np.array([*a, heading]))[1], heading, 250.0)) < 0.5)
+    True
+    """
+    pose, goal = np.asarray(pose, dtype=np.float64), np.asarray(goal, dtype=np.float64)
+    right_unit = np.array([math.cos(goal[2]), -math.sin(goal[2])])  # along the face, to the slot's right
+
+    def excess(x: float) -> float:
+        """Where the robot would end along the face (um, + = right) for an arc aimed ``x`` um right."""
+        fr = turn_fraction(pose, goal[:2] + x * right_unit, r)
+        if fr is None:  # left of the heading (too far left) or tighter than r (too far right)
+            ahead = turn_fraction(pose, goal[:2] + x * right_unit, 0.0)
+            return -math.inf if ahead is None else math.inf
+        return x + 0.5 * length_um * math.sin(float(angle_difference(fr[2], goal[2])))
+
+    lo, hi = -float(length_um), float(length_um)
+    if not (excess(lo) < 0.0 < excess(hi)):
+        return None
+    while hi - lo > tol_um:
+        mid = 0.5 * (lo + hi)
+        if excess(mid) < 0.0:
+            lo = mid
+        else:
+            hi = mid
+    x = lo if math.isfinite(excess(lo)) else hi
+    if not abs(excess(x)) <= 2.0 * tol_um + 1e-9:
+        return None  # no root, only the jump where straight ahead ends (3 um, turn_fraction): no arc does it
+    return goal[:2] + x * right_unit
 
 
 def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float) -> float:

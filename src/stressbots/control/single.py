@@ -383,7 +383,8 @@ class SingleDocking:
                 # already at the structure (e.g. it met it while turning): push, and let compliance act
                 lp.drive([(k - 1, lp.opts.push_s)])
                 return self.check_docked(i, k)
-            fr = turn_fraction(lp.est[i], goal, r)
+            aim = docking.compliant_aim(lp.est[i], goal, r, float(lp.L[i]))  # arrive where compliance ends it in the slot
+            fr = turn_fraction(lp.est[i], goal if aim is None else aim, r)
             if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
                 return False  # not reachable on one interpolated arc: gross motion again
             rho, length, _ = fr
