@@ -77,19 +77,30 @@ def test_compliant_aim_ends_the_robot_in_its_slot_after_compliance(behind, right
     start = np.array([right, -0.5 * L - behind, math.radians(psi_deg)])
     aim = compliant_aim(start, goal, r, L)
     if aim is None:
+        assert turn_fraction(start, goal, r) is None  # None only when not even the slot is reachable
         return
-    rho, length, _ = turn_fraction(start, aim, r)
-    end = move(start, length, rho / r)  # the interpolated arc, driven by independent kinematics
     assert abs(aim[1] - goal[1]) < 1e-9  # the aim lies on the slot's face line
-    # the arc passes through the aim (a point within turn_fraction's 3 um of straight ahead is driven straight)
+    rho, length, _ = turn_fraction(start, aim, r)
+    end = move(start, length, rho / r)  # the arc (or, within 3 um of straight ahead, the straight), driven
     straight = rho == 0.0
-    assert np.hypot(*(end[:2] - aim)) < (3.0 if straight else 1e-6 * max(1.0, length))
+    assert np.hypot(*(end[:2] - aim)) < (3.01 if straight else 1e-6 * max(1.0, length))
     psi_end = float((end[2] + math.pi) % (2 * math.pi) - math.pi)
-    # docking compliance about the leading corner then leaves the centre on the slot (to the bisection's tolerance
-    # and the second-order (W/2)(1 - cos psi) the aim leaves out)
-    tol = 0.5 + 0.5 * W * (1.0 - math.cos(psi_end)) + (3.0 / math.cos(psi_end) if straight else 0.0)
     e = float(start[0] + behind * math.tan(start[2])) if straight else float(end[0])  # centre line meets the face
-    assert abs(flush_by_rotation(e, psi_end, L, W)) <= tol
+    miss = flush_by_rotation(e, psi_end, L, W)  # where docking compliance leaves it (um, + = right)
+    step = np.array([0.05, 0.0])
+    near = [turn_fraction(start, aim + d, r) for d in (step, -step)]
+    edge = straight or any(f is None or f[0] == 0.0 for f in near)  # at a jump: unreachable or straight next to it
+    if edge:
+        # no arc ends it in the slot (it points about where it must arrive, so the arcs start 3 um right of its
+        # straight, or the arc would need a radius below r): the aim is the side of the jump nearer the root, no
+        # worse than an arc through the slot
+        through = turn_fraction(start, goal, r)
+        if through is not None:
+            assert abs(miss) <= abs(flush_by_rotation(0.0, through[2], L, W)) + 3.5
+        return
+    # compliance about the leading corner leaves the centre on the slot, up to the second-order terms the
+    # model (contact_offset) leaves out
+    assert abs(miss) <= 0.1 + 0.5 * W * (1.0 - math.cos(psi_end)) + 0.25 * L * abs(psi_end) ** 3
 
 
 def test_an_arc_through_the_slot_itself_would_end_off_it():

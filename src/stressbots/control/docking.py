@@ -84,7 +84,7 @@ def contact_offset(behind_um: float, right_um: float, psi_rad: float, length_um:
     return float(right_um + max(behind_um, 0.0) * math.tan(psi_rad) + 0.5 * length_um * math.sin(psi_rad))
 
 
-def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.25) -> np.ndarray | None:
+def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.01) -> np.ndarray | None:
     """The point (um, 2,) an S_2f arc from ``pose`` should pass through so that the robot, turned flush by
     docking compliance, ends in the slot ``goal``; None when no clockwise arc of radius >= ``r`` does.
 
@@ -95,8 +95,9 @@ def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.25) 
     ``x + (L/2) sin e(x) = 0``. Aiming further right turns the arrival further clockwise, so the left side
     grows with ``x`` and the root is found by bisection over ``|x| <= L`` to ``tol_um`` (a fixed-point
     iteration oscillates: its gain is about ``L / behind``, over 1 close to the slot). Points the arc
-    cannot reach count as too far left (left of the heading) or too far right (radius below ``r``); when
-    the side changes only by that jump (a robot already pointing right of where it must arrive), None.
+    cannot reach count as too far left (left of the heading) or too far right (radius below ``r``). A robot
+    already pointing right of where it must arrive has no root, only the jump where straight ahead ends
+    (3 um, :func:`~stressbots.control.queries.turn_fraction`): it drives straight, the least it can miss by.
 
     >>> g = np.array([0.0, 0.0, 0.0])
     >>> start = np.array([-10.0, -200.0, math.radians(-10.0)])   # 200 um behind, pointing 10 deg left
@@ -112,10 +113,13 @@ def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.25) 
 
     def excess(x: float) -> float:
         """Where the robot would end along the face (um, + = right) for an arc aimed ``x`` um right."""
-        fr = turn_fraction(pose, goal[:2] + x * right_unit, r)
-        if fr is None:  # left of the heading (too far left) or tighter than r (too far right)
-            ahead = turn_fraction(pose, goal[:2] + x * right_unit, 0.0)
-            return -math.inf if ahead is None else math.inf
+        point = goal[:2] + x * right_unit
+        fr = turn_fraction(pose, point, r)
+        if fr is None:  # left of the heading: too far left; right of it (tighter than r, or behind): too far right
+            d = point - pose[:2]
+            return math.inf if d[0] * math.cos(pose[2]) - d[1] * math.sin(pose[2]) > 0.0 else -math.inf
+        if fr[0] == 0.0:  # within 3 um of straight ahead it drives straight, and meets the face on its own line
+            return contact_offset(*line_coords(goal, pose), length_um)
         return x + 0.5 * length_um * math.sin(float(angle_difference(fr[2], goal[2])))
 
     lo, hi = -float(length_um), float(length_um)
@@ -127,9 +131,8 @@ def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.25) 
             lo = mid
         else:
             hi = mid
-    x = lo if math.isfinite(excess(lo)) else hi
-    if not abs(excess(x)) <= 2.0 * tol_um + 1e-9:
-        return None  # no root, only the jump where straight ahead ends (3 um, turn_fraction): no arc does it
+    ends = [x for x in (lo, hi) if math.isfinite(excess(x))]  # a jump (straight to arc) leaves no root: the nearer side
+    x = min(ends, key=lambda x: abs(excess(x))) if ends else lo
     return goal[:2] + x * right_unit
 
 
