@@ -1,4 +1,4 @@
-"""The G_1 phase's pure queries and recovery geometry on hand-built poses (stressbots.control.transfer,
+"""The G_1 phase's pure queries and recovery geometry on hand-built poses (stressbots.control.transfer_legs,
 rendezvous, pair_recovery), each against an independent computation (corners by hand, approach-line
 coordinates, distances between centres)."""
 
@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from stressbots.control.pair_recovery import PairRecovery
 from stressbots.control.queries import line_coords
 from stressbots.control.rendezvous import arrival_region
-from stressbots.control.transfer import clear_tracks
+from stressbots.control.transfer_legs import clear_tracks
 from stressbots.robots import angle_difference, turning_centres
 
 
