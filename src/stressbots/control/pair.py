@@ -20,8 +20,9 @@ the meeting tolerates |alpha| < 60 deg and |w_y| < 80 um. The pair may form a li
 nominal place: the later slots follow it (:meth:`PairPhase.retarget`). When a stage has no solution,
 :meth:`PairPhase.form` re-plans toward another *pair frame* (the structure turned and shifted).
 
-When D_n has no timed way or a meeting fails, :mod:`~stressbots.control.pair_recovery` holds D_n on a free
-orbit, gets it clear of D_{n-1}'s orbit or separates the pair, and the stage is tried again. This module
+When D_n has no timed way, :mod:`~stressbots.control.holding` takes it to a free orbit to wait on; when its
+orbit overlaps another or a meeting fails, :mod:`~stressbots.control.pair_recovery` gets it clear of D_{n-1}'s
+orbit or separates the pair; then the stage is tried again. This module
 holds the phase itself (:class:`PairPhase`); the pure geometry is in :mod:`~stressbots.control.pair_geometry`.
 
 The phase drives the robots only through the closed loop it is handed (:class:`PairLoop`: the
@@ -37,6 +38,7 @@ import numpy as np
 from ..collision import arena_gap, bodies_hit_discs, point_rectangle_distance
 from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
+from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
     framed_goals,
@@ -51,21 +53,23 @@ from .queries import pose_on_orbit
 from .rendezvous import Rendezvous
 from .transfer import StationTransfer
 
-__all__ = ["PairLoop", "PairPhase", "PairRecovery", "Rendezvous", "Replan", "StationTransfer", "approach_pose", "framed_goals",
-           "frames_apart", "meet_distance", "station_centre", "tight_discs"]
+__all__ = ["HoldingOrbit", "PairLoop", "PairPhase", "PairRecovery", "Rendezvous", "Replan", "StationTransfer", "approach_pose",
+           "framed_goals", "frames_apart", "meet_distance", "station_centre", "tight_discs"]
 
 
 class PairPhase:
     """G_1 for a closed loop ``loop``: pair frames, station geometry, and the slots' retargeting once it formed.
 
     ``form()`` runs the phase; :attr:`transfer` (stage 1) and :attr:`meeting` (stages 2 and 3) hold the
-    motion. Raises ``loop.abort(reason)`` when G_1 cannot form.
+    motion, :attr:`holding` (D_n waiting on a free orbit) and :attr:`recovery` (escapes, separation) the
+    fallbacks. Raises ``loop.abort(reason)`` when G_1 cannot form.
     """
 
     def __init__(self, loop: PairLoop):
         self.loop = loop
         self.transfer = StationTransfer(self)
         self.meeting = Rendezvous(self)
+        self.holding = HoldingOrbit(self)
         self.recovery = PairRecovery(self)
 
     def centre(self, i: int) -> np.ndarray:
@@ -147,7 +151,7 @@ class PairPhase:
                                  "is planned again")
         q = self.approach_pose(N, M, self.centre(M), D)
         disc = [(self.centre(M), self.loop.rstar[M])]
-        if not self.recovery.to_holding(N, q, lower, disc):
+        if not self.holding.to_holding(N, q, lower, disc):
             self.recovery.escape(N, lower)
         return bool(np.hypot(*(self.loop.est[N, :2] - before)) >= self.loop.tune.round_moved_um)
 

@@ -3,8 +3,9 @@ departs toward it as measured, and both drive straight into each other (self-ali
 
 D_n's timed arrival waits on its own orbit or loops at an interpolated radius (:meth:`Rendezvous.loiter_path`),
 re-planned every t_x (:meth:`Rendezvous.arrive_timed`); D_{n-1}'s departure is timed from its measured
-heading (:meth:`Rendezvous.depart_and_meet`). When no timed way exists or the meeting fails, the
-recoveries of :mod:`~stressbots.control.pair_recovery` take over.
+heading (:meth:`Rendezvous.depart_and_meet`). When no timed way exists D_n waits on a holding orbit
+(:mod:`~stressbots.control.holding`); when the meeting fails, the recoveries of
+:mod:`~stressbots.control.pair_recovery` take over.
 """
 
 from __future__ import annotations
@@ -249,7 +250,7 @@ class Rendezvous:
             if path is None:
                 # no timed way from here: go where D_n can wait on its orbit near the target, then retry
                 holds += 1
-                if holds > 3 or not self.pair.recovery.to_holding(N, q, lower, disc):
+                if holds > 3 or not self.pair.holding.to_holding(N, q, lower, disc):
                     return False
                 continue
             self.loop.replans += 1
