@@ -206,25 +206,12 @@ class Rendezvous:
             vN = self.loop.v_hat[N]
             q = target_fn()
             disc = [(self.pair.centre(M), self.loop.rstar[M])]
-            t_dep = float(np.mod(th_dep - self.loop.est[M, 2], TWO_PI)) / self.loop.omega_hat[M]
-            period = TWO_PI / self.loop.omega_hat[M]
-            arrivals = [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
+            arrivals = self._arrivals(M, th_dep, early)
             path = self.continued(N, arrivals, lower, disc)
             if path is None and prev is not None and prev.length - vN * self.loop.tx <= self.loop.tune.final_leg_s * vN:
-                # the final seconds: a small error can make the replanned path a loop (one-way robot);
-                # the rest of the plan, driven open loop, misses by a few um at most
-                rest = pathlib.sub_path(prev, min(vN * self.loop.tx, prev.length), prev.length)
-                self.loop.log("final", N, f"{self.loop.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
-                self.loop.drive(path_steps(rest, vN, n, n - 1, None))
+                self._drive_rest_open_loop(N, prev, vN)
                 return True
-            loop = None
-            for tol in (0.3, 0.7):
-                if path is not None:
-                    break
-                found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
-                path = None if found is None else found[0]
-                self._plan = None if found is None else (found[1], found[2], self.loop.t + found[3])
-                loop = None if found is None else found[4]
+            path, loop = self._timed_path(N, q, arrivals, lower, disc, path)
             if loop is not None:
                 loops += 1
                 if loops > self.loop.tune.timing_loops_max:
@@ -232,18 +219,7 @@ class Rendezvous:
                     # another would too; the caller falls back (another leg option, a holding orbit, a new frame)
                     self.loop.log("retry", N, f"{self.loop.scn.names[N]} missed its time after {loops - 1} timing loops")
                     return False
-                R, m = loop
-                self.loop.log("loop", N, f"{self.loop.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
-                self.loop.replans += 1
-                total = m * TWO_PI * R / vN
-                while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
-                    if not self.loop_clear(N, R, total, lower, disc):
-                        self.loop.log("loop", N, f"{self.loop.scn.names[N]}'s timing loop has drifted toward an obstacle; "
-                                                 "it plans again from here")
-                        break
-                    d = min(self.loop.tx, total)
-                    self.loop.drive(self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1))
-                    total -= d
+                self._drive_timing_loop(N, loop, vN, lower, disc)
                 prev = None
                 continue
             prev = path
@@ -260,8 +236,64 @@ class Rendezvous:
                 return True
         return False
 
+    def _arrivals(self, M: int, th_dep: float, early: float) -> list[float]:
+        """When D_n should arrive (s from now): ``early`` s before each of D_{n-1}'s next four passes through
+        heading ``th_dep`` on its orbit (as measured, at its identified turn rate), those more than 0.3 s away."""
+        t_dep = float(np.mod(th_dep - self.loop.est[M, 2], TWO_PI)) / self.loop.omega_hat[M]
+        period = TWO_PI / self.loop.omega_hat[M]
+        return [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
+
+    def _drive_rest_open_loop(self, N: int, prev: pathlib.Path, vN: float) -> None:
+        """The final seconds of :meth:`arrive_timed`: D_n drives the rest of its last plan ``prev`` (less the
+        t_x already driven) open loop at ``vN`` um/s. A small error can make a replanned path a loop (one-way
+        robot); the rest of the plan misses by a few um at most."""
+        n = self.loop.n
+        rest = pathlib.sub_path(prev, min(vN * self.loop.tx, prev.length), prev.length)
+        self.loop.log("final", N, f"{self.loop.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
+        self.loop.drive(path_steps(rest, vN, n, n - 1, None))
+
+    def _timed_path(self, N: int, q, arrivals: Sequence[float], lower, disc, path: pathlib.Path | None):
+        """``(path, loop)``: the continued plan ``path`` if there is one, else a new :meth:`loiter_path` to ``q``
+        (arrival tolerance 0.3 s, then 0.7 s), remembered as the plan to continue; ``loop`` = (radius_um, count)
+        of timing loops to drive first, or None. ``(None, None)``: no timed way from here."""
+        loop = None
+        for tol in (0.3, 0.7):
+            if path is not None:
+                break
+            found = self.loiter_path(N, q, arrivals, lower, disc, tol_s=tol)
+            path = None if found is None else found[0]
+            self._plan = None if found is None else (found[1], found[2], self.loop.t + found[3])
+            loop = None if found is None else found[4]
+        return path, loop
+
+    def _drive_timing_loop(self, N: int, loop: tuple[float, int], vN: float, lower, disc) -> None:
+        """D_n circles ``loop`` = (radius_um, count) interpolated loops (P_n / P_{n-1} alternating) at ``vN``
+        um/s, a t_x at a time; it stops early where the rest is no longer clear (:meth:`loop_clear`)."""
+        n = self.loop.n
+        R, m = loop
+        self.loop.log("loop", N, f"{self.loop.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
+        self.loop.replans += 1
+        total = m * TWO_PI * R / vN
+        while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
+            if not self.loop_clear(N, R, total, lower, disc):
+                self.loop.log("loop", N, f"{self.loop.scn.names[N]}'s timing loop has drifted toward an obstacle; "
+                                         "it plans again from here")
+                break
+            d = min(self.loop.tx, total)
+            self.loop.drive(self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1))
+            total -= d
+
     def depart_and_meet(self, N: int, M: int) -> bool:
         """D_n runs straight until D_{n-1} reaches the departure heading that best lines them up; both meet."""
+        if not self._await_departure(N, M):
+            return False
+        self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        return self._drive_to_meet(N, M)
+
+    def _await_departure(self, N: int, M: int) -> bool:
+        """D_n runs straight (P_{n-1}: D_{n-1} orbits on) until D_{n-1} reaches its best departure heading
+        (:meth:`best_departure`, re-planned every t_x, at most 40 t_x). False when D_n is on no line D_{n-1}
+        can leave along: D_n then turns a quarter away from the orbit (P_n)."""
         n = self.loop.n
         for _ in range(40):
             best = self.best_departure(N, M)
@@ -274,7 +306,13 @@ class Rendezvous:
                 self.loop.drive([(n - 1, t_wait)])
                 break
             self.loop.drive([(n - 1, self.loop.tx)])
-        self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        return True
+
+    def _drive_to_meet(self, N: int, M: int) -> bool:
+        """Both drive straight (P_{n-2}) into each other, at most 60 t_x, until they stop together
+        (:meth:`_stopped_together`); False when they miss each other or one would lose room to orbit (then
+        the rendezvous is planned again)."""
+        n = self.loop.n
         closest = math.inf
         free = True
         lower = self.loop.orbiting_below(n - 1)
@@ -300,22 +338,29 @@ class Rendezvous:
             moved = np.hypot(*(self.loop.est[[N, M], :2] - before[:, :2]).T)
             free = bool((moved >= self.loop.tune.meet_free_fraction * self.loop.v[[N, M]] * self.loop.tx).all())
             if (moved < 0.2 * self.loop.v[[N, M]] * self.loop.tx).all():
-                ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
-                gap = float(np.hypot(*(ends[0] - ends[1])))
-                if gap < self.loop.tune.meet_gap_um:
-                    self.loop.drive([(n - 2, self.loop.opts.push_s)])
-                    self.loop.docked[[N, M]] = True
-                    for _ in range(4):  # frames of the still pair: its pose estimate is their mean
-                        self.loop.drive([(n - 2, 0.5)])
-                    self.loop.log("G_1", N, f"formed with {self.loop.scn.names[M]} (front edges {gap:.1f} um apart)")
-                    self.pair.retarget(N, M)
-                    return True
-                # outside the self-alignment limits (failure region H): both turn away, D_n approaches again
-                self.loop.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H); both turn away and "
-                                          f"{self.loop.scn.names[N]} approaches again")
-                self.pair.recovery.separate(N, M)
-                return False
+                return self._stopped_together(N, M)
         self.loop.log("miss", N, "the pair drove past each other; both turn away and the rendezvous is planned again")
+        self.pair.recovery.separate(N, M)
+        return False
+
+    def _stopped_together(self, N: int, M: int) -> bool:
+        """The pair stopped moving (each under a fifth of its commanded travel in a t_x): fronts within
+        ``Tuning.meet_gap_um`` form G_1 (a push of ``ControllerOptions.push_s``, both marked docked, the later
+        slots retargeted); farther apart it is failure region H, and the pair separates (False)."""
+        n = self.loop.n
+        ends = front_midpoints(self.loop.est[[N, M]], self.loop.L[[N, M]])
+        gap = float(np.hypot(*(ends[0] - ends[1])))
+        if gap < self.loop.tune.meet_gap_um:
+            self.loop.drive([(n - 2, self.loop.opts.push_s)])
+            self.loop.docked[[N, M]] = True
+            for _ in range(4):  # frames of the still pair: its pose estimate is their mean
+                self.loop.drive([(n - 2, 0.5)])
+            self.loop.log("G_1", N, f"formed with {self.loop.scn.names[M]} (front edges {gap:.1f} um apart)")
+            self.pair.retarget(N, M)
+            return True
+        # outside the self-alignment limits (failure region H): both turn away, D_n approaches again
+        self.loop.log("stuck", N, f"the pair stopped {gap:.0f} um apart (failure region H); both turn away and "
+                                  f"{self.loop.scn.names[N]} approaches again")
         self.pair.recovery.separate(N, M)
         return False
 
