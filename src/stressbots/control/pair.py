@@ -12,7 +12,8 @@ one-way car (P_n turns it, P_{n-1} drives it straight). Under P_{n-2} both drive
    to D_{n-1}'s slot, timed to arrive a little before D_{n-1} passes the tangent point, and runs straight
    on; D_{n-1} leaves its orbit at the heading that best lines it up with D_n as measured (the departure
    is timed from D_{n-1}'s measured heading and identified turn rate);
-3. both drive straight into each other: self-aligning compliance forms G_1.
+3. both drive straight into each other (:class:`~stressbots.control.departure.Departure`, which also times
+   D_{n-1}'s departure): self-aligning compliance forms G_1.
 
 No step needs an exact pose: D_n's arrival may be early or late by a second (its straight run absorbs
 it), D_{n-1}'s station may be tens of um off (the rendezvous is computed from the measured orbit), and

@@ -2,8 +2,8 @@
 has no solution from where the robots are (:class:`Replan`: the pair's gross motion is planned again).
 
 Shared by :mod:`~stressbots.control.pair` and its stages (:mod:`~stressbots.control.transfer`,
-:mod:`~stressbots.control.transfer_legs`, :mod:`~stressbots.control.rendezvous`, :mod:`~stressbots.control.holding`,
-:mod:`~stressbots.control.pair_recovery`), so none imports another's module for them.
+:mod:`~stressbots.control.transfer_legs`, :mod:`~stressbots.control.rendezvous`, :mod:`~stressbots.control.departure`,
+:mod:`~stressbots.control.holding`, :mod:`~stressbots.control.pair_recovery`), so none imports another's module for them.
 """
 
 from __future__ import annotations
