@@ -70,3 +70,70 @@ def test_no_move_when_every_way_out_is_blocked():
     move = park_move(0, [0], [1, 2, 3], allp, np.full(n, R), np.full(n, V / R), np.full(n, V), np.full(n, RSTAR), ARENA,
                      np.zeros((0, 3)), [], [], shift_um=150.0, clearance_um=25.0)
     assert move is None
+
+
+# -- the runner's parking policy: how often one orbit is moved in one phase -----------------------------------
+
+
+def _runner_with_orbit_near_the_wall():
+    """A 4-robot run whose only waiting robot (D_1, during D_2's phase) orbits 10 um from the left wall."""
+    from stressbots.control import structure_targets
+    from stressbots.control.runner import _Runner
+    from stressbots.control.tuning import ControllerOptions
+    from stressbots.generate import random_scenario
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(4, 3, shape="tee")
+    run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
+    i = run.by_rank[1]
+    r, rstar = float(run.r_hat[i]), float(run.rstar[i])
+    h = scn.arena_um[1] / 2.0
+    # heading 0 (+y): the turning centre lies r to the right (+x) of the robot
+    run.estimator.pose[i] = (rstar + 10.0 - r, h, 0.0)
+    return run, i
+
+
+def _scripted_drive(run, i, shift_um: float):
+    """``run.drive`` replaced: each drive moves robot ``i`` ``shift_um`` away from the left wall (0: it is held)."""
+    calls = []
+
+    def drive(steps):
+        calls.append(steps)
+        run.estimator.pose[i, 0] += shift_um
+
+    run.drive = drive
+    return calls
+
+
+def test_an_orbit_that_drifts_back_into_trouble_is_moved_again_in_the_same_phase():
+    run, i = _runner_with_orbit_near_the_wall()
+    calls = _scripted_drive(run, i, 150.0)
+    run.park_orbits(2)
+    assert len(calls) == 1 and wall_gap_of(run, i) > run.tune.park_margin_um
+    run.park_orbits(2)
+    assert len(calls) == 1  # clear now: no move
+    run.estimator.pose[i, 0] -= 150.0  # drifted back
+    run.park_orbits(2)
+    assert len(calls) == 2
+    for _ in range(run.tune.park_moves_per_phase):
+        run.estimator.pose[i, 0] -= 150.0
+        run.park_orbits(2)
+    assert len(calls) == run.tune.park_moves_per_phase  # at most this many per phase
+    run.park_orbits(3, top=1)
+    assert len(calls) == run.tune.park_moves_per_phase + 1  # a new phase may move it again
+
+
+def test_an_orbit_move_that_did_not_widen_the_gap_is_not_repeated_in_its_phase():
+    run, i = _runner_with_orbit_near_the_wall()
+    calls = _scripted_drive(run, i, 0.0)  # held: the move does not help
+    run.park_orbits(2)
+    run.park_orbits(2)
+    assert len(calls) == 1
+
+
+def wall_gap_of(run, i: int) -> float:
+    """Independent: the wall gap of robot ``i``'s orbit disc from its estimate (turning centre r to the right)."""
+    p = run.estimator.pose[i]
+    centre = (p[0] + run.r_hat[i] * math.cos(p[2]), p[1] - run.r_hat[i] * math.sin(p[2]))
+    w, h = run.scn.arena_um
+    return float(min(centre[0], w - centre[0], centre[1], h - centre[1])) - float(run.rstar[i])

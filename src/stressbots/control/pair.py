@@ -120,6 +120,9 @@ class PairPhase:
         tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] if not last else []
         for frame_no in range(frames_max):
             if frame_no > 0 or last:
+                # a re-plan costs the pair its timing anyway: the waiting orbits, untended while G_1 runs (one phase
+                # took 500 s and two orbits drifted into each other), are moved off trouble first
+                self.loop.park_orbits(self.loop.n, top=self.loop.n - 2)
                 frames = [f for f in self.pair_frames(N, M, D, lower) if all(frames_apart(f, t) for t in tried)]
                 if not frames:
                     break

@@ -38,3 +38,6 @@ class PairLoop(DockingLoop, Protocol):
 
     @property
     def rstar(self) -> np.ndarray: ...
+
+    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None) -> None:
+        """Move waiting orbits that drifted near trouble (:meth:`stressbots.control.runner._Runner.park_orbits`)."""

@@ -115,7 +115,8 @@ class _Runner(PlantLoop):
         self.goals = self.nominal_goals.copy()
         self.stuck = False
         self._warned: set = set()
-        self._parked: set[tuple[int, int]] = set()  # (robot, phase k) of every park move (parking)
+        # (robot, phase k) -> park moves so far (parking); a move that did not widen the gap is the last of its phase
+        self._parked: dict[tuple[int, int], int] = {}
         self._unblocks: dict[tuple[int, int], int] = {}  # (robot, phase k) -> orbit moves off a docking robot's way
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -180,17 +181,17 @@ class _Runner(PlantLoop):
     def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None) -> None:
         """Before D_k's phase: move waiting orbits that drifted within ``margin_um`` (default
         ``Tuning.park_margin_um``) of the arena edge, the structure or another orbit
-        (:mod:`stressbots.control.parking`); at most one move each. Only the orbits of D_1 .. D_top count
-        (``top`` = k; k - 1 while D_k moves: it has no orbit then)."""
+        (:mod:`stressbots.control.parking`). Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k
+        moves: it has no orbit then). An orbit may be moved again in the same phase when it drifts back (up to
+        ``Tuning.park_moves_per_phase`` moves), unless its last move did not widen its gap by
+        ``Tuning.park_progress_um`` (a trapped robot: repeating the move would not free it)."""
         margin = self.tune.park_margin_um if margin_um is None else margin_um
         waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
-        docked = np.flatnonzero(self.docked)
-        gaps = orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
-                          self.est[docked], self.L[docked], self.W[docked])
+        gaps = self._waiting_gaps(waiting)
         for idx in np.argsort(gaps):
             i = waiting[int(idx)]
             j = int(self.rank[i])
-            if gaps[idx] >= margin or j == k or (i, k) in self._parked:
+            if gaps[idx] >= margin or j == k or self._parked.get((i, k), 0) >= self.tune.park_moves_per_phase:
                 continue
             park = {"shift_um": self.tune.park_shift_um, "clearance_um": self.tune.park_clearance_um}
             move_ = None
@@ -208,8 +209,16 @@ class _Runner(PlantLoop):
             self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
                                 f"{self.tune.park_shift_um:.0f} um away")
             self.replans += 1
-            self._parked.add((i, k))  # once per phase: a move that did not help (a trapped robot) is not repeated
+            self._parked[(i, k)] = self._parked.get((i, k), 0) + 1
             self.drive([(k, move_.wait_s), (j - 1, move_.straight_s)])
+            if self._waiting_gaps(waiting)[idx] < gaps[idx] + self.tune.park_progress_um:
+                self._parked[(i, k)] = self.tune.park_moves_per_phase  # it did not help: not repeated this phase
+
+    def _waiting_gaps(self, waiting: Sequence[int]) -> np.ndarray:
+        """Measured gaps (um) of the ``waiting`` robots' orbit discs to the arena edge, the docked bodies and each other."""
+        docked = np.flatnonzero(self.docked)
+        return orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
+                          self.est[docked], self.L[docked], self.W[docked])
 
     def tend_orbits(self, k: int) -> None:
         """During D_k's gross motion (every t_x): :meth:`park_orbits` for the orbits waiting below it.

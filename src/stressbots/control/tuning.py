@@ -304,6 +304,13 @@ class ParkingTuning:
     obstacle traps its robot."""
     park_shift_um: float = 150.0
     """How far such an orbit is moved."""
+    park_moves_per_phase: int = 3
+    """Park moves of one waiting orbit per docking phase. Orbits keep drifting after a move: at twice the literature's
+    noise, orbits moved once 150 um away drifted back into the arena edge within the same (200-300 s) phase and
+    trapped their robots, which then failed every docking attempt."""
+    park_progress_um: float = 20.0
+    """um. A park move that widened its orbit's gap by less than this did not help (the robot is held): it is the
+    last of its phase."""
     park_clearance_um: float = 25.0
     """Clearance every robot driving straight during that move keeps (or, if closer already, does not lose)."""
     unblock_margin_um: float = 30.0
