@@ -87,6 +87,7 @@ def _runner_with_orbit_near_the_wall():
     run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
     i = run.by_rank[1]
     r, rstar = float(run.r_hat[i]), float(run.rstar[i])
+    assert scn.arena_um is not None
     h = scn.arena_um[1] / 2.0
     # heading 0 (+y): the turning centre lies r to the right (+x) of the robot
     run.estimator.pose[i] = (rstar + 10.0 - r, h, 0.0)
@@ -135,5 +136,6 @@ def wall_gap_of(run, i: int) -> float:
     """Independent: the wall gap of robot ``i``'s orbit disc from its estimate (turning centre r to the right)."""
     p = run.estimator.pose[i]
     centre = (p[0] + run.r_hat[i] * math.cos(p[2]), p[1] - run.r_hat[i] * math.sin(p[2]))
+    assert run.scn.arena_um is not None
     w, h = run.scn.arena_um
     return float(min(centre[0], w - centre[0], centre[1], h - centre[1])) - float(run.rstar[i])
