@@ -94,42 +94,53 @@ def _runner_with_orbit_near_the_wall():
     return run, i
 
 
-def _scripted_drive(run, i, shift_um: float):
-    """``run.drive`` replaced: each drive moves robot ``i`` ``shift_um`` away from the left wall (0: it is held)."""
-    calls = []
+def _scripted_drive(run, i, held: bool, record_waits: bool = False):
+    """``run.drive`` replaced by noiseless kinematics on D_1's and D_2's estimates: under P_p the robots of rank <= p
+    orbit and the others drive straight (P_2: the wait; P_0: the straight); robot ``i`` does not move if ``held``.
+    Returns the durations of the straights driven (and of the waits, with ``record_waits``)."""
+    from stressbots.kinematics import move
+
+    straights = []
 
     def drive(steps):
-        calls.append(steps)
-        run.estimator.pose[i, 0] += shift_um
+        for prim, dur in steps:
+            for m in range(run.n):
+                if run.rank[m] > 2 or (held and m == i):
+                    continue  # the pair is not simulated here
+                curv = 1.0 / float(run.r_hat[m]) if run.rank[m] <= prim else 0.0
+                run.estimator.pose[m] = move(run.estimator.pose[m], np.array([float(run.v_hat[m]) * dur]), curv)[-1]
+            if prim < 2 or record_waits:
+                straights.append(dur)
 
     run.drive = drive
-    return calls
+    return straights
 
 
 def test_an_orbit_that_drifts_back_into_trouble_is_moved_again_in_the_same_phase():
     run, i = _runner_with_orbit_near_the_wall()
-    calls = _scripted_drive(run, i, 150.0)
+    start = run.estimator.pose.copy()
+    calls = _scripted_drive(run, i, held=False)
     run.park_orbits(2)
     assert len(calls) == 1 and wall_gap_of(run, i) > run.tune.park_margin_um
     run.park_orbits(2)
     assert len(calls) == 1  # clear now: no move
-    run.estimator.pose[i, 0] -= 150.0  # drifted back
-    run.park_orbits(2)
-    assert len(calls) == 2
-    for _ in range(run.tune.park_moves_per_phase):
-        run.estimator.pose[i, 0] -= 150.0
+    for m in range(1, run.tune.park_moves_per_phase + 1):
+        run.estimator.pose[:] = start  # drifted back
         run.park_orbits(2)
-    assert len(calls) == run.tune.park_moves_per_phase  # at most this many per phase
+        assert len(calls) == min(m + 1, run.tune.park_moves_per_phase)  # moved again, at most this many per phase
+    run.estimator.pose[:] = start
     run.park_orbits(3, top=1)
     assert len(calls) == run.tune.park_moves_per_phase + 1  # a new phase may move it again
 
 
 def test_an_orbit_move_that_did_not_widen_the_gap_is_not_repeated_in_its_phase():
     run, i = _runner_with_orbit_near_the_wall()
-    calls = _scripted_drive(run, i, 0.0)  # held: the move does not help
+    calls = _scripted_drive(run, i, held=True, record_waits=True)  # held: neither the wait nor the straight moves it
+    run.park_orbits(2)
+    assert len(calls) >= 1
     run.park_orbits(2)
     run.park_orbits(2)
-    assert len(calls) == 1
+    assert len(calls) <= 2  # one move (a wait, at most one straight), not repeated
 
 
 def wall_gap_of(run, i: int) -> float:

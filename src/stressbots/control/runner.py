@@ -206,11 +206,20 @@ class _Runner(PlantLoop):
                                         "takes it away")
                 continue
             self._warned.discard((i, "park"))
-            self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
-                                f"{self.tune.park_shift_um:.0f} um away")
             self.replans += 1
             self._parked[(i, k)] = self._parked.get((i, k), 0) + 1
-            self.drive([(k, move_.wait_s), (j - 1, move_.straight_s)])
+            self.drive([(k, move_.wait_s)])
+            # the straight is checked again from the measured poses: the other movers' headings after the wait were
+            # predicted with rates identified from little motion (one start-up park ran D_(n-1)'s orbit into the edge)
+            move_ = self._group_move(park_move, i, k, held=True, **park)
+            if move_ is None:
+                self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble, but after the wait "
+                                    "its straight is not clear: it stays")
+                self._parked[(i, k)] = self.tune.park_moves_per_phase  # another wait would end the same way
+                continue
+            self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
+                                f"{self.tune.park_shift_um:.0f} um away")
+            self.drive([(j - 1, move_.straight_s)])
             if self._waiting_gaps(waiting)[idx] < gaps[idx] + self.tune.park_progress_um:
                 self._parked[(i, k)] = self.tune.park_moves_per_phase  # it did not help: not repeated this phase
 
@@ -270,14 +279,15 @@ class _Runner(PlantLoop):
             self.replans += 1
             heading = float(np.mod(self.est[b, 2] + self.omega_hat[b] * move_.wait_s, 2.0 * np.pi))
             self.drive([(k, move_.wait_s)])
-            # a waiting robot touched by the docking one cannot turn: its planned straight would run off in another
-            # direction; a straight along the heading it has is taken only if it is checked the same way
-            if abs(angle_difference(self.est[b, 2], heading)) > np.radians(self.tune.unblock_heading_tol_deg):
-                move_ = self._group_move(unblock_move, b, k, points, headings=[float(self.est[b, 2])], **unblock)
-                if move_ is None:
-                    self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but it did not "
-                                           "turn to its departure heading: it stays")
-                    continue
+            # the straight is checked again from the measured poses, along the heading the waiting robot has: one
+            # touched by the docking robot cannot turn (its planned straight would run off in a direction nobody
+            # checked), and the other movers' headings were predicted with rates identified from little motion
+            turned = abs(angle_difference(self.est[b, 2], heading)) <= np.radians(self.tune.unblock_heading_tol_deg)
+            move_ = self._group_move(unblock_move, b, k, points, headings=[float(self.est[b, 2])], **unblock)
+            if move_ is None:
+                why = "after the wait its straight is not clear" if turned else "it did not turn to its departure heading"
+                self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way, but {why}: it stays")
+                continue
             self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way: it moves "
                                    f"{move_.straight_s * self.v_hat[b]:.0f} um off it")
             self.drive([(j - 1, move_.straight_s)])
