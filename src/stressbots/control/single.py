@@ -261,6 +261,8 @@ class SingleDocking:
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
+            elif lp.stuck and self.near_slot(i) and self.check_docked(i, k):
+                return  # it stopped at its own slot (a blocked gross motion drove it in): docking compliance docked it
             elif lp.stuck:
                 # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
                 # retrying the same way unchanged met the same orbit every time
