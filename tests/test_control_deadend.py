@@ -188,3 +188,38 @@ def test_back_off_never_drives_a_robot_that_can_still_move_on_blindly():
     escaped = BackOffLoop(escapes=True, free=None)  # the checked escape drove it (through the loop): nothing more
     SingleDocking(escaped).back_off(1, 2)  # type: ignore[arg-type]
     assert escaped.driven == []
+
+
+# -- a blocked gross motion that ends at the robot's own slot -----------------------------------------------
+
+
+def test_a_robot_whose_blocked_gross_motion_stopped_it_at_its_slot_docks_there():
+    """The gross motion is made to end each attempt driven straight in along the approach line and report itself
+    stuck (as a blocked gross motion whose clear part ran into the slot does): the robot is pushed and judged
+    where it stopped, and the simulator records it docked, instead of being backed off attempt after attempt."""
+    from stressbots.control import structure_targets
+    from stressbots.control.runner import _Runner
+    from stressbots.control.tuning import ControllerOptions
+    from stressbots.generate import random_scenario
+    from stressbots.scenario import Noise
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(3, 0, shape="tee", noise=Noise())
+    sim = SimulatedPlant(scn, seed=0)
+    run = _Runner(scn, sim, structure_targets(scn), ControllerOptions(), 0)
+    run.pair.form()
+    i = run.by_rank[1]
+    real = run.gross.steer
+
+    def steer_then_stop_in_the_slot(j, target, *args, **kwargs):
+        real(j, target, *args, **kwargs)
+        g = run.goals[j]
+        behind = float((g[:2] - run.est[j, :2]) @ np.array([math.sin(g[2]), math.cos(g[2])]))
+        run.drive([(0, max(behind - 3.0, 0.0) / float(run.v_hat[j]))])
+        run.stuck = True
+        return False
+
+    run.steer = steer_then_stop_in_the_slot  # type: ignore[method-assign]
+    run.single.dock(1, None)
+    assert sim.docked[i] and run.docked[i]
+    assert sum(e["kind"] == "docked" for e in run.events) == 1
