@@ -219,7 +219,7 @@ def test_a_robot_whose_blocked_gross_motion_stopped_it_at_its_slot_docks_there()
         run.stuck = True
         return False
 
-    run.steer = steer_then_stop_in_the_slot  # type: ignore[method-assign]
+    run.steer = steer_then_stop_in_the_slot  # type: ignore[method-assign, assignment]
     run.single.dock(1, None)
     assert sim.docked[i] and run.docked[i]
     assert sum(e["kind"] == "docked" for e in run.events) == 1
