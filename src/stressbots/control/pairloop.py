@@ -8,6 +8,7 @@ Shared by :mod:`~stressbots.control.pair` and its stages (:mod:`~stressbots.cont
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -39,5 +40,5 @@ class PairLoop(DockingLoop, Protocol):
     @property
     def rstar(self) -> np.ndarray: ...
 
-    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None) -> None:
+    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None, among: Sequence[int] = ()) -> None:
         """Move waiting orbits that drifted near trouble (:meth:`stressbots.control.runner._Runner.park_orbits`)."""

@@ -178,16 +178,17 @@ class _Runner(PlantLoop):
         (:meth:`stressbots.control.gross.GrossMotion.obstacles_hit`)."""
         return self.gross.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target)
 
-    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None) -> None:
+    def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None, among: Sequence[int] = ()) -> None:
         """Before D_k's phase: move waiting orbits that drifted within ``margin_um`` (default
         ``Tuning.park_margin_um``) of the arena edge, the structure or another orbit
         (:mod:`stressbots.control.parking`). Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k
         moves: it has no orbit then). An orbit may be moved again in the same phase when it drifts back (up to
         ``Tuning.park_moves_per_phase`` moves), unless its last move did not widen its gap by
-        ``Tuning.park_progress_um`` (a trapped robot: repeating the move would not free it)."""
+        ``Tuning.park_progress_um`` (a trapped robot: repeating the move would not free it). The orbit discs of the
+        robots ``among`` (D_(n-1) orbiting at the end of a station-transfer leg) count as trouble too."""
         margin = self.tune.park_margin_um if margin_um is None else margin_um
         waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
-        gaps = self._waiting_gaps(waiting)
+        gaps = self._waiting_gaps(waiting, among)
         for idx in np.argsort(gaps):
             i = waiting[int(idx)]
             j = int(self.rank[i])
@@ -220,14 +221,16 @@ class _Runner(PlantLoop):
             self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
                                 f"{self.tune.park_shift_um:.0f} um away")
             self.drive([(j - 1, move_.straight_s)])
-            if self._waiting_gaps(waiting)[idx] < gaps[idx] + self.tune.park_progress_um:
+            if self._waiting_gaps(waiting, among)[idx] < gaps[idx] + self.tune.park_progress_um:
                 self._parked[(i, k)] = self.tune.park_moves_per_phase  # it did not help: not repeated this phase
 
-    def _waiting_gaps(self, waiting: Sequence[int]) -> np.ndarray:
-        """Measured gaps (um) of the ``waiting`` robots' orbit discs to the arena edge, the docked bodies and each other."""
+    def _waiting_gaps(self, waiting: Sequence[int], among: Sequence[int] = ()) -> np.ndarray:
+        """Measured gaps (um) of the ``waiting`` robots' orbit discs to the arena edge, the docked bodies, each other
+        and the orbit discs of ``among``."""
         docked = np.flatnonzero(self.docked)
-        return orbit_gaps(turning_centres(self.est[waiting], self.r_hat[waiting]), self.rstar[waiting], self.scn.arena_um,
-                          self.est[docked], self.L[docked], self.W[docked])
+        discs = [*waiting, *among]
+        return orbit_gaps(turning_centres(self.est[discs], self.r_hat[discs]), self.rstar[discs], self.scn.arena_um,
+                          self.est[docked], self.L[docked], self.W[docked])[:len(waiting)]
 
     def tend_orbits(self, k: int) -> None:
         """During D_k's gross motion (every t_x): :meth:`park_orbits` for the orbits waiting below it.

@@ -133,6 +133,9 @@ class StationTransfer:
                     continue
                 self.wait_straight(M, th_dep)
             self.straight_leg(N, M, c_next, lower)
+            # a leg that stopped short may leave D_(n-1)'s orbit over a waiting one (both then turn into each other):
+            # that waiting orbit is moved off it, as drifted orbits are
+            self.loop.park_orbits(self.loop.n, top=self.loop.n - 2, among=[M])
         if final:
             miss = float(np.hypot(*(c_star - self.pair.centre(M))))
             self.loop.log("station", M, f"{self.loop.scn.names[M]} orbits {miss:.0f} um from its station")
