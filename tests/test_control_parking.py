@@ -150,3 +150,29 @@ def wall_gap_of(run, i: int) -> float:
     assert run.scn.arena_um is not None
     w, h = run.scn.arena_um
     return float(min(centre[0], w - centre[0], centre[1], h - centre[1])) - float(run.rstar[i])
+
+
+def test_a_waiting_orbit_under_d_n_minus_1s_orbit_is_moved_off_it_when_that_orbit_counts():
+    """After a station-transfer leg D_(n-1)'s orbit disc counts as trouble (``among``): a waiting orbit it overlaps
+    is moved off it (measured gap to that disc grows); without ``among`` nothing moves."""
+    run, i = _runner_with_orbit_near_the_wall()
+    m = run.by_rank[3]
+    assert run.scn.arena_um is not None
+    w, h = run.scn.arena_um
+    run.estimator.pose[i] = (0.5 * w - float(run.r_hat[i]), 0.5 * h, 0.0)  # turning centre at the arena's middle
+    run.estimator.pose[m] = (0.5 * w - float(run.r_hat[m]) + 150.0, 0.5 * h, 0.0)  # its centre 150 um to the right
+    calls = _scripted_drive(run, i, held=False)
+    run.park_orbits(4, top=2)
+    assert calls == []
+    before = disc_gap(run, i, m)
+    run.park_orbits(4, top=2, among=[m])
+    assert len(calls) == 1 and disc_gap(run, i, m) > before + run.tune.park_progress_um
+
+
+def disc_gap(run, a: int, b: int) -> float:
+    """Independent: gap (um) between the orbit discs of robots ``a`` and ``b`` (turning centres r to the right)."""
+    cs = []
+    for j in (a, b):
+        p = run.estimator.pose[j]
+        cs.append((p[0] + run.r_hat[j] * math.cos(p[2]), p[1] - run.r_hat[j] * math.sin(p[2])))
+    return float(math.hypot(cs[0][0] - cs[1][0], cs[0][1] - cs[1][1]) - run.rstar[a] - run.rstar[b])
