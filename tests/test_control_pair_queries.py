@@ -120,3 +120,52 @@ def test_meets_others_compares_bodies_at_the_same_instants():
     left = made(-110.0)
     assert left.meets_others(0, [1], 1.0 / 150.0, 1.5)  # 1.5 s at 100 um/s on r = 150 um: 57 deg
     assert not left.meets_others(0, [1], 1.0 / 150.0, 0.9)  # 34 deg: 41 um apart
+
+
+# -- meeting where they stand: the cost of both driving straight into each other -----------------------------
+
+
+def _brute_meeting_cost(pN, vN, LN, pM, vM, LM, dt=1e-4, t_max=30.0):
+    """Independent: step both bodies straight in time until D_n's front midpoint passes D_(n-1)'s front line; the
+    lateral offset of the fronts then (um, along D_(n-1)'s right) and the heading mismatch, as a cost; None if the
+    front never passes within ``t_max`` s or starts behind it."""
+    def front(p, v, L, t):
+        h = np.array([math.sin(p[2]), math.cos(p[2])])
+        return p[:2] + (0.5 * L + v * t) * h, h
+
+    def along(t):
+        fN, _ = front(pN, vN, LN, t)
+        fM, hM = front(pM, vM, LM, t)
+        return float((fN - fM) @ hM)
+
+    if along(0.0) <= 0.0:
+        return None
+    t = 0.0
+    while along(t) > 0.0:
+        t += dt
+        if t > t_max:
+            return None
+    fN, _ = front(pN, vN, LN, t)
+    fM, _ = front(pM, vM, LM, t)
+    right = np.array([math.cos(pM[2]), -math.sin(pM[2])])
+    alpha = abs(math.degrees(float(angle_difference(pM[2], pN[2] + math.pi))))
+    return max(abs(float((fN - fM) @ right)) / 80.0, alpha / 60.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-60.0, 60.0), st.floats(50.0, 600.0), st.floats(-40.0, 40.0), st.floats(60.0, 150.0), st.floats(60.0, 150.0))
+def test_meeting_cost_matches_stepping_both_bodies_straight(lateral, gap, mismatch_deg, vN, vM):
+    from stressbots.control.queries import meeting_cost
+
+    LN, LM = 220.0, 260.0
+    pM = np.array([100.0, 200.0, 0.3])
+    hM = np.array([math.sin(pM[2]), math.cos(pM[2])])
+    right = np.array([math.cos(pM[2]), -math.sin(pM[2])])
+    fN = pM[:2] + (0.5 * LM + gap) * hM + lateral * right
+    thN = pM[2] + math.pi + math.radians(mismatch_deg)
+    pN = np.array([*(fN - 0.5 * LN * np.array([math.sin(thN), math.cos(thN)])), thN])
+    got = meeting_cost(pN, vN, LN, pM, vM, LM)
+    want = _brute_meeting_cost(pN, vN, LN, pM, vM, LM)
+    assert (got is None) == (want is None)
+    if got is not None and want is not None:
+        assert abs(got - want) < 0.01

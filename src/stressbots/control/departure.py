@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..robots import front_midpoints
-from .queries import best_departure
+from .queries import best_departure, meeting_cost
 
 if TYPE_CHECKING:
     from .pair import PairPhase
@@ -37,6 +37,20 @@ class Departure:
         if not self._await_departure(N, M):
             return False
         self.loop.log("depart", M, f"{self.loop.scn.names[M]} leaves its orbit toward {self.loop.scn.names[N]}")
+        return self._drive_to_meet(N, M)
+
+    def meet_as_they_are(self, N: int, M: int) -> bool:
+        """Last resort of G_1 (every pair frame failed where the pair stands): when D_n and D_(n-1) face each other
+        within the self-alignment limits (:func:`~stressbots.control.queries.meeting_cost` at most
+        ``Tuning.last_meet_cost_max``), both drive straight into each other and G_1 forms where they meet (the
+        later slots follow it, SPEC 6). A station-transfer leg that stopped the pair head to head, a few um apart,
+        left neither robot a clear turn or straight: every pair frame failed at once and the run ended within
+        25 s. True when G_1 formed."""
+        L = self.loop
+        cost = meeting_cost(L.est[N], float(L.v_hat[N]), float(L.L[N]), L.est[M], float(L.v_hat[M]), float(L.L[M]))
+        if cost is None or cost > L.tune.last_meet_cost_max:
+            return False
+        L.log("depart", M, f"{L.scn.names[M]} and {L.scn.names[N]} face each other (cost {cost:.2f}): they meet where they are")
         return self._drive_to_meet(N, M)
 
     def _await_departure(self, N: int, M: int) -> bool:

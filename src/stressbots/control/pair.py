@@ -112,6 +112,8 @@ class PairPhase:
             frames += tried
             if done:
                 return
+        if self.meeting.departure.meet_as_they_are(N, M):
+            return
         raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); last: {last}")
 
     def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int) -> tuple[bool, int, str]:

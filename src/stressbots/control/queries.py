@@ -14,7 +14,7 @@ from .. import paths as pathlib
 from ..robots import TWO_PI, angle_difference
 
 __all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "in_corridor",
-           "best_departure", "interpolated_steps"]
+           "best_departure", "meeting_cost", "interpolated_steps"]
 
 
 def turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um: float = 3.0):
@@ -176,6 +176,32 @@ def best_departure(pN, vN: float, LN: float, cM, rM: float, thM: float, wM: floa
     if not np.isfinite(cost[j]) or cost[j] > cost_max:
         return None
     return float(wait[j]), float(cost[j])
+
+
+def meeting_cost(pN, vN: float, LN: float, pM, vM: float, LM: float) -> float | None:
+    """Cost of D_n and D_(n-1) meeting as they are: both drive straight from the measured poses ``pN``, ``pM``
+    (um, rad) at speeds ``vN``, ``vM`` (um/s); the larger of |w_y| / 80 um and |alpha| / 60 deg when the front
+    edges meet, as in :func:`best_departure` (the self-alignment limits). None when their fronts are not closing
+    on each other (D_n's front behind D_(n-1)'s, or the gap opening).
+
+    >>> round(meeting_cost(np.array([0.0, 0.0, 0.0]), 100.0, 200.0, np.array([30.0, 400.0, np.pi]), 100.0, 200.0), 3)
+    0.375
+    >>> meeting_cost(np.array([0.0, 0.0, np.pi]), 100.0, 200.0, np.array([0.0, 400.0, 0.0]), 100.0, 200.0) is None  # back to back
+    True
+    """
+    hN = np.array([math.sin(pN[2]), math.cos(pN[2])])
+    hM = np.array([math.sin(pM[2]), math.cos(pM[2])])
+    fN = np.asarray(pN, float)[:2] + 0.5 * LN * hN
+    fM = np.asarray(pM, float)[:2] + 0.5 * LM * hM
+    closing = vM + vN * float(-(hN @ hM))
+    gap_along = float((fN - fM) @ hM)
+    if closing <= 0.0 or gap_along <= 0.0:
+        return None
+    t_meet = gap_along / closing
+    right = np.array([math.cos(pM[2]), -math.sin(pM[2])])
+    w_y = abs(float(((fN + vN * t_meet * hN) - (fM + vM * t_meet * hM)) @ right))
+    alpha = abs(math.degrees(float(angle_difference(pM[2], pN[2] + math.pi))))
+    return max(w_y / 80.0, alpha / 60.0)
 
 
 def interpolated_steps(rho_turn: float, duration: float, turn_k: int, straight_k: int, period_s: float) -> list[tuple[int, float]]:

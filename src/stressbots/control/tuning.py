@@ -57,6 +57,10 @@ class PairTuning:
     """Rendezvous tries at one station before G_1 is re-planned."""
     departure_cost_max: float = 0.6
     """Largest accepted max(|w_y| / 80 um, |alpha| / 60 deg) of D_{n-1}'s departure (self-alignment limits)."""
+    last_meet_cost_max: float = 1.0
+    """Largest accepted cost (as ``departure_cost_max``) of the pair meeting where it stands once every pair frame has
+    failed (:meth:`~stressbots.control.departure.Departure.meet_as_they_are`): the self-alignment limits themselves,
+    no margin, since the alternative is giving G_1 up."""
     meet_gap_um: float = 25.0
     """Front edges of the stopped pair at most this far apart count as G_1 formed."""
     via_tol_um: float = 60.0
