@@ -138,3 +138,33 @@ def test_leg_watch_stops_the_leg_at_the_last_instant_the_pair_orbits_stay_apart(
         assert stop is not None and 0.0 <= stop < taus[-1]
         i = int(np.flatnonzero(taus == stop)[0])
         assert gaps[i] >= keep and (gaps[i + 1:] < keep).all()  # the last instant that keeps the gap
+
+
+# tuning layout 19, plant seed 1, 2x noise, t = 9 s (D_1 .. D_7 in docking order): D_n (last) hemmed in beside a
+# waiting robot near the arena corner; no group way out keeps 10 um between bodies, so every pair frame failed
+TIGHT_POSES = np.array([[3459.199, 2476.206, 1.902], [855.687, 2440.684, 2.688], [2913.456, 3110.142, 2.834],
+                        [656.404, 998.106, 0.629], [577.531, 1556.808, 4.283], [459.436, 3021.533, 5.199],
+                        [3141.372, 3119.166, 4.982]])
+TIGHT_ARENA = (3827.837, 3827.837)
+
+
+def test_without_the_body_margin_a_hemmed_in_d_n_still_leaves_and_touches_nobody():
+    """PairRecovery.group_escape's fallback (``Tuning.group_tight_body_um`` = 0): the margin-free way out exists where
+    the default one does not, and replayed by hand the bodies graze by at most a few um between the search's samples
+    (none with a 5 um margin exists) and D_n's orbit ends clear."""
+    v = np.array([78.73, 102.58, 147.15, 113.0, 116.72, 90.86, 114.89])
+    r = np.array([239.62, 246.87, 169.72, 244.45, 190.02, 238.87, 190.34])
+    length = np.array([241.7, 271.1, 263.6, 289.0, 234.8, 262.3, 296.8])
+    width = np.array([52.3, 56.5, 59.4, 63.5, 64.6, 68.0, 69.8])
+    need = np.array([40.0, 40.0, 40.0, 40.0, 40.0, 25.0, 0.0])
+    g = _group(TIGHT_POSES, v, r, length, width, need)
+
+    def search(body: float):
+        return group_escape(g, TIGHT_ARENA, edge_need=40.0, body_clearance=body, edge_clearance=40.0, disc_clearance=25.0)
+
+    assert search(10.0) is None
+    m = search(0.0)
+    assert m is not None
+    assert search(5.0) is None
+    assert (_body_gaps(g, m)[:-1] > -5.0).all()  # replayed 10x finer than the search samples
+    assert _slack(g, _replay(g, m, m.total_s), TIGHT_ARENA) >= -1e-6

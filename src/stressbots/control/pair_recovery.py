@@ -93,32 +93,40 @@ class PairRecovery:
         again from wherever its orbit ends (every pair frame plans from the measured poses)."""
         n, tune, names = self.loop.n, self.loop.tune, self.loop.scn.names
         said = False
+        tight = False  # no way out with the body margin: one without it (bodies still kept apart) is taken
         for _ in range(tune.escape_search_frames):
-            m = self.group_plan()
+            m = self.group_plan(tight)
+            if m is None and not tight:
+                tight = True
+                m = self.group_plan(tight)
             if m is None or m.total_s <= 1e-3:
                 break
             if not said:
                 said = True
+                margin = " (no body margin)" if tight else ""
                 self.loop.log("escape", N, f"{names[N]} has no way out alone: after {m.wait_s:.1f} s, D_{m.k + 1} .. D_{n} "
-                                           f"drive straight together {m.straight_s:.1f} s (P_{m.k})")
+                                           f"drive straight together {m.straight_s:.1f} s (P_{m.k}){margin}")
             k, dt = (n, m.wait_s) if m.wait_s > 1e-3 else (m.k, m.straight_s)
             self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
-        m = self.group_plan()
+        m = self.group_plan(tight)
         if m is None or m.total_s > 1e-3:
             self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
             return False
         return True
 
-    def group_plan(self):
+    def group_plan(self, tight: bool = False):
         """D_n's group way out from the measured poses (:func:`~stressbots.control.group_escape.group_escape`), the
-        gaps as in :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``."""
+        gaps as in :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``.
+        D_n's body keeps ``Tuning.escape_body_clearance_um`` from the others, or ``Tuning.group_tight_body_um`` when
+        ``tight``."""
         L, tune = self.loop, self.loop.tune
         order = tuple(L.by_rank[r] for r in range(1, L.n + 1) if not L.docked[L.by_rank[r]])
         need = np.full(L.n, tune.wall_clearance_um)
         need[L.by_rank[L.n - 1]] = tune.g1_clearance_um
         g = Group(order, L.est, L.v_hat, L.r_hat, L.L, L.W, L.rstar, need)
         dk = np.flatnonzero(L.docked)
-        return group_escape(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=tune.escape_body_clearance_um,
+        body = tune.group_tight_body_um if tight else tune.escape_body_clearance_um
+        return group_escape(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=body,
                             edge_clearance=tune.wall_clearance_um, disc_clearance=tune.group_disc_clearance_um,
                             docked=(L.est[dk], L.L[dk], L.W[dk]), wait_steps=tune.group_escape_waits,
                             max_straight_um=tune.group_escape_straight_um)

@@ -144,6 +144,11 @@ class PairTuning:
     """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
     the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
     since the move is a park move of the group."""
+    group_tight_body_um: float = 0.0
+    """um. When no group way out keeps ``escape_body_clearance_um`` between D_n's body and the others, one that keeps
+    this at the search's samples is taken (no margin: bodies may graze by a few um between samples), the last way
+    out before every pair frame fails at the same instant with nothing moved (2x tuning layouts 19 seed 1 and 34
+    seed 0: D_n hemmed in beside a waiting robot at t = 9 and 27 s)."""
     leg_stall_frames: int = 4
     """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
     (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
