@@ -209,10 +209,12 @@ class _Runner(PlantLoop):
             self._warned.discard((i, "park"))
             self.replans += 1
             self._parked[(i, k)] = self._parked.get((i, k), 0) + 1
-            self.drive([(k, move_.wait_s)])
-            # the straight is checked again from the measured poses: the other movers' headings after the wait were
-            # predicted with rates identified from little motion (one start-up park ran D_(n-1)'s orbit into the edge)
-            move_ = self._group_move(park_move, i, k, held=True, **park)
+            if move_.wait_s > 0.0:
+                self.drive([(k, move_.wait_s)])
+                # the straight is checked again from the measured poses: the other movers' headings after the wait were
+                # predicted with rates identified from little motion (one start-up park ran D_(n-1)'s orbit into the
+                # edge); a move without a wait (a held robot's straight as it heads) has nothing predicted to check
+                move_ = self._group_move(park_move, i, k, held=True, **park)
             if move_ is None:
                 self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble, but after the wait "
                                     "its straight is not clear: it stays")
