@@ -29,6 +29,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
 from . import docking
 from .docking import DockOutcome, DockView
+from .gross import SteerOutcome
 from .loopview import DockingLoop
 from .queries import in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
@@ -252,18 +253,19 @@ class SingleDocking:
                 ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
+            stuck = False
             for tgt in targets:
-                lp.steer(i, tgt, k, k - 1, orbiting, ready=ready)
-                if lp.stuck:
+                stuck = lp.steer(i, tgt, k, k - 1, orbiting, ready=ready) is SteerOutcome.STUCK
+                if stuck:
                     break
             waypoints = []
             if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back):
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
-            elif lp.stuck and self.near_slot(i) and self.check_docked(i, k):
+            elif stuck and self.near_slot(i) and self.check_docked(i, k):
                 return  # it stopped at its own slot (a blocked gross motion drove it in): docking compliance docked it
-            elif lp.stuck:
+            elif stuck:
                 # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
                 # retrying the same way unchanged met the same orbit every time
                 path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
