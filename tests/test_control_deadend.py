@@ -18,7 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots import paths as pathlib
-from stressbots.control.gross import GrossMotion, viable_prefix
+from stressbots.control.gross import GrossMotion, SteerOutcome, viable_prefix
 from stressbots.control.parking import unblock_move
 from stressbots.control.queries import in_corridor, line_coords, line_pose
 from stressbots.control.tuning import ControllerOptions, Tuning
@@ -216,8 +216,7 @@ def test_a_robot_whose_blocked_gross_motion_stopped_it_at_its_slot_docks_there()
         g = run.goals[j]
         behind = float((g[:2] - run.est[j, :2]) @ np.array([math.sin(g[2]), math.cos(g[2])]))
         run.drive([(0, max(behind - 3.0, 0.0) / float(run.v_hat[j]))])
-        run.stuck = True
-        return False
+        return SteerOutcome.STUCK
 
     run.steer = steer_then_stop_in_the_slot  # type: ignore[method-assign, assignment]
     run.single.dock(1, None)

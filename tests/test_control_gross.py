@@ -22,6 +22,7 @@ from stressbots.collision import arena_gap
 from stressbots.control import ControllerOptions, Tuning
 from stressbots.control.gross import (
     GrossMotion,
+    SteerOutcome,
     arrived,
     clear_prefix,
     contact_clearance,
@@ -111,7 +112,6 @@ class KinematicLoop:
         self.tx = 1.0
         self.tune = tune or Tuning()
         self.opts = ControllerOptions(tuning=self.tune)
-        self.stuck = False
         self.t = 0.0
         self.replans = 0
         self.routes_rng = np.random.default_rng(7)
@@ -170,7 +170,7 @@ def test_a_robot_in_a_tight_spot_by_the_wall_escapes_on_a_tight_route_and_arrive
     target = np.array([1500.0, 1200.0, 0.5 * math.pi])
     assert not _route_exists(start, target, 15.0) and _route_exists(start, target, 10.0)  # the premise
     loop = KinematicLoop(start)
-    assert GrossMotion(loop).steer(0, target, 1, 0, [])
+    assert GrossMotion(loop).steer(0, target, 1, 0, []) is SteerOutcome.ARRIVED
     assert arrived(loop.est[0], target, loop.tune)
     assert any(kind == "detour" for kind, _ in loop.events)  # it was routed, not driven along a blocked path
     assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0  # never touched the wall

@@ -15,6 +15,7 @@ exists far more often than the disc test alone allows. A pure function of a snap
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import numpy as np
@@ -136,6 +137,23 @@ def escape_manoeuvre(pose, speed: float, radius: float, L: float, W: float, rsta
     s_run = np.arange(0.0, max_straight_um + 1e-9, sample_um)
     best: tuple[float, Manoeuvre] | None = None
     fallback: Manoeuvre | None = None
+    for m, clear in _candidates(pose, speed, radius, L, W, rstar, others, arena_um, edge_need, docked, col, s_run,
+                                lead_ins_um=lead_ins_um, turn_step_deg=turn_step_deg, sample_um=sample_um):
+        if clear:
+            if best is None or m.total_s < best[0]:
+                best = (m.total_s, m)
+        elif m.slack_um >= now + min_gain_um and (fallback is None or m.slack_um > fallback.slack_um):
+            fallback = m
+    return best[1] if best is not None else fallback
+
+
+def _candidates(pose: np.ndarray, speed: float, radius: float, L: float, W: float, rstar: float, others: Orbiting, arena_um,
+                edge_need: float, docked, col: tuple, s_run: np.ndarray, *, lead_ins_um: tuple[float, ...], turn_step_deg: float,
+                sample_um: float) -> Iterator[tuple[Manoeuvre, bool]]:
+    """The candidates of :func:`escape_manoeuvre`'s search, lazily, each with whether it takes D_n's orbit clear: for
+    each lead-in (um) and each clockwise turn on the ``turn_step_deg`` (deg) grid whose sweep keeps the clearances
+    (``col``: :func:`_collides`'s arguments after the body's size), the straight of ``s_run`` (um along it) that clears
+    D_n's orbit soonest, else the one with the largest :func:`orbit_slack` (um) before D_n's body first comes too close."""
     for lead in lead_ins_um:
         # a short straight first: the body beside D_n's turn may be gone by the time it turns
         s_lead = np.arange(0.0, lead + 1e-9, sample_um) if lead > 0 else np.zeros(1)
@@ -158,9 +176,4 @@ def escape_manoeuvre(pose, speed: float, radius: float, L: float, W: float, rsta
             ok = np.flatnonzero(slack >= 0.0)
             k = int(ok[0]) if len(ok) else int(np.argmax(slack))
             m = Manoeuvre(t0, float(t_arc[-1] - t0), float(s_run[k] / speed), float(slack[k]))
-            if len(ok):
-                if best is None or m.total_s < best[0]:
-                    best = (m.total_s, m)
-            elif slack[k] >= now + min_gain_um and (fallback is None or slack[k] > fallback.slack_um):
-                fallback = m
-    return best[1] if best is not None else fallback
+            yield m, bool(len(ok))

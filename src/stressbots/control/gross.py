@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Sequence
-from typing import Protocol
+from enum import Enum
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -27,8 +28,8 @@ from .loopview import LoopView, Steps
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["GrossLoop", "GrossMotion", "arrived", "clear_prefix", "contact_clearance", "escape_moves", "escape_sweep", "path_steps",
-           "viable_prefix"]
+__all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "clear_prefix", "contact_clearance", "escape_moves",
+           "escape_sweep", "path_steps", "viable_prefix"]
 
 
 
@@ -43,6 +44,45 @@ class GrossLoop(LoopView, Protocol):
     def rstar(self) -> np.ndarray: ...
 
     def tend_orbits(self, k: int) -> None: ...
+
+
+class SteerOutcome(Enum):
+    """How a gross motion (:meth:`GrossMotion.steer`) ended. Compare members with ``is``: every member is truthy."""
+
+    ARRIVED = "arrived"
+    """In the target region (or ``ready()`` became true): the next step works from here."""
+    NO_WAY = "no way"
+    """Short of the target without a stall: a committed route's waypoint out of reach, or the cycles ran out; the
+    caller re-plans."""
+    STUCK = "stuck"
+    """Failure region H: the robot stalled (``Tuning.stall_count`` frames in a row and no escape), or it has no route
+    and nothing clear to drive (:meth:`GrossMotion._blocked` gives up this target); the caller's recovery (backing off)
+    takes over. A stall on the last waypoint steered of a roadmap route counts until another route's waypoints are
+    steered, even if the robot then arrives (the loop's former ``stuck`` flag, which the callers read, kept it so)."""
+
+
+def _ended(arrived: bool, stalled: bool) -> SteerOutcome:
+    """The outcome of a gross motion that ended in its target region (``arrived``) or short of it, ``stalled``
+    (failure region H) or not: a stall counts first."""
+    if stalled:
+        return SteerOutcome.STUCK
+    return SteerOutcome.ARRIVED if arrived else SteerOutcome.NO_WAY
+
+
+class Detour(NamedTuple):
+    """What gross motion around a blocked path (:meth:`GrossMotion._blocked`) did this t_x, and the state it leaves
+    to the rest of the gross motion."""
+
+    outcome: SteerOutcome | pathlib.Path | None
+    """A :class:`SteerOutcome` ends the gross motion (ARRIVED: ``ready()`` became true on a roadmap route; STUCK:
+    no route and nothing clear to drive); None: a route's waypoints were driven, re-plan; a path: drive it this
+    t_x."""
+    quiet: int
+    """The t_x left before the roadmap is asked again."""
+    escapes: int
+    """The escapes left to this gross motion."""
+    stalled: bool
+    """Whether the robot is stalled (failure region H): the last waypoint steered stalled, or it gave up."""
 
 
 def path_steps(path: pathlib.Path, v: float, turn_k: int, straight_k: int, limit_s: float | None = None) -> Steps:
@@ -147,7 +187,7 @@ def arrived(pose: np.ndarray, target: np.ndarray, tune: Tuning) -> bool:
 class GrossMotion:
     """Gross motion for a closed loop ``loop``: drives a robot to a target region around the obstacles.
 
-    Sets ``loop.stuck`` when the robot stalled (failure region H) during the last :meth:`steer`.
+    :meth:`steer` returns a :class:`SteerOutcome` (STUCK when the robot stalled: failure region H).
     """
 
     def __init__(self, loop: GrossLoop):
@@ -203,13 +243,13 @@ class GrossMotion:
         return self.loop.tune.route_searches_max - self._failed.get(self._search_key(i, target, orbiting), 0)
 
     def _blocked(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs, ready,
-                 clearance, path, quiet: int, escapes: int):
-        """Gross motion around a blocked ``path``: ``(outcome, quiet, escapes)`` (the t_x left before the roadmap is
-        asked again, the escapes left to this gross motion).
+                 clearance, path, quiet: int, escapes: int, stalled: bool) -> Detour:
+        """Gross motion around a blocked ``path``: a :class:`Detour` (``quiet``, ``escapes`` and ``stalled`` as the
+        gross motion had them before, updated).
 
-        ``outcome`` is True (``ready()`` became true on a roadmap route), None (a route's waypoints were
-        driven: re-plan), a path to drive this t_x, or False: no route and nothing clear to drive (give up
-        this target; the caller re-plans) after an :meth:`escape` was tried. With no route, only the clear beginning of ``path``
+        Its ``outcome`` is ARRIVED (``ready()`` became true on a roadmap route), None (a route's waypoints were
+        driven: re-plan), a path to drive this t_x, or STUCK: no route and nothing clear to drive (give up
+        this target; failure region H) after an :meth:`escape` was tried. With no route, only the clear beginning of ``path``
         (:func:`clear_prefix`, at the full clearance, else at ``Tuning.escape_clearance_um``, else short of contact) is driven,
         never the blocked part: robots that drove on along blocked paths
         ran into the arena edge or the structure and were trapped there (a one-way robot against an
@@ -227,11 +267,11 @@ class GrossMotion:
                 # them, at the clearance it was found at), instead of a new random route every t_x
                 t_before = self.loop.t
                 for w in points[:-1]:
-                    self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready, via=False,
-                               clearance=min(c, c_eff))
+                    stalled = self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready,
+                                         via=False, clearance=min(c, c_eff)) is SteerOutcome.STUCK
                     if ready is not None and ready():
-                        return True, quiet, escapes
-                return (None if self.loop.t > t_before else routed), quiet, escapes
+                        return Detour(_ended(True, stalled), quiet, escapes, stalled)
+                return Detour(None if self.loop.t > t_before else routed, quiet, escapes, stalled)
             key = self._search_key(i, target, orbiting)
             self._failed[key] = self._failed.get(key, 0) + 1
             quiet = self.loop.tune.no_route_quiet_cycles
@@ -250,11 +290,11 @@ class GrossMotion:
         ahead = self._viable(i, path, ahead, orbiting, extra_discs)
         if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
             if escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
-                return None, quiet, escapes - 1  # off the obstacle: re-plan from there
+                return Detour(None, quiet, escapes - 1, stalled)  # off the obstacle: re-plan from there
             self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
-            self.loop.stuck = True  # failure region H: the caller's recovery (backing off) takes over
-            return False, quiet, escapes
-        return pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes
+            # failure region H: the caller's recovery (backing off) takes over
+            return Detour(SteerOutcome.STUCK, quiet, escapes, True)
+        return Detour(pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes, stalled)
 
     def free_moves(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> Iterator[tuple[float, float]]:
         """The escapes of the kind :meth:`escape` drives (turn clockwise ``Tuning.escape_turns`` of a loop, none
@@ -284,13 +324,14 @@ class GrossMotion:
                              self.loop.tune.viable_checks_max)
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
-        """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; True when there.
+              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
+              clearance: float | None = None) -> SteerOutcome:
+        """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; ARRIVED when there.
 
         ``ready()`` True ends the gross motion early (the robot is already in the region from which the
         next step works: the seed's regions A_i instead of a point). A blocked path is routed around the
-        obstacles (:meth:`_blocked`); False when there is no way (the caller re-plans) or the robot stalled
-        (``loop.stuck``).
+        obstacles (:meth:`_blocked`); NO_WAY when there is no way (the caller re-plans), STUCK when the robot
+        stalled or has no route and nothing clear to drive (failure region H; see :class:`SteerOutcome`).
 
         Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
         points a little left of where it must. Clockwise is the only correction a one-way robot makes
@@ -300,21 +341,21 @@ class GrossMotion:
         stalls = 0
         escapes = self.loop.tune.escapes_per_steer
         quiet = 0  # cycles left before the roadmap is asked again after it found no way around
-        self.loop.stuck = False
+        stalled = False  # failure region H (see SteerOutcome.STUCK)
         for _ in range(max_cycles):
             v = self.loop.v_hat[i]
             p = self.loop.est[i]
             if (ready is None and arrived(p, target, self.loop.tune)) or (ready is not None and ready()):
-                return True
+                return _ended(True, stalled)
             path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
                 if not via:
-                    return False  # a waypoint of a committed route is out of reach: the caller re-plans
-                outcome, quiet, escapes = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance, path,
-                                                        quiet, escapes)
+                    return _ended(False, stalled)  # a waypoint of a committed route is out of reach: the caller re-plans
+                outcome, quiet, escapes, stalled = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance,
+                                                                 path, quiet, escapes, stalled)
                 if outcome is None:
                     continue
-                if isinstance(outcome, bool):
+                if isinstance(outcome, SteerOutcome):
                     return outcome
                 path = outcome
             self.loop.replans += 1
@@ -331,15 +372,14 @@ class GrossMotion:
                 if stalls >= self.loop.tune.stall_count:
                     self.loop.log("stuck", i, "stopped during gross motion (failure region H)")
                     if not (escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs)):
-                        self.loop.stuck = True
-                        return False
+                        return SteerOutcome.STUCK
                     stalls, escapes = 0, escapes - 1
             else:
                 stalls = 0
             if whole:
-                return True
+                return _ended(True, stalled)
             self.loop.tend_orbits(turn_k)  # waiting orbits drift meanwhile: move one away before it is trapped
-        return False
+        return _ended(False, stalled)
 
     def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs=()) -> bool:
         """Recovery from a contact (or a pose that close): drive robot ``i`` off what blocks it; True if it moved.

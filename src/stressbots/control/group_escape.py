@@ -130,11 +130,7 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
                                                                                                arena_um)[0]) - 1e-6)
     vN, rN = float(g.speeds[N]), float(g.radii[N])
     period = TWO_PI * rN / vN
-    # the wait: everyone orbits; D_n's body checked every ~10 um of its arc, up to its first contact
-    tw_dense = np.arange(0.0, period, 10.0 / vN)
-    orbit_at = {j: move(g.poses[j], g.speeds[j] * tw_dense, 1.0 / g.radii[j]) for j in order}
-    free_wait = _first_hit(orbit_at[N], {j: orbit_at[j] for j in others}, g, N, floor, arena_um, edge_floor, docked)
-    max_wait = tw_dense[free_wait - 1] if free_wait > 0 else -1.0
+    max_wait = _longest_wait(g, order, N, others, floor, arena_um, edge_floor, docked, period, vN)
     s_run = np.arange(0.0, max_straight_um + 1e-9, sample_um)
     t_run = s_run / vN
     best: GroupMove | None = None
@@ -148,19 +144,10 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
             free = _first_hit(tracks[N], {j: tracks[j] for j in others}, g, N, floor, arena_um, edge_floor, docked)
             if free == 0:
                 continue
-            ok = np.ones(free, dtype=bool)
             mc = {j: turning_centres(tracks[j][:free], g.radii[j]) if j in movers else np.broadcast_to(centres[j], (free, 2))
                   for j in order}
-            for j in movers[:-1]:
-                rest = [b for b in others if b != j]
-                dc = np.stack([mc[b] for b in rest], axis=1) if rest else np.zeros((free, 0, 2))
-                gaps = _disc_gaps(mc[j], float(g.rstar[j]), arena_um, docked, dc, g.rstar[rest])
-                ok &= np.minimum.accumulate(gaps) >= min(disc_clearance, float(gaps[0]) - 1e-6)
-            oc = np.stack([mc[b] for b in others], axis=1)  # (free, n-1, 2)
-            cN = turning_centres(tracks[N][:free], rN)
-            slack = (np.hypot(*(cN[:, None, :] - oc).transpose(2, 0, 1)) - float(g.rstar[N]) - g.rstar[others][None, :]
-                     - orb_need[None, :]).min(axis=1)
-            slack = np.minimum(slack, orbit_slack(cN, float(g.rstar[N]), _NO_ORBITS, arena_um, edge_need, docked))
+            ok = _movers_discs_clear(g, movers, others, mc, free, arena_um, docked, disc_clearance)
+            slack = _disc_slack(g, N, others, mc, tracks[N][:free], rN, orb_need, arena_um, edge_need, docked)
             good = np.flatnonzero(ok & (slack >= 0.0))
             if not len(good):
                 continue
@@ -169,5 +156,44 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
             if best is None or m.total_s < best.total_s:
                 best = m
     return best
+
+
+def _longest_wait(g: Group, order: list[int], N: int, others: list[int], floor: np.ndarray, arena_um, edge_floor: float, docked,
+                  period: float, vN: float) -> float:
+    """How long (s) D_n may wait under P_n (everyone orbits, D_n's orbit of ``period`` s at ``vN`` um/s) before its body
+    first comes within its floors (um) of another body, the arena edge or a docked body; -1 when not even at once."""
+    # the wait: everyone orbits; D_n's body checked every ~10 um of its arc, up to its first contact
+    tw_dense = np.arange(0.0, period, 10.0 / vN)
+    orbit_at = {j: move(g.poses[j], g.speeds[j] * tw_dense, 1.0 / g.radii[j]) for j in order}
+    free_wait = _first_hit(orbit_at[N], {j: orbit_at[j] for j in others}, g, N, floor, arena_um, edge_floor, docked)
+    max_wait = tw_dense[free_wait - 1] if free_wait > 0 else -1.0
+    return max_wait
+
+
+def _movers_discs_clear(g: Group, movers: list[int], others: list[int], mc: dict[int, np.ndarray], free: int, arena_um, docked,
+                        disc_clearance: float) -> np.ndarray:
+    """Mask (free,): up to each sample, every mover but D_n kept its orbit disc (centres ``mc[j]`` (free, 2) along its
+    track) ``disc_clearance`` um (or its present gap, if smaller) from the arena edge, the docked bodies and the other
+    discs but D_n's."""
+    ok = np.ones(free, dtype=bool)
+    for j in movers[:-1]:
+        rest = [b for b in others if b != j]
+        dc = np.stack([mc[b] for b in rest], axis=1) if rest else np.zeros((free, 0, 2))
+        gaps = _disc_gaps(mc[j], float(g.rstar[j]), arena_um, docked, dc, g.rstar[rest])
+        ok &= np.minimum.accumulate(gaps) >= min(disc_clearance, float(gaps[0]) - 1e-6)
+    return ok
+
+
+def _disc_slack(g: Group, N: int, others: list[int], mc: dict[int, np.ndarray], track_N: np.ndarray, rN: float,
+                orb_need: np.ndarray, arena_um, edge_need: float, docked) -> np.ndarray:
+    """Smallest surplus (um, (free,)) of D_n's orbit disc, D_n at each of ``track_N`` (free, 3), over the gaps it needs:
+    ``orb_need`` from the other robots' discs (centres ``mc``) and ``edge_need`` from the arena edge and the docked
+    bodies (:func:`~stressbots.control.escape_search.orbit_slack`)."""
+    oc = np.stack([mc[b] for b in others], axis=1)  # (free, n-1, 2)
+    cN = turning_centres(track_N, rN)
+    slack = (np.hypot(*(cN[:, None, :] - oc).transpose(2, 0, 1)) - float(g.rstar[N]) - g.rstar[others][None, :]
+             - orb_need[None, :]).min(axis=1)
+    slack = np.minimum(slack, orbit_slack(cN, float(g.rstar[N]), _NO_ORBITS, arena_um, edge_need, docked))
+    return slack
 
 

@@ -18,7 +18,7 @@ import numpy as np
 from .. import paths as pathlib
 from ..collision import arena_gap
 from ..robots import turning_centres
-from .gross import arrived, path_steps
+from .gross import SteerOutcome, arrived, path_steps
 from .pair_geometry import tight_discs
 from .station import orbit_room
 
@@ -131,9 +131,8 @@ class HoldingOrbit:
             return False
         self.loop.log("hold", N, f"{self.loop.scn.names[N]} steers around the obstacles to a free orbit "
                                  f"{np.hypot(*(hold[:2] - q[:2])):.0f} um from its target, to wait there")
-        self.loop.steer(N, hold, self.loop.n, self.loop.n - 1, lower, extra_discs=disc, max_cycles=tune.hold_frames,
-                        clearance=tune.g1_clearance_um)
-        return not self.loop.stuck
+        return self.loop.steer(N, hold, self.loop.n, self.loop.n - 1, lower, extra_discs=disc, max_cycles=tune.hold_frames,
+                               clearance=tune.g1_clearance_um) is not SteerOutcome.STUCK
 
     def drive_to_hold(self, N: int, hold, lower, disc, short: float) -> bool:
         """D_n drives its shortest path to ``hold``, re-planned every t_x while it stays clear

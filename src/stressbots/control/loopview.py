@@ -4,18 +4,21 @@ Each phase (:mod:`~stressbots.control.gross`, :mod:`~stressbots.control.single`,
 :mod:`~stressbots.control.pair`) is handed the loop (:class:`~stressbots.control.loop.PlantLoop` and the
 controller built on it) and names what it reads and calls through a :class:`typing.Protocol`, so that no
 phase imports the runner. :class:`LoopView` is what every phase uses (the scenario, the estimates, the
-log, the one ``drive``); :class:`DockingLoop` adds what the phases that dock robots share (the slots, the
-plant's stuck flag, obstacle queries, steering). Each phase's own protocol extends one of them.
+log, the one ``drive``); :class:`DockingLoop` adds what the phases that dock robots share (the slots,
+obstacle queries, steering). Each phase's own protocol extends one of them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from .tuning import ControllerOptions, Tuning
+
+if TYPE_CHECKING:
+    from .gross import SteerOutcome
 
 __all__ = ["DockingLoop", "LoopView", "Steps"]
 
@@ -33,7 +36,6 @@ class LoopView(Protocol):
     tx: float
     tune: Tuning
     opts: ControllerOptions
-    stuck: bool
 
     @property
     def est(self) -> np.ndarray: ...
@@ -71,4 +73,5 @@ class DockingLoop(LoopView, Protocol):
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int) -> Steps: ...
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool: ...
+              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
+              clearance: float | None = None) -> SteerOutcome: ...

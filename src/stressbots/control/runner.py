@@ -57,7 +57,7 @@ from ..collision import point_rectangle_distance
 from ..errors import PlanningError
 from ..kinematics import move
 from ..robots import angle_difference, turning_centres
-from .gross import GrossMotion, escape_sweep
+from .gross import GrossMotion, SteerOutcome, escape_sweep
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import blocking_orbits, orbit_gaps, park_move, unblock_move
@@ -113,7 +113,6 @@ class _Runner(PlantLoop):
         self.v, self.r = scenario.speeds_um_s, scenario.turn_radii_um
         self.nominal_goals = np.asarray(plan_result.goals, dtype=np.float64).copy()
         self.goals = self.nominal_goals.copy()
-        self.stuck = False
         self._warned: set = set()
         # (robot, phase k) -> park moves so far (parking); a move that did not widen the gap is the last of its phase
         self._parked: dict[tuple[int, int], int] = {}
@@ -337,8 +336,9 @@ class _Runner(PlantLoop):
     # -- motion primitives ------------------------------------------------------------------------------
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
-              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True, clearance: float | None = None) -> bool:
-        """Gross motion of robot ``i`` to ``target``; True when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
+              max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
+              clearance: float | None = None) -> SteerOutcome:
+        """Gross motion of robot ``i`` to ``target``; ARRIVED when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
         return self.gross.steer(i, target, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=max_cycles, ready=ready,
                                 via=via, clearance=clearance)
 

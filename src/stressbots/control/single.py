@@ -18,7 +18,7 @@ are pure geometry.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
@@ -29,6 +29,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
 from . import docking
 from .docking import DockOutcome, DockView
+from .gross import SteerOutcome
 from .loopview import DockingLoop
 from .queries import in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
@@ -241,35 +242,19 @@ class SingleDocking:
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
         misses = 0
         for attempt in range(lp.tune.dock_attempts):
-            goal = lp.goals[i]
-            back = self.approach_length(i)
-            if back is None:
-                a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
-                a_pose = retarget(a_pose, lp.motion)
-                ready = None
-            else:
-                a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
-                ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
+            goal, back, a_pose, ready = self._aim(i, attempt, route_phase)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
-            for tgt in targets:
-                lp.steer(i, tgt, k, k - 1, orbiting, ready=ready)
-                if lp.stuck:
-                    break
+            stuck = self._steer_through(i, k, orbiting, targets, ready)
             waypoints = []
             if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back):
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
-            elif lp.stuck and self.near_slot(i) and self.check_docked(i, k):
+            elif stuck and self.near_slot(i) and self.check_docked(i, k):
                 return  # it stopped at its own slot (a blocked gross motion drove it in): docking compliance docked it
-            elif lp.stuck:
-                # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
-                # retrying the same way unchanged met the same orbit every time
-                path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
-                if not lp.unblock_orbits(k, i, np.vstack([lp.est[i][None, :2], path.sample(20.0)[:, :2],
-                                                          way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
-                    self.back_off(i, k)
+            elif stuck:
+                self._clear_the_way(i, k, goal, a_pose, back)
                 continue
             elif back is not None and not self.in_funnel(i, back):
                 lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
@@ -289,6 +274,45 @@ class SingleDocking:
             self.back_off(i, k)
         raise lp.abort(f"{lp.scn.names[i]} did not dock in {lp.tune.dock_attempts} attempts (last: "
                        f"{lp.events[-1]['detail'] if lp.events else ''})")
+
+    def _aim(self, i: int, attempt: int, route_phase) -> tuple[np.ndarray, float | None, np.ndarray, Callable[[], bool] | None]:
+        """``(goal, back, a_pose, ready)`` of docking attempt ``attempt`` (from 0) of robot ``i``: its slot (um, um, rad),
+        the approach line's length behind it (um; None: the line's corridor is blocked, the fine motion takes the S_2f
+        arc from the intermediate pose a_i), the pose its gross motion sigma_1 aims at, and the test that ends that
+        gross motion early (in the approach funnel; None: at a_i)."""
+        lp = self.loop
+        goal = lp.goals[i]
+        back = self.approach_length(i)
+        if back is None:
+            a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
+            a_pose = retarget(a_pose, lp.motion)
+            ready = None
+        else:
+            a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
+            ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
+        return goal, back, a_pose, ready
+
+    def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None) -> bool:
+        """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
+        its aim); whether one ended stuck (failure region H: the rest are skipped, the caller's recovery takes over)."""
+        lp = self.loop
+        stuck = False
+        for tgt in targets:
+            stuck = lp.steer(i, tgt, k, k - 1, orbiting, ready=ready) is SteerOutcome.STUCK
+            if stuck:
+                break
+        return stuck
+
+    def _clear_the_way(self, i: int, k: int, goal: np.ndarray, a_pose: np.ndarray, back: float | None) -> None:
+        """Recovery of robot ``i`` (D_k) whose gross motion toward ``a_pose`` stopped it in failure region H: waiting
+        orbits over its way to the slot ``goal`` are moved off it, else (none moved) it backs off (:meth:`back_off`)."""
+        lp = self.loop
+        # a waiting orbit in the way (over the path, or the robot pinned against it) is moved off it;
+        # retrying the same way unchanged met the same orbit every time
+        path = pathlib.shortest_path(lp.est[i], a_pose, lp.r_hat[i])
+        if not lp.unblock_orbits(k, i, np.vstack([lp.est[i][None, :2], path.sample(20.0)[:, :2],
+                                                  way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
+            self.back_off(i, k)
 
     # -- where to aim ---------------------------------------------------------------------------------
 
