@@ -248,3 +248,11 @@ def test_a_robot_trapped_against_the_wall_does_not_try_an_escape():
     loop = KinematicLoop(start)
     assert not GrossMotion(loop).escape(0, 1, 0, [])
     assert len(loop.trail) == 1  # it did not move
+
+
+def test_a_gross_motion_that_arrives_after_a_stall_on_an_earlier_waypoint_has_arrived():
+    from stressbots.control.gross import SteerOutcome, _ended
+
+    assert _ended(True, True) is SteerOutcome.ARRIVED  # the stall was on an earlier waypoint of the route
+    assert _ended(False, True) is SteerOutcome.STUCK
+    assert _ended(False, False) is SteerOutcome.NO_WAY

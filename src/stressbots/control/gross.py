@@ -57,16 +57,16 @@ class SteerOutcome(Enum):
     STUCK = "stuck"
     """Failure region H: the robot stalled (``Tuning.stall_count`` frames in a row and no escape), or it has no route
     and nothing clear to drive (:meth:`GrossMotion._blocked` gives up this target); the caller's recovery (backing off)
-    takes over. A stall on the last waypoint steered of a roadmap route counts until another route's waypoints are
-    steered, even if the robot then arrives (the loop's former ``stuck`` flag, which the callers read, kept it so)."""
+    takes over. A robot that arrives after a stall on an earlier waypoint of a roadmap route has arrived."""
 
 
 def _ended(arrived: bool, stalled: bool) -> SteerOutcome:
     """The outcome of a gross motion that ended in its target region (``arrived``) or short of it, ``stalled``
-    (failure region H) or not: a stall counts first."""
-    if stalled:
-        return SteerOutcome.STUCK
-    return SteerOutcome.ARRIVED if arrived else SteerOutcome.NO_WAY
+    (failure region H) or not. Arriving counts first: the loop's former ``stuck`` flag kept a stall on an earlier
+    waypoint of a route, and the robot that then arrived was backed off (docking) or reported stuck (holding)."""
+    if arrived:
+        return SteerOutcome.ARRIVED
+    return SteerOutcome.STUCK if stalled else SteerOutcome.NO_WAY
 
 
 class Detour(NamedTuple):
