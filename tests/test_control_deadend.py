@@ -222,3 +222,49 @@ def test_a_robot_whose_blocked_gross_motion_stopped_it_at_its_slot_docks_there()
     run.single.dock(1, None)
     assert sim.docked[i] and run.docked[i]
     assert sum(e["kind"] == "docked" for e in run.events) == 1
+
+
+def test_a_robot_whose_line_approach_missed_and_cannot_loop_back_is_backed_off_not_sent_down_the_line_again():
+    """Policy of SingleDocking.dock with its moves scripted: the gross motion can never leave (stuck at once), the robot
+    sits in its approach corridor and every line approach from there misses. The corridor shortcut is not taken again
+    from where a line approach just missed (it ran six attempts out at the same instant): the robot is backed off."""
+    import pytest
+
+    from stressbots.control import structure_targets
+    from stressbots.control.docking import DockOutcome
+    from stressbots.control.gross import SteerOutcome
+    from stressbots.control.runner import _Runner
+    from stressbots.control.tuning import ControllerOptions
+    from stressbots.generate import random_scenario
+    from stressbots.scenario import Noise
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(3, 0, shape="tee", noise=Noise())
+    run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
+    single = run.single
+    calls = {"line": 0, "back_off": 0}
+
+    def line_approach(i, k, attempt=0):
+        calls["line"] += 1
+        return DockOutcome.MISSED
+
+    def back_off(i, k):
+        calls["back_off"] += 1
+        run.drive([(k, 1.0)])  # time passes: the robot is somewhere new
+
+    def stuck_at_once(*_args, **_kwargs):
+        return SteerOutcome.STUCK
+
+    def always(value):
+        return lambda *_args: value
+
+    def clear_the_way(i, k, *_args):
+        back_off(i, k)
+
+    for obj, name, fake in ((run, "steer", stuck_at_once), (single, "in_corridor", always(True)), (single, "in_funnel", always(False)),
+                            (single, "approach_length", always(300.0)), (single, "line_approach", line_approach),
+                            (single, "back_off", back_off), (single, "_clear_the_way", clear_the_way)):
+        setattr(obj, name, fake)
+    with pytest.raises(Exception, match="did not dock"):
+        single.dock(1, None)
+    assert calls["back_off"] >= 2 and calls["line"] <= run.tune.dock_attempts - 2

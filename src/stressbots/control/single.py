@@ -46,6 +46,8 @@ class SingleLoop(DockingLoop, Protocol):
 
     events: list[dict]
     straight_drift: Any
+    t: float
+    """Simulated time (s) of the latest frame."""
 
     def park_orbits(self, k: int) -> None: ...
 
@@ -241,13 +243,16 @@ class SingleDocking:
             route_phase = None  # the pair formed in a re-planned frame: the nominal route no longer applies
         waypoints = [np.array(w) for w in (route_phase.waypoints if route_phase is not None else ())]
         misses = 0
+        missed_at = -1.0  # time (s) of the last missed line approach
         for attempt in range(lp.tune.dock_attempts):
             goal, back, a_pose, ready = self._aim(i, attempt, route_phase)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
             stuck = self._steer_through(i, k, orbiting, targets, ready)
             waypoints = []
-            if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back):
+            # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
+            # left the robot there) it would miss again, and six attempts ran out at the same instant
+            if back is not None and not self.in_funnel(i, back) and self.in_corridor(i, back) and lp.t > missed_at:
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
@@ -268,6 +273,7 @@ class SingleDocking:
             if outcome is DockOutcome.MISSED:
                 # no contact: the gross motion (obstacle-checked) loops back into the funnel
                 misses += 1
+                missed_at = lp.t
                 lp.log("retry", i, f"attempt {attempt + 1} missed the approach line; looping back")
                 continue
             lp.log("retry", i, f"attempt {attempt + 1} did not dock; backing off")
