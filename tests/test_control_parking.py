@@ -116,21 +116,26 @@ def _scripted_drive(run, i, held: bool, record_waits: bool = False):
     return straights
 
 
+def _moves(run) -> list:
+    """The park moves the run has made (its log)."""
+    return [e for e in run.events if e["kind"] == "park" and "it moves" in e["detail"]]
+
+
 def test_an_orbit_that_drifts_back_into_trouble_is_moved_again_in_the_same_phase():
     run, i = _runner_with_orbit_near_the_wall()
     start = run.estimator.pose.copy()
-    calls = _scripted_drive(run, i, held=False)
+    _scripted_drive(run, i, held=False)
     run.park_orbits(2)
-    assert len(calls) == 1 and wall_gap_of(run, i) > run.tune.park_margin_um
+    assert len(_moves(run)) == 1 and wall_gap_of(run, i) > run.tune.park_margin_um
     run.park_orbits(2)
-    assert len(calls) == 1  # clear now: no move
+    assert len(_moves(run)) == 1  # clear now: no move
     for m in range(1, run.tune.park_moves_per_phase + 1):
         run.estimator.pose[:] = start  # drifted back
         run.park_orbits(2)
-        assert len(calls) == min(m + 1, run.tune.park_moves_per_phase)  # moved again, at most this many per phase
+        assert len(_moves(run)) == min(m + 1, run.tune.park_moves_per_phase)  # moved again, at most this many per phase
     run.estimator.pose[:] = start
     run.park_orbits(3, top=1)
-    assert len(calls) == run.tune.park_moves_per_phase + 1  # a new phase may move it again
+    assert len(_moves(run)) == run.tune.park_moves_per_phase + 1  # a new phase may move it again
 
 
 def test_an_orbit_move_that_did_not_widen_the_gap_is_not_repeated_in_its_phase():
@@ -161,12 +166,12 @@ def test_a_waiting_orbit_under_d_n_minus_1s_orbit_is_moved_off_it_when_that_orbi
     w, h = run.scn.arena_um
     run.estimator.pose[i] = (0.5 * w - float(run.r_hat[i]), 0.5 * h, 0.0)  # turning centre at the arena's middle
     run.estimator.pose[m] = (0.5 * w - float(run.r_hat[m]) + 150.0, 0.5 * h, 0.0)  # its centre 150 um to the right
-    calls = _scripted_drive(run, i, held=False)
+    _scripted_drive(run, i, held=False)
     run.park_orbits(4, top=2)
-    assert calls == []
+    assert _moves(run) == []
     before = disc_gap(run, i, m)
     run.park_orbits(4, top=2, among=[m])
-    assert len(calls) == 1 and disc_gap(run, i, m) > before + run.tune.park_progress_um
+    assert len(_moves(run)) == 1 and disc_gap(run, i, m) > before + run.tune.park_progress_um
 
 
 def disc_gap(run, a: int, b: int) -> float:
@@ -176,3 +181,21 @@ def disc_gap(run, a: int, b: int) -> float:
         p = run.estimator.pose[j]
         cs.append((p[0] + run.r_hat[j] * math.cos(p[2]), p[1] - run.r_hat[j] * math.sin(p[2])))
     return float(math.hypot(cs[0][0] - cs[1][0], cs[0][1] - cs[1][1]) - run.rstar[a] - run.rstar[b])
+
+
+def test_a_group_straight_is_driven_a_t_x_at_a_time_and_stops_before_an_orbit_meets_the_arena_edge():
+    """The straight of a group move heading for the arena edge (a heading the plan did not expect) stops while the
+    orbit is still ``park_clearance_um`` clear of the edge, replayed by noiseless kinematics; a clear one runs whole."""
+    run, i = _runner_with_orbit_near_the_wall()
+    _scripted_drive(run, i, held=False)
+    run.estimator.pose[i, 2] = 1.5 * math.pi  # heading -x: straight at the left edge
+    run.estimator.pose[i, 0] += 300.0  # its disc 310 um from that edge
+    before = run.estimator.pose[i].copy()
+    run._drive_group_straight(i, 2, 20.0)  # 20 s would run it far into the edge
+    gap = wall_gap_of(run, i)
+    assert run.tune.park_clearance_um <= gap < 310.0
+    assert any("stops" in e["detail"] for e in run.events)
+    run.estimator.pose[i] = before
+    run.estimator.pose[i, 2] = 0.5 * math.pi  # heading +x: away from it
+    run._drive_group_straight(i, 2, 2.0)
+    assert math.isclose(run.estimator.pose[i, 0] - before[0], 2.0 * float(run.v_hat[i]), rel_tol=1e-6)

@@ -26,7 +26,7 @@ import numpy as np
 from ..collision import point_rectangle_distance
 from ..robots import TWO_PI, turning_centres
 
-__all__ = ["ParkMove", "blocking_orbits", "orbit_gaps", "park_move", "unblock_move"]
+__all__ = ["ParkMove", "blocking_orbits", "orbit_gaps", "park_move", "straights_clear", "unblock_move"]
 
 
 @dataclass(frozen=True)
@@ -155,6 +155,34 @@ def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um,
         if clear and accept(tracks[:, -1]) and cost < best_cost:
             best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
+
+
+def straights_clear(movers: list[int], still: list[int], poses, radii, speeds, rstar, arena_um, docked_poses, docked_L, docked_W,
+                    duration_s: float, clearance_um: float) -> bool:
+    """Whether the straight of a group move, driven ``duration_s`` s on from the measured ``poses`` (each mover along
+    the heading it has), keeps every mover's orbit disc ``clearance_um`` (um) from the arena edge, the docked bodies
+    and the other discs, or (where it is closer already) no closer; the arena edge is judged apart, as in a park
+    move's plan. Checked before every t_x of the straight: a 490 um straight planned clear of the arena edge ran a
+    waiting orbit 34 um into it (the heading after the wait was 10 deg off the plan).
+
+    >>> p = np.array([[500.0, 500.0, 0.0]])   # heading +y: its disc (centre y = 500, r* 120) 380 um below the top edge
+    >>> def clear(s): return straights_clear([0], [], p, np.array([100.0]), np.array([100.0]), np.array([120.0]),
+    ...                                      (1000.0, 1000.0), np.zeros((0, 3)), [], [], s, 25.0)
+    >>> clear(3.0), clear(4.0)   # 100 um/s: 80 um, then -20 um from the edge
+    (True, False)
+    """
+    poses = np.asarray(poses, float)
+    centres = turning_centres(poses, radii)
+    docked_poses = np.atleast_2d(np.asarray(docked_poses, float)).reshape(-1, 3)
+    everyone = movers + still
+    gap0 = orbit_gaps(centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)[:len(movers)]
+    t = np.linspace(0.0, duration_s, 12)
+    h = np.stack([np.sin(poses[movers, 2]), np.cos(poses[movers, 2])], axis=1)
+    tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
+    gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
+    walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
+    wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
+    return bool((gaps >= np.minimum(clearance_um, gap0 - 1e-6)).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all())
 
 
 def blocking_orbits(centres, rstar, points, reach_um: float) -> np.ndarray:

@@ -60,7 +60,7 @@ from ..robots import angle_difference, turning_centres
 from .gross import GrossMotion, SteerOutcome, escape_sweep
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
-from .parking import blocking_orbits, orbit_gaps, park_move, unblock_move
+from .parking import blocking_orbits, orbit_gaps, park_move, straights_clear, unblock_move
 from .queries import interpolated_steps
 from .result import AssemblyResult, judge_run
 from .single import SingleDocking
@@ -221,7 +221,7 @@ class _Runner(PlantLoop):
                 continue
             self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
                                 f"{self.tune.park_shift_um:.0f} um away")
-            self.drive([(j - 1, move_.straight_s)])
+            self._drive_group_straight(i, k, move_.straight_s)
             if self._waiting_gaps(waiting, among)[idx] < gaps[idx] + self.tune.park_progress_um:
                 self._parked[(i, k)] = self.tune.park_moves_per_phase  # it did not help: not repeated this phase
 
@@ -232,6 +232,24 @@ class _Runner(PlantLoop):
         discs = [*waiting, *among]
         return orbit_gaps(turning_centres(self.est[discs], self.r_hat[discs]), self.rstar[discs], self.scn.arena_um,
                           self.est[docked], self.L[docked], self.W[docked])[:len(waiting)]
+
+    def _drive_group_straight(self, i: int, k: int, straight_s: float) -> None:
+        """The straight of a group move of waiting robot ``i`` in D_k's phase (P_(j-1), j = rank of ``i``: D_j .. D_k
+        straight), ``straight_s`` s, one t_x at a time: each part is driven only while it keeps every mover's orbit
+        disc ``Tuning.park_clearance_um`` clear (or no closer) as measured (:func:`~stressbots.control.parking.straights_clear`)."""
+        j = int(self.rank[i])
+        movers, still = [self.by_rank[m] for m in range(j, k + 1)], [self.by_rank[m] for m in range(1, j)]
+        left = straight_s
+        while left > 1e-6:
+            dt = min(left, self.tx)
+            docked = np.flatnonzero(self.docked)
+            if not straights_clear(movers, still, self.est, self.r_hat, self.v_hat, self.rstar, self.scn.arena_um, self.est[docked],
+                                   self.L[docked], self.W[docked], dt, self.tune.park_clearance_um):
+                self.log("park", i, f"the straight of {self.scn.names[i]}'s orbit move stops {left * self.v_hat[i]:.0f} um short: "
+                                    "as measured it would run an orbit into trouble")
+                return
+            self.drive([(j - 1, dt)])
+            left -= dt
 
     def tend_orbits(self, k: int) -> None:
         """During D_k's gross motion (every t_x): :meth:`park_orbits` for the orbits waiting below it.
@@ -265,7 +283,6 @@ class _Runner(PlantLoop):
         moved = False
         for idx in np.flatnonzero(blocked):
             b = waiting[int(idx)]
-            j = int(self.rank[b])
             if self._unblocks.get((b, k), 0) >= self.tune.unblock_moves_per_phase:
                 continue
             unblock = {"reach_um": reach, "margin_um": self.tune.unblock_margin_um, "max_shift_um": self.tune.unblock_max_shift_um,
@@ -294,7 +311,7 @@ class _Runner(PlantLoop):
                 continue
             self.log("unblock", b, f"the orbit of {self.scn.names[b]} blocks {self.scn.names[i]}'s way: it moves "
                                    f"{move_.straight_s * self.v_hat[b]:.0f} um off it")
-            self.drive([(j - 1, move_.straight_s)])
+            self._drive_group_straight(b, k, move_.straight_s)
             moved = True
         return moved
 
