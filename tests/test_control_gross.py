@@ -256,3 +256,15 @@ def test_a_gross_motion_that_arrives_after_a_stall_on_an_earlier_waypoint_has_ar
     assert _ended(True, True) is SteerOutcome.ARRIVED  # the stall was on an earlier waypoint of the route
     assert _ended(False, True) is SteerOutcome.STUCK
     assert _ended(False, False) is SteerOutcome.NO_WAY
+
+
+def test_a_waypoint_of_a_committed_route_is_reached_on_arriving_even_while_the_final_region_is_not():
+    """Steering to a route's waypoint (``via`` False) with the final region's ``ready`` test given (never true here):
+    the robot arrives and the steer ends there, within a few t_x, instead of circling the waypoint it reached until
+    the cycle cap (60 t_x) ran out."""
+    waypoint = np.array([1000.0, 1000.0, 0.0])
+    start = waypoint + np.array([0.0, 10.0, 0.0])  # 10 um past it (the shortest path back to it is a whole loop)
+    loop = KinematicLoop(start)
+    out = GrossMotion(loop).steer(0, waypoint, 1, 0, [], ready=lambda: False, via=False, max_cycles=60)
+    assert out is SteerOutcome.ARRIVED
+    assert arrived(loop.est[0], waypoint, loop.tune) and loop.t <= 10.0

@@ -345,7 +345,9 @@ class GrossMotion:
         for _ in range(max_cycles):
             v = self.loop.v_hat[i]
             p = self.loop.est[i]
-            if (ready is None and arrived(p, target, self.loop.tune)) or (ready is not None and ready()):
+            # a waypoint of a committed route (``via`` False) is reached on arriving at it, even when ``ready`` (the
+            # final region) is given: waiting for ``ready`` alone, robots circled a waypoint they had reached for 60 t_x
+            if (ready is not None and ready()) or ((ready is None or not via) and arrived(p, target, self.loop.tune)):
                 return _ended(True, stalled)
             path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
