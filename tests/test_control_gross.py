@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from stressbots import paths as pathlib
 from stressbots import planning
-from stressbots.collision import arena_gap
+from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control import ControllerOptions, Tuning
 from stressbots.control.gross import (
     GrossMotion,
@@ -268,3 +268,41 @@ def test_a_waypoint_of_a_committed_route_is_reached_on_arriving_even_while_the_f
     out = GrossMotion(loop).steer(0, waypoint, 1, 0, [], ready=lambda: False, via=False, max_cycles=60)
     assert out is SteerOutcome.ARRIVED
     assert arrived(loop.est[0], waypoint, loop.tune) and loop.t <= 10.0
+
+
+class BesideTheStructure(KinematicLoop):
+    """KinematicLoop with a second robot, docked, as the structure (it never moves)."""
+
+    def __init__(self, pose, docked_pose):
+        super().__init__(pose)
+        self.L, self.W = np.array([L, L]), np.array([W, W])
+        self.docked = np.array([False, True])
+        self._est = np.array([pose, docked_pose], float)
+        self.scn = SimpleNamespace(arena_um=ARENA, names=("R0", "R1"))
+
+    @property
+    def v_hat(self) -> np.ndarray:
+        return np.full(2, V)
+
+    @property
+    def r_hat(self) -> np.ndarray:
+        return np.full(2, R)
+
+    @property
+    def rstar(self) -> np.ndarray:
+        return np.full(2, orbit_radii(L, W, R))
+
+
+def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was_planned_with():
+    """A waypoint leg passing 25 um beside a docked body (inside Tuning.gross_docked_clearance_um, outside the route's
+    15 um) is driven to the waypoint; checked with the wider docked clearance it was 'blocked' at once (the route then
+    dropped and a new random one drawn every t_x). Independent check: the trail keeps 15 um from the body."""
+    start = np.array([1000.0, 1000.0, 0.0])
+    body = np.array([1000.0 + W + 25.0, 1000.0 + 3.0 * V, 0.0])  # parallel, beside the way ahead, 25 um gap
+    waypoint = np.array([1000.0, 1000.0 + 6.0 * V, 0.0])
+    loop = BesideTheStructure(start, body)
+    assert loop.tune.gross_docked_clearance_um > 25.0 > 15.0  # the premise
+    out = GrossMotion(loop).steer(0, waypoint, 1, 0, [], ready=lambda: False, via=False, clearance=15.0)
+    assert out is SteerOutcome.ARRIVED and arrived(loop.est[0], waypoint, loop.tune)
+    trail = np.array(loop.trail)
+    assert (penetration_depth(trail, L, W, body[None], L, W) < -15.0).all()

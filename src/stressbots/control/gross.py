@@ -350,7 +350,11 @@ class GrossMotion:
             if (ready is not None and ready()) or ((ready is None or not via) and arrived(p, target, self.loop.tune)):
                 return _ended(True, stalled)
             path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
+            # a committed route's waypoint (``via`` False) is checked at the clearance its route was planned with: the
+            # wider clearance from the docked structure (``target``) made the first leg of nearly every route around
+            # the structure 'blocked' at once, and a new random route was drawn every t_x
+            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
+                                  target=target if via else None):
                 if not via:
                     return _ended(False, stalled)  # a waypoint of a committed route is out of reach: the caller re-plans
                 outcome, quiet, escapes, stalled = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance,
