@@ -242,3 +242,14 @@ def test_simulate_strategy_seed_writes_it_into_result_json(small, tmp_path, run_
     assert doc["strategy"] == "seed" and doc["success"] is True and doc["seed"] == 3
     bad = run_cli("simulate", str(path), "--strategy", "ours", "--out", str(tmp_path / "o2"))
     assert bad.code == 2 and bad.err.startswith("error:")
+
+
+def test_the_seeds_timed_orbit_then_go_never_plans_a_negative_wait():
+    """Regression (bench_strategies, tee-6 layout 360, plant seed 3): the secant search for D_n's wait in
+    ``seed_pair.orbit_then_go`` ran out of its bracket to a wait of -548 um and the Path it built raised
+    ValueError, ending the whole benchmark. The run now ends with a failure reason (or assembles)."""
+    from stressbots.strategies import assemble_with
+
+    scn = random_scenario(6, 360, shape="tee", noise=LITERATURE_NOISE)
+    res = assemble_with("seed", scn, SimulatedPlant(scn, seed=3), seed=3, plan=nominal_plan(scn))
+    assert res.success or res.failure

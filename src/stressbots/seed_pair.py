@@ -283,6 +283,7 @@ def orbit_then_go(loop: SeedLoop, N: int, target, durations, lower, disc) -> tup
             f = r * (psi + TWO_PI * m) + lengths - v * d
             for j in np.flatnonzero(np.sign(f[:-1]) != np.sign(f[1:])):
                 w0, w1 = r * (psi[j] + TWO_PI * m), r * (psi[j + 1] + TWO_PI * m)
+                lo, hi = w0, w1
                 f0, f1 = float(f[j]), float(f[j + 1])
                 for _ in range(6):  # secant steps on a smooth stretch (a jump in the family is rejected below)
                     w = w0 - f0 * (w1 - w0) / (f1 - f0) if f1 != f0 else w0
@@ -291,6 +292,8 @@ def orbit_then_go(loop: SeedLoop, N: int, target, durations, lower, disc) -> tup
                         break
                     w0, f0, w1, f1 = w1, f1, w, fw
                 if abs(total(w) - v * d) > 0.1 * v:  # more than 0.1 s off: a discontinuity, not a root
+                    continue
+                if not lo <= w <= hi:  # the secant ran out of its bracket (once to a negative wait): not this root
                     continue
                 rest = paths.shortest_path(move(start, w, 1.0 / r), target, r)
                 path = paths.Path(Pose(*start), r, (("R", w),) + rest.segments)
