@@ -102,7 +102,7 @@ def brute_leg_clear(a, b, rstar, body: Body, centres, radii, clearance) -> bool:
     th = math.atan2(d[0], d[1]) - body.bias_rad
     start = np.array([a[0] - body.r_um * math.cos(th), a[1] + body.r_um * math.sin(th), th])
     ell = float(np.hypot(*d)) + body.overrun_um
-    poses = move(start, np.arange(0.0, ell + 5.0, 5.0), 0.0)
+    poses = move(start, np.append(np.arange(0.0, ell, 5.0), ell), 0.0)  # every 5 um, ending exactly at the leg's end
     if bodies_hit_discs(poses, body.length_um, body.width_um, centres, np.asarray(radii) + clearance - 1e-6).any():
         return False
     if (arena_gap(poses, body.length_um, body.width_um, ARENA) < clearance - 1e-6).any():
