@@ -345,14 +345,11 @@ class GrossMotion:
         for _ in range(max_cycles):
             v = self.loop.v_hat[i]
             p = self.loop.est[i]
-            # a waypoint of a committed route (``via`` False) is reached on arriving at it, even when ``ready`` (the
-            # final region) is given: waiting for ``ready`` alone, robots circled a waypoint they had reached for 60 t_x
+            # a route's waypoint (via False) ends on arrival too: waiting for ready() alone, robots circled it 60 t_x
             if (ready is not None and ready()) or ((ready is None or not via) and arrived(p, target, self.loop.tune)):
                 return _ended(True, stalled)
             path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
-            # a committed route's waypoint (``via`` False) is checked at the clearance its route was planned with: the
-            # wider clearance from the docked structure (``target``) made the first leg of nearly every route around
-            # the structure 'blocked' at once, and a new random route was drawn every t_x
+            # a route's waypoint legs at the route's own clearance (the docked one blocked them: a new route every t_x)
             if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
                                   target=target if via else None):
                 if not via:
