@@ -270,7 +270,7 @@ class GrossMotion:
                     stalled = self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready,
                                          via=False, clearance=min(c, c_eff)) is SteerOutcome.STUCK
                     if ready is not None and ready():
-                        return Detour(_ended(True, stalled), quiet, escapes, stalled)
+                        return Detour(SteerOutcome.ARRIVED, quiet, escapes, stalled)
                 return Detour(None if self.loop.t > t_before else routed, quiet, escapes, stalled)
             key = self._search_key(i, target, orbiting)
             self._failed[key] = self._failed.get(key, 0) + 1

@@ -94,6 +94,26 @@ def _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still
     return gap
 
 
+def _straight_tracks(centres, headings, speeds, duration_s: float, samples: int) -> np.ndarray:
+    """Orbit-disc centres (M, T, 2) of movers driving straight ``duration_s`` s from ``centres`` (M, 2) along
+    ``headings`` (rad) at ``speeds`` (um/s), at ``samples`` instants."""
+    t = np.linspace(0.0, duration_s, samples)
+    h = np.stack([np.sin(headings), np.cos(headings)], axis=1)  # (M, 2)
+    return centres[:, None, :] + (speeds[:, None] * t[None, :])[:, :, None] * h[:, None, :]
+
+
+def _tracks_clear(tracks, centres, rstar, gap0, arena_um, docked_poses, docked_L, docked_W, still_c, still_r,
+                  clearance_um: float) -> tuple[bool, np.ndarray]:
+    """Whether the movers' discs along ``tracks`` (M, T, 2; from ``centres``, radii ``rstar``) keep ``clearance_um``
+    from everything, or (where their present gap ``gap0`` is smaller) get no closer, the arena edge judged apart (a
+    mover whose disc starts overlapping another disc must not swap it for the edge); and each one's smallest gap."""
+    gaps = _gaps_along(tracks, rstar, arena_um, docked_poses, docked_L, docked_W, still_c, still_r)
+    walls = _wall_gaps(tracks, rstar, arena_um).min(axis=1)
+    wall0 = _wall_gaps(centres[:, None, :], rstar, arena_um)[:, 0]
+    clear = bool((gaps >= np.minimum(clearance_um, gap0 - 1e-6)).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all())
+    return clear, gaps
+
+
 def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
               docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False) -> ParkMove | None:
     """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
@@ -142,16 +162,10 @@ def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um,
         # everyone orbits for ``wait`` (heading + rate * wait, same centre)
         after = poses.copy()
         after[everyone, 2] = np.mod(poses[everyone, 2] + rates[everyone] * wait, TWO_PI)
-        t = np.linspace(0.0, straight, 24)
-        h = np.stack([np.sin(after[movers, 2]), np.cos(after[movers, 2])], axis=1)  # (M, 2)
-        tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
-        gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
-        need = np.array([min(clearance_um, gap0[m] - 1e-6) for m in movers])
-        # the arena edge apart: a mover whose disc starts overlapping another disc must not swap it for the edge
-        walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
-        wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
+        tracks = _straight_tracks(centres[movers], after[movers, 2], speeds[movers], straight, 24)
+        clear, gaps = _tracks_clear(tracks, centres[movers], rstar[movers], np.array([gap0[m] for m in movers]), arena_um,
+                                    docked_poses, docked_L, docked_W, centres[still], rstar[still], clearance_um)
         cost = wait if candidates is None else wait + straight
-        clear = (gaps >= need).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all()
         if clear and accept(tracks[:, -1]) and cost < best_cost:
             best, best_cost = ParkMove(j, wait, straight, float(gap0[j]), float(gaps[movers.index(j)])), cost
     return best
@@ -176,13 +190,9 @@ def straights_clear(movers: list[int], still: list[int], poses, radii, speeds, r
     docked_poses = np.atleast_2d(np.asarray(docked_poses, float)).reshape(-1, 3)
     everyone = movers + still
     gap0 = orbit_gaps(centres[everyone], rstar[everyone], arena_um, docked_poses, docked_L, docked_W)[:len(movers)]
-    t = np.linspace(0.0, duration_s, 12)
-    h = np.stack([np.sin(poses[movers, 2]), np.cos(poses[movers, 2])], axis=1)
-    tracks = centres[movers][:, None, :] + (speeds[movers][:, None] * t[None, :])[:, :, None] * h[:, None, :]
-    gaps = _gaps_along(tracks, rstar[movers], arena_um, docked_poses, docked_L, docked_W, centres[still], rstar[still])
-    walls = _wall_gaps(tracks, rstar[movers], arena_um).min(axis=1)
-    wall0 = _wall_gaps(centres[movers][:, None, :], rstar[movers], arena_um)[:, 0]
-    return bool((gaps >= np.minimum(clearance_um, gap0 - 1e-6)).all() and (walls >= np.minimum(clearance_um, wall0 - 1e-6)).all())
+    tracks = _straight_tracks(centres[movers], poses[movers, 2], speeds[movers], duration_s, 12)
+    return _tracks_clear(tracks, centres[movers], rstar[movers], gap0, arena_um, docked_poses, docked_L, docked_W, centres[still],
+                         rstar[still], clearance_um)[0]
 
 
 def blocking_orbits(centres, rstar, points, reach_um: float) -> np.ndarray:
