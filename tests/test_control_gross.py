@@ -125,15 +125,15 @@ class KinematicLoop:
 
     @property
     def v_hat(self) -> np.ndarray:
-        return np.full(1, V)
+        return np.full(len(self._est), V)
 
     @property
     def r_hat(self) -> np.ndarray:
-        return np.full(1, R)
+        return np.full(len(self._est), R)
 
     @property
     def rstar(self) -> np.ndarray:
-        return np.full(1, orbit_radii(L, W, R))
+        return np.full(len(self._est), orbit_radii(L, W, R))
 
     def log(self, kind: str, robot=None, detail: str = "") -> None:
         self.events.append((kind, detail))
@@ -279,18 +279,6 @@ class BesideTheStructure(KinematicLoop):
         self.docked = np.array([False, True])
         self._est = np.array([pose, docked_pose], float)
         self.scn = SimpleNamespace(arena_um=ARENA, names=("R0", "R1"))
-
-    @property
-    def v_hat(self) -> np.ndarray:
-        return np.full(2, V)
-
-    @property
-    def r_hat(self) -> np.ndarray:
-        return np.full(2, R)
-
-    @property
-    def rstar(self) -> np.ndarray:
-        return np.full(2, orbit_radii(L, W, R))
 
 
 def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was_planned_with():
