@@ -265,6 +265,10 @@ class SingleDocking:
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
+            elif back is not None and not self.in_funnel(i, back) and self.can_steep_merge(i, back) and lp.t > missed_at:
+                b, r, psi = self.line_coords(i)
+                lp.log("merge", i, f"attempt {attempt + 1}: {lp.scn.names[i]} can merge onto its approach line from here ({b:.0f} um "
+                                   f"behind, {r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
             elif stuck and self.near_slot(i) and self.check_docked(i, k):
                 return  # it stopped at its own slot (a blocked gross motion drove it in): docking compliance docked it
             elif stuck:
@@ -365,6 +369,13 @@ class SingleDocking:
     def in_funnel(self, i: int, back: float) -> bool:
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
+
+    def can_steep_merge(self, i: int, back: float) -> bool:
+        """Whether robot ``i``, outside the approach funnel, still merges onto its approach line pointing up to
+        ``Tuning.steep_merge_deg`` left of it (:func:`~stressbots.control.queries.in_funnel` with that bound): a
+        gross motion that ended so has its aim ahead and to the right, and reaching it again costs a loop, which
+        near the structure it may have no room for."""
+        return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune, self.loop.tune.steep_merge_deg)
 
     # -- fine motion ----------------------------------------------------------------------------------
 

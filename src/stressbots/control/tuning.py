@@ -242,6 +242,11 @@ class GrossTuning:
     meet the structure), while the gross motion's loop back met the structure and gave up six times."""
     corridor_psi_deg: float = 12.0
     """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
+    steep_merge_deg: float = 35.0
+    """deg. A robot whose gross motion ended outside the approach funnel only because it points more than the
+    funnel's 12 deg left of the line (it turned in early, 30-40 um right of the line) goes on with the line
+    approach's merge when one exists pointing up to this far left: steering back to the funnel's aim cost it a loop,
+    and beside the structure the loop had no room (no route, gives up the target)."""
 
 
 @dataclass(frozen=True)
