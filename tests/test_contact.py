@@ -421,3 +421,18 @@ def test_turning_against_a_body_without_being_flush_is_blocked_not_docked():
     plant.apply(turn_r0(4.0))
     assert kinds(plant, "R0")[0] == "blocked" and not plant.docked[0]
     no_overlap(plant)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 25), st.integers(0, 5), st.floats(50.0, 300.0), st.floats(20.0, 80.0), st.floats(-5.0, 5.0),
+       st.integers(0, 2**32 - 1))
+def test_bodies_hit_discs_equals_the_brute_force_distance_matrix(m, k, length, width, tol, seed):
+    """The pruned test (only centre pairs within reach are measured) against the full (M, K) signed-distance
+    matrix: identical for bodies and discs anywhere, negative reaches included."""
+    from stressbots.collision import bodies_hit_discs
+
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(0, 2000, m), rng.uniform(0, 2000, m), rng.uniform(0, 2 * math.pi, m)])
+    centres, radii = rng.uniform(0, 2000, (k, 2)), rng.uniform(-50, 600, k)
+    brute = point_rectangle_distance(centres, poses, length, width) < radii[None, :] - tol
+    assert np.array_equal(bodies_hit_discs(poses, length, width, centres, radii, tol_um=tol), brute.reshape(m, k))
