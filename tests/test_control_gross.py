@@ -29,7 +29,7 @@ from stressbots.control.gross import (
     escape_moves,
     escape_sweep,
 )
-from stressbots.control.single import approach_length, fine_start, lead_in_clear
+from stressbots.control.single import approach_length, lead_in_clear
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 
@@ -93,32 +93,10 @@ def test_a_funnel_backed_against_the_wall_gives_way_to_a_shorter_reachable_corri
     assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA, R, R, 15.0) == 350.0
 
 
-def test_no_corridor_when_no_funnel_is_reachable_so_the_slot_is_entered_by_an_arc():
+def test_lead_in_falls_back_to_the_longest_clear_corridor_when_none_is_reachable():
     goal = _slot(420.0)  # every funnel is backed against the wall
     lengths = (250.0, 150.0)
-    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA) == 250.0  # clear, without the lead-in ...
-    assert all(not lead_in_clear(goal, b, R, R, L, W, NO_BODIES, ARENA, 15.0) for b in lengths)  # ... but unreachable
-    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA, R, R, 15.0) is None
-
-
-@pytest.mark.parametrize("x", [330.0, 420.0, 900.0])
-def test_the_s2f_arc_start_keeps_the_whole_arc_in_the_arena(x):
-    """a_i (:func:`fine_start`) lies on a clockwise arc that ends in the slot with the slot's heading; checked
-    independently by driving that arc forward from a_i with the exact kinematics. A slot whose line meets the wall
-    one body length behind it gets a wider arc (entered from the side), never an a_i outside the arena."""
-    goal = _slot(x)
-    s_f = min(2.5 * R, 3.0 * 150.0)
-    a = fine_start(goal, R, L, W, 150.0, NO_BODIES, ARENA)
-    # the arc from a_i: its turn (heading change) and its radius s_f / turn
-    turn = float(np.mod(goal[2] - a[2], 2.0 * math.pi))
-    assert turn > 0.0
-    arc = move(a, np.linspace(0.0, s_f, 60), turn / s_f)
-    assert np.allclose(arc[-1, :2], goal[:2], atol=1e-6)
-    assert s_f / turn >= R - 1e-9  # a radius the robot can drive
-    assert (arena_gap(arc, L, W, ARENA) >= 0.0).all()
-    straight_behind = goal[:2] - s_f * np.array([math.sin(goal[2]), math.cos(goal[2])])
-    if x < s_f:
-        assert straight_behind[0] < 0.0  # the old fallback would have aimed outside the arena
+    assert approach_length(goal, L, W, lengths, NO_BODIES, ARENA, R, R, 15.0) == approach_length(goal, L, W, lengths, NO_BODIES, ARENA)
 
 
 # -- gross motion through a kinematic loop ------------------------------------------------------------

@@ -114,21 +114,6 @@ def test_funnel_on_hand_built_line_poses():
     assert not in_funnel(500.0, 20.0, math.radians(6.0), 450.0, r, t)  # right of it, pointing right
 
 
-def test_a_steep_merge_counts_only_with_the_wider_bound_and_only_where_the_merge_exists():
-    """The steep-merge shortcut (``Tuning.steep_merge_deg``): 44 um right, 29 deg left, 546 um behind a 450 um
-    corridor is outside the funnel (over 12 deg left) but merges: by hand, straight (44 - r(1 - cos 29 deg)) /
-    sin 29 deg, then the arc, uses ~133 um of the 486 um left before the slot."""
-    t, r = Tuning(), 211.0
-    psi = -math.radians(29.0)
-    assert not in_funnel(546.0, 44.0, psi, 450.0, r, t)
-    assert in_funnel(546.0, 44.0, psi, 450.0, r, t, max_left_deg=t.steep_merge_deg)
-    s1 = (44.0 - r * (1.0 - math.cos(psi))) / math.sin(-psi)
-    used = s1 * math.cos(psi) + r * math.sin(-psi)
-    assert used < 546.0 - 60.0
-    assert not in_funnel(546.0, 44.0, -math.radians(40.0), 450.0, r, t, max_left_deg=t.steep_merge_deg)  # steeper: no
-    assert not in_funnel(546.0, -20.0, psi, 450.0, r, t, max_left_deg=t.steep_merge_deg)  # left of the line: no
-
-
 @settings(max_examples=60, deadline=None)
 @given(st.floats(20.0, 800.0), st.floats(5.0, 400.0), st.floats(150.0, 250.0))
 def test_turn_fraction_arc_passes_through_the_point(ahead, rightward, r):

@@ -264,12 +264,11 @@ class GrossMotion:
                 if routed is None:
                     continue
                 # commit to one roadmap route: steer through its waypoints (replanning every t_x between
-                # them, a little below the clearance it was found at), instead of a new random route every t_x
-                follow = max(min(c, c_eff) - self.loop.tune.route_follow_slack_um, self.loop.tune.viable_clearance_um)
+                # them, at the clearance it was found at), instead of a new random route every t_x
                 t_before = self.loop.t
                 for w in points[:-1]:
                     stalled = self.steer(i, w, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=60, ready=ready,
-                                         via=False, clearance=follow) is SteerOutcome.STUCK
+                                         via=False, clearance=min(c, c_eff)) is SteerOutcome.STUCK
                     if ready is not None and ready():
                         return Detour(SteerOutcome.ARRIVED, quiet, escapes, stalled)
                 return Detour(None if self.loop.t > t_before else routed, quiet, escapes, stalled)

@@ -70,19 +70,12 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
     on a nominal arc of radius ``s_f / phi`` (arrival heading = the slot's): measured errors either
     way are then absorbed by a larger or smaller r'. ``s_f = min(2.5 r, 3 fine_distance_um)`` (um);
     ``phi`` is the largest of 25, 15, 8, 4 deg whose swept bodies (``length`` x ``width`` um) clear the
-    docked ``bodies`` by 0.5 um and stay inside the arena (tight gaps need an almost straight entry), else
-    the first of 45, 60, 75, ... deg that does and that the robot can turn (``s_f / phi >= r``): a slot whose
-    line meets the arena edge a body length behind it is entered from the side; when none does, a_i is
-    ``s_f`` straight behind the slot.
+    docked ``bodies`` by 0.5 um and stay inside the arena (tight gaps need an almost straight entry);
+    when none does, a_i is ``s_f`` straight behind the slot.
     """
     s_f = min(2.5 * r, 3.0 * fine_distance_um)
-    # wider arcs last (every 15 deg up to the tightest the robot turns, s_f / r): a slot whose line runs into the
-    # arena edge a body length behind it is entered from the side
-    wide = np.arange(45.0, math.degrees(s_f / r) + 1e-9, 15.0) if r > 0.0 else np.zeros(0)
-    for phi_deg in (25.0, 15.0, 8.0, 4.0, *wide):
+    for phi_deg in (25.0, 15.0, 8.0, 4.0):
         R = s_f / math.radians(phi_deg)
-        if R < r:
-            continue  # tighter than the robot turns
         back = move(goal, -np.linspace(0.0, s_f, 40), 1.0 / R)  # poses along the arc, slot first
         ok = True
         for pj, lj, wj in zip(*bodies, strict=True):
@@ -122,9 +115,7 @@ def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: S
     straight run need. With ``lead_in_um`` (and the robot's turn radius ``r``, um) the longest corridor
     whose funnel a one-way robot can reach (:func:`lead_in_clear`) is preferred: it enters the funnel
     from behind, so a corridor that ends at the arena edge has a funnel no path reaches. When no clear
-    corridor is reachable so, None: the S_2f arc (:func:`fine_start`), which enters the slot from the side
-    (the longest clear corridor, taken before, aimed every attempt at a funnel against the arena edge that no
-    route reached: a tee's stem pointing at the edge failed both plant seeds).
+    corridor is reachable so, the longest clear one (as without ``lead_in_um``).
     """
     first = None
     for back in lengths_um:
@@ -140,7 +131,7 @@ def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: S
             first = back if first is None else first
             if lead_in_clear(goal, back, lead_in_um, r, length, width, bodies, arena_um, wall_um):
                 return back
-    return None if lead_in_um > 0.0 else first
+    return first
 
 
 def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, length: float, width: float, bodies: Bodies,
@@ -265,10 +256,6 @@ class SingleDocking:
                 b, r, psi = self.line_coords(i)
                 lp.log("corridor", i, f"attempt {attempt + 1}: {lp.scn.names[i]} is in its approach corridor ({b:.0f} um behind, "
                                       f"{r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
-            elif back is not None and not self.in_funnel(i, back) and self.can_steep_merge(i, back) and lp.t > missed_at:
-                b, r, psi = self.line_coords(i)
-                lp.log("merge", i, f"attempt {attempt + 1}: {lp.scn.names[i]} can merge onto its approach line from here ({b:.0f} um "
-                                   f"behind, {r:.0f} um right, {math.degrees(psi):.1f} deg): the line approach takes it from here")
             elif stuck and self.near_slot(i) and self.check_docked(i, k):
                 return  # it stopped at its own slot (a blocked gross motion drove it in): docking compliance docked it
             elif stuck:
@@ -305,8 +292,6 @@ class SingleDocking:
         if back is None:
             a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
             a_pose = retarget(a_pose, lp.motion)
-            if lp.scn.arena_um is not None and arena_gap(a_pose[None, :], lp.L[i], lp.W[i], lp.scn.arena_um)[0] < lp.opts.clearance_um:
-                a_pose = self.fine_start(i, goal)  # the structure formed nearer the edge than planned: the route's a_i is out
             ready = None
         else:
             a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
@@ -369,13 +354,6 @@ class SingleDocking:
     def in_funnel(self, i: int, back: float) -> bool:
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
-
-    def can_steep_merge(self, i: int, back: float) -> bool:
-        """Whether robot ``i``, outside the approach funnel, still merges onto its approach line pointing up to
-        ``Tuning.steep_merge_deg`` left of it (:func:`~stressbots.control.queries.in_funnel` with that bound): a
-        gross motion that ended so has its aim ahead and to the right, and reaching it again costs a loop, which
-        near the structure it may have no room for."""
-        return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune, self.loop.tune.steep_merge_deg)
 
     # -- fine motion ----------------------------------------------------------------------------------
 

@@ -199,10 +199,6 @@ class GrossTuning:
     """Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot (its loop 12 um
     from the edge, say) has no route at 15-20 um from where it is, and the clear part of a route at a few um is
     safer than the blocked shortest path (5 sigma of the 2 um camera error)."""
-    route_follow_slack_um: float = 5.0
-    """um. A committed roadmap route's legs are steered at this much less clearance than the route was found at (not
-    below ``viable_clearance_um``): a route found at exactly 15 um, checked again at 15 um from where one t_x of error
-    left the robot, was "blocked", and robots near the arena edge drew a new random route every t_x for minutes."""
     route_searches_max: int = 3
     """Failed roadmap searches (each at up to three clearances) a robot may spend on one target (same structure and
     orbits) in a run; each costs up to six roadmap builds (0.1-0.5 s each), and failing 8-robot runs spent 40-80 s
@@ -242,11 +238,6 @@ class GrossTuning:
     meet the structure), while the gross motion's loop back met the structure and gave up six times."""
     corridor_psi_deg: float = 12.0
     """deg. Largest heading error from the line of such a robot (the funnel's own bound on pointing left)."""
-    steep_merge_deg: float = 35.0
-    """deg. A robot whose gross motion ended outside the approach funnel only because it points more than the
-    funnel's 12 deg left of the line (it turned in early, 30-40 um right of the line) goes on with the line
-    approach's merge when one exists pointing up to this far left: steering back to the funnel's aim cost it a loop,
-    and beside the structure the loop had no room (no route, gives up the target)."""
 
 
 @dataclass(frozen=True)
