@@ -436,3 +436,28 @@ def test_bodies_hit_discs_equals_the_brute_force_distance_matrix(m, k, length, w
     centres, radii = rng.uniform(0, 2000, (k, 2)), rng.uniform(-50, 600, k)
     brute = point_rectangle_distance(centres, poses, length, width) < radii[None, :] - tol
     assert np.array_equal(bodies_hit_discs(poses, length, width, centres, radii, tol_um=tol), brute.reshape(m, k))
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(1, 12))
+def test_penetration_depth_is_positive_exactly_when_shapely_finds_the_bodies_overlapping(seed, m):
+    """Independent truth: shapely's polygons of the body corners. Pairs within 0.5 um of touching are skipped
+    (where either answer is rounding). One pose against many gives the same as that pose repeated."""
+    from shapely.geometry import Polygon
+
+    from stressbots.robots import body_corners
+
+    rng = np.random.default_rng(seed)
+    pa = np.column_stack([rng.uniform(0, 600, m), rng.uniform(0, 600, m), rng.uniform(-7, 7, m)])
+    pb = np.column_stack([rng.uniform(0, 600, m), rng.uniform(0, 600, m), rng.uniform(-7, 7, m)])
+    la, wa, lb, wb = rng.uniform(60, 300), rng.uniform(20, 80), rng.uniform(60, 300), rng.uniform(20, 80)
+    depth = penetration_depth(pa, la, wa, pb, lb, wb)
+    ca, cb = body_corners(pa, la, wa), body_corners(pb, lb, wb)
+    for k in range(m):
+        a, b = Polygon(ca[k]), Polygon(cb[k])
+        gap, area = a.distance(b), a.intersection(b).area
+        if 0.0 < gap < 0.5 or 0.0 <= area < 1.0 and gap == 0.0:
+            continue  # nearly touching, apart or in
+        assert (depth[k] > 0.0) == (area > 0.0)
+    one = penetration_depth(pa[0], la, wa, pb, lb, wb)
+    assert np.array_equal(one, penetration_depth(np.repeat(pa[:1], m, axis=0), la, wa, pb, lb, wb))
