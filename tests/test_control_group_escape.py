@@ -168,3 +168,34 @@ def test_without_the_body_margin_a_hemmed_in_d_n_still_leaves_and_touches_nobody
     assert search(5.0) is None
     assert (_body_gaps(g, m)[:-1] > -5.0).all()  # replayed 10x finer than the search samples
     assert _slack(g, _replay(g, m, m.total_s), TIGHT_ARENA) >= -1e-6
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_collides_flags_exactly_the_samples_whose_body_overlaps_an_orbiting_or_docked_body_then(seed):
+    """escape_search._collides with zero floors against shapely: the orbiting bodies moved along their clockwise orbits
+    to each sample's instant by the exact kinematics, polygons from the corners; near-touching samples skipped."""
+    from shapely.geometry import Polygon
+
+    from stressbots.control.escape_search import Orbiting, _collides
+    from stressbots.kinematics import move
+    from stressbots.robots import body_corners
+
+    rng = np.random.default_rng(seed)
+    s, k, b = 30, 3, 2
+    mine = np.column_stack([rng.uniform(0, 900, s), rng.uniform(0, 900, s), rng.uniform(0, 6.3, s)])
+    t = np.sort(rng.uniform(0, 20, s))
+    o = Orbiting(np.column_stack([rng.uniform(0, 900, k), rng.uniform(0, 900, k), rng.uniform(0, 6.3, k)]),
+                 rng.uniform(80, 150, k), rng.uniform(150, 250, k), rng.uniform(200, 300, k), rng.uniform(40, 70, k),
+                 rng.uniform(250, 350, k), rng.uniform(10, 40, k))
+    docked = (np.column_stack([rng.uniform(0, 900, b), rng.uniform(0, 900, b), rng.uniform(0, 6.3, b)]), [240.0, 260.0], [50.0, 60.0])
+    hit = _collides(mine, t, 250.0, 55.0, o, np.zeros(k), None, 0.0, docked, 0.0)
+    for q in range(s):
+        me = Polygon(body_corners(mine[q][None, :], 250.0, 55.0)[0])
+        others = [Polygon(body_corners(move(o.poses[j], o.speeds[j] * t[q], 1.0 / o.radii[j])[None, :], o.lengths[j],
+                                       o.widths[j])[0]) for j in range(k)]
+        others += [Polygon(body_corners(docked[0][j][None, :], docked[1][j], docked[2][j])[0]) for j in range(b)]
+        areas = [me.intersection(p).area for p in others]
+        if any(0.0 < me.distance(p) < 0.5 or 0.0 < a < 1.0 for p, a in zip(others, areas, strict=True)):
+            continue
+        assert bool(hit[q]) == any(a > 0.0 for a in areas)
