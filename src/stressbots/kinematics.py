@@ -103,8 +103,8 @@ def move(poses, length_um, curvature_per_um=0.0) -> np.ndarray:
     turn = kappa * s
     # chord length s * sin(turn/2) / (turn/2): np.sinc(u) = sin(pi u) / (pi u) written out (the same operations, so
     # the same bits, without np.sinc's overhead: the escape searches call move ~300,000 times in a run)
-    x = turn * (0.5 / math.pi)
-    u = math.pi * np.where(x == 0.0, 1.0e-20, x)  # x, not turn: a subnormal turn scales to 0 (np.sinc tests x)
+    cycles = turn * (0.5 / math.pi)
+    u = math.pi * np.where(cycles == 0.0, 1.0e-20, cycles)  # cycles, not turn: a subnormal turn scales to 0 (as np.sinc)
     chord = s * (np.sin(u) / u)
     mid = theta + 0.5 * turn
     x = poses[..., 0] + chord * np.sin(mid)

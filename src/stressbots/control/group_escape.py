@@ -166,8 +166,7 @@ def _longest_wait(g: Group, order: list[int], N: int, others: list[int], floor: 
     tw_dense = np.arange(0.0, period, 10.0 / vN)
     orbit_at = {j: move(g.poses[j], g.speeds[j] * tw_dense, 1.0 / g.radii[j]) for j in order}
     free_wait = _first_hit(orbit_at[N], {j: orbit_at[j] for j in others}, g, N, floor, arena_um, edge_floor, docked)
-    max_wait = tw_dense[free_wait - 1] if free_wait > 0 else -1.0
-    return max_wait
+    return float(tw_dense[free_wait - 1]) if free_wait > 0 else -1.0
 
 
 def _movers_discs_clear(g: Group, movers: list[int], others: list[int], mc: dict[int, np.ndarray], free: int, arena_um, docked,

@@ -301,13 +301,7 @@ class SingleDocking:
     def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None) -> bool:
         """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
         its aim); whether one ended stuck (failure region H: the rest are skipped, the caller's recovery takes over)."""
-        lp = self.loop
-        stuck = False
-        for tgt in targets:
-            stuck = lp.steer(i, tgt, k, k - 1, orbiting, ready=ready) is SteerOutcome.STUCK
-            if stuck:
-                break
-        return stuck
+        return any(self.loop.steer(i, tgt, k, k - 1, orbiting, ready=ready) is SteerOutcome.STUCK for tgt in targets)
 
     def _clear_the_way(self, i: int, k: int, goal: np.ndarray, a_pose: np.ndarray, back: float | None) -> None:
         """Recovery of robot ``i`` (D_k) whose gross motion toward ``a_pose`` stopped it in failure region H: waiting
