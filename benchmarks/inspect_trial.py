@@ -1,0 +1,193 @@
+"""Look inside one closed-loop trial of ``bench_generality``: its events, a picture of the plant, the shape residuals.
+
+A failing benchmark trial is named by its set, layout index and plant seed (``tuning 25:0`` at ``--noise-scale
+2``). This tool replays exactly that trial (the controller and the simulator are deterministic, so the replay
+is the benchmark's run, event for event) and shows one of:
+
+- ``events``: the controller's event log, optionally of one robot (``--robot R2``) in a time window
+  (``--from 300 --to 400``);
+- ``snap``: the true poses at simulated time ``--at T`` as a picture (``--out snap.png``): bodies (docked ones
+  filled), headings, the orbit disc every undocked robot sweeps if it orbits from there (dotted); ``--robot``
+  is outlined in red;
+- ``shape``: each robot's share of the final shape error (RMS of its body-corner residuals after the best rigid
+  alignment, um), the RMS without each robot, and the docking and G_1 events: which robot spoiled the shape.
+
+Examples::
+
+    python benchmarks/inspect_trial.py events tuning 25:0 --noise-scale 2 --robot R2 --from 300
+    python benchmarks/inspect_trial.py snap tuning 31:0 --noise-scale 2 --at 10.4 --robot R4 --out snap.png
+    python benchmarks/inspect_trial.py shape tuning 33:1 --noise-scale 2
+
+``--plan-cache DIR`` reuses ``bench_generality``'s pickled nominal plans (the same key, so a benchmark run's
+cache serves here). Poses are ``(x_um, y_um, heading)``, heading clockwise from +y, as everywhere in stressbots.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from bench_generality import SETS, ProtocolOnly, _cached_plan, _plan_or_error, layout_spec  # noqa: E402
+
+
+class _StopAt(Exception):
+    """Raised by :class:`_UntilTime` to end a replay at the requested simulated time."""
+
+
+class _UntilTime:
+    """A protocol-only plant that stops the run (raises :class:`_StopAt`) once the simulated time reaches ``t_s``."""
+
+    def __init__(self, inner, t_s: float):
+        self._inner, self._t_s = inner, t_s
+
+    def observe(self):
+        return self._inner.observe()
+
+    def apply(self, waveform):
+        if self._inner.time_s >= self._t_s:
+            raise _StopAt
+        self._inner.apply(waveform)
+
+
+def _trial(set_name: str, spec: str, noise_scale: float, plan_cache: str):
+    """``(scenario, plan, plant_seed)`` of trial ``spec`` (``"j:seed"``) of a benchmark set."""
+    from stressbots.control import nominal_plan
+    from stressbots.generate import LITERATURE_NOISE, random_scenario
+
+    j, ps = (int(x) for x in spec.split(":"))
+    seed, n, shape = layout_spec(set_name, j)
+    scn = random_scenario(n, seed, shape=shape, noise=LITERATURE_NOISE.scaled(noise_scale))
+    plan = _cached_plan(plan_cache, f"{set_name}-{j}-x{noise_scale:g}", lambda: _plan_or_error(nominal_plan, scn))
+    return scn, plan, ps
+
+
+def _run(scn, plan, ps: int, stop_at: float | None = None):
+    """Replay the trial; ``(result or None if stopped, simulator)``."""
+    from stressbots.control import assemble
+    from stressbots.errors import PlanningError
+    from stressbots.sim import SimulatedPlant
+
+    sim = SimulatedPlant(scn, seed=ps)
+    plant = ProtocolOnly(sim) if stop_at is None else _UntilTime(sim, stop_at)
+    if isinstance(plan, PlanningError):
+        plan = None
+    try:
+        return assemble(scn, plant, seed=ps, plan=plan), sim
+    except _StopAt:
+        return None, sim
+
+
+def show_events(scn, plan, ps: int, robot: str | None, t0: float, t1: float) -> None:
+    result, _ = _run(scn, plan, ps)
+    assert result is not None
+    print("robots in docking order D_1 .. D_n:", " ".join(scn.names))
+    for e in result.events:
+        if (robot is None or e["robot"] == robot) and t0 <= e["t_s"] <= t1:
+            print(f"{e['t_s']:8.1f} {e['kind']:<12} {e['robot']}: {e['detail']}")
+    verdict = "assembled" if result.success else f"not assembled: {result.failure}"
+    print(f"{verdict} (shape error {result.shape_error_rms_um:.1f} um RMS, {result.duration_s:.0f} s simulated)")
+
+
+def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle, Polygon
+
+    from stressbots.robots import body_corners
+
+    _, sim = _run(scn, plan, ps, stop_at=t_s)
+    poses, names = sim.true_poses(), sim.names
+    fig, ax = plt.subplots(figsize=(8, 8))
+    if scn.arena_um is not None:
+        w, h = scn.arena_um
+        ax.plot([0, w, w, 0, 0], [0, 0, h, h, 0], "k-", lw=1)
+    lengths = np.asarray(scn.lengths_um, float)
+    widths = np.asarray(scn.widths_um, float)
+    corners = body_corners(poses, lengths, widths)
+    for k, name in enumerate(names):
+        colour = f"C{k % 10}"
+        ax.add_patch(Polygon(corners[k], closed=True, fill=bool(sim.docked[k]), alpha=0.6, color=colour))
+        x, y, th = poses[k]
+        ax.arrow(x, y, 0.6 * lengths[k] * math.sin(th), 0.6 * lengths[k] * math.cos(th), width=3, color="k")
+        ax.annotate(f"{name} {math.degrees(th) % 360:.0f}", (x, y), fontsize=8)
+        if not sim.docked[k]:
+            r = scn.robots[k].turn_radius_um
+            centre = (x + r * math.cos(th), y - r * math.sin(th))  # clockwise turning centre, on the right
+            ax.add_patch(Circle(centre, r + 0.5 * math.hypot(lengths[k], widths[k]), fill=False, ls=":", color=colour))
+        if name == robot:
+            ax.add_patch(Polygon(corners[k], closed=True, fill=False, lw=2, color="red"))
+    ax.set_aspect("equal")
+    ax.set_title(f"t = {sim.time_s:.1f} s (true poses; dotted: orbit discs from here)")
+    fig.savefig(out, dpi=90)
+    print(f"wrote {out} at t = {sim.time_s:.1f} s; docked: {', '.join(n for n, d in zip(names, sim.docked, strict=True) if d) or 'none'}")
+
+
+def show_shape(scn, plan, ps: int) -> None:
+    from stressbots.assessment import kabsch_2d
+    from stressbots.robots import body_corners
+
+    result, sim = _run(scn, plan, ps)
+    assert result is not None
+    true = sim.true_poses()
+    lengths = np.asarray(scn.lengths_um, float)
+    widths = np.asarray(scn.widths_um, float)
+
+    def residuals(keep: np.ndarray) -> np.ndarray:
+        f = body_corners(true[keep], lengths[keep], widths[keep]).reshape(-1, 2)
+        g = body_corners(result.nominal_goals[keep], lengths[keep], widths[keep]).reshape(-1, 2)
+        rot, t = kabsch_2d(f, g)
+        return np.hypot(*(f @ rot.T + t - g).T).reshape(int(keep.sum()), 4)
+
+    n = len(scn.names)
+    every = residuals(np.ones(n, dtype=bool))
+    print(f"shape error {result.shape_error_rms_um:.1f} um RMS ({'assembled' if result.success else result.failure})")
+    print("per robot (RMS of its corners, um):", "  ".join(f"{nm} {e:.1f}" for nm, e in zip(scn.names, np.sqrt((every**2).mean(axis=1)),
+                                                                                         strict=True)))
+    without = []
+    for k in range(n):
+        keep = np.ones(n, dtype=bool)
+        keep[k] = False
+        without.append(float(np.sqrt(np.mean(residuals(keep) ** 2))) if keep.sum() >= 2 else float("nan"))
+    print("RMS without each robot (um):       ", "  ".join(f"{nm} {e:.1f}" for nm, e in zip(scn.names, without, strict=True)))
+    for e in result.events:
+        if e["kind"] in ("docked", "G_1", "retarget", "late"):
+            print(f"{e['t_s']:8.1f} {e['kind']:<9} {e['robot']}: {e['detail']}")
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("events", "snap", "shape"))
+    ap.add_argument("set", choices=sorted(SETS))
+    ap.add_argument("trial", help="layout index and plant seed, e.g. 25:0")
+    ap.add_argument("--noise-scale", type=float, default=1.0, help="multiple of the literature's noise (as the benchmark ran)")
+    ap.add_argument("--robot", default=None, help="one robot's events (events), outlined in red (snap)")
+    ap.add_argument("--from", dest="t0", type=float, default=0.0, help="events from this simulated time (s)")
+    ap.add_argument("--to", dest="t1", type=float, default=math.inf, help="events up to this simulated time (s)")
+    ap.add_argument("--at", type=float, default=0.0, help="snap: simulated time (s) of the picture")
+    ap.add_argument("--out", default="snap.png", help="snap: the picture's file")
+    ap.add_argument("--plan-cache", default="", help="bench_generality's directory of pickled nominal plans")
+    a = ap.parse_args(argv)
+    try:
+        scn, plan, ps = _trial(a.set, a.trial, a.noise_scale, a.plan_cache)
+    except ValueError:
+        ap.error(f"trial: expected LAYOUT:SEED such as 25:0, got {a.trial!r}")
+    if a.robot is not None and a.robot not in scn.names:
+        ap.error(f"--robot: {a.robot!r} is not one of {', '.join(scn.names)}")
+    if a.what == "events":
+        show_events(scn, plan, ps, a.robot, a.t0, a.t1)
+    elif a.what == "snap":
+        show_snap(scn, plan, ps, a.at, a.robot, a.out)
+    else:
+        show_shape(scn, plan, ps)
+
+
+if __name__ == "__main__":
+    main()
