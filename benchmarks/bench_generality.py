@@ -156,11 +156,12 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
             r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan)
             ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
             tail = [] if ok else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]]
+            counts = dict(Counter(e["kind"] for e in r.events))
         except WallTimeCap as exc:
-            tail = []
+            tail, counts = [], {}
             ok, failure, sim_s, shape_err = False, f"wall-time cap: {exc} ({cap_s:g} s)", float("nan"), float("nan")
         except Exception as exc:  # a controller exception is a failure of the trial, with its type
-            tail = []
+            tail, counts = [], {}
             ok, failure, sim_s, shape_err = False, f"controller error: {type(exc).__name__}: {exc}", float("nan"), float("nan")
             rec.setdefault("tracebacks", []).append(traceback.format_exc(limit=4))
         trials.append(
@@ -173,6 +174,7 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
                 "sim_s": sim_s,
                 "shape_error_um": shape_err,
                 "events_tail": tail,
+                "event_counts": counts,
             }
         )
     rec["trials"] = trials
@@ -194,6 +196,17 @@ def _wilson(s: int, n: int) -> tuple[float, float]:
     from stressbots.montecarlo import wilson_interval
 
     return wilson_interval(s, n)
+
+
+def _print_detours(trials: list[dict], out) -> None:
+    """Roadmap routes (``detour`` events) per trial, successes and failures apart: a robot that drifts clockwise
+    off its route cannot rejoin it without a loop and draws a new one (route thrash; records from before
+    ``event_counts`` existed are skipped)."""
+    for label, want in (("successes", True), ("failures", False)):
+        d = np.array([t["event_counts"].get("detour", 0) for t in trials if "event_counts" in t and t["success"] is want])
+        if d.size:
+            print(f"roadmap routes per trial, {label}: median {np.median(d):g}, 90th {np.percentile(d, 90):g}, max {d.max():g} "
+                  f"({d.size} trials)", file=out)
 
 
 def summarise(records: list[dict], out=sys.stdout) -> dict:
@@ -220,6 +233,7 @@ def summarise(records: list[dict], out=sys.stdout) -> dict:
         print("by n: " + ", ".join(f"{n}: {s}/{t}" for n, (s, t) in sorted(by_n.items())), file=out)
     for kind, c in kinds.most_common():
         print(f"  {c:>3} x {kind[:150]}", file=out)
+    _print_detours(trials, out)
     walls = {}
     for n in (4, 8):
         w = np.array([t["wall_s"] for r in ran if r["n"] == n for t in r["trials"]])
