@@ -130,32 +130,39 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
     print(f"wrote {out} at t = {sim.time_s:.1f} s; docked: {', '.join(n for n, d in zip(names, sim.docked, strict=True) if d) or 'none'}")
 
 
-def show_shape(scn, plan, ps: int) -> None:
+def shape_shares(final: np.ndarray, goals: np.ndarray, lengths: np.ndarray, widths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each robot's share of the shape error and the shape error without it: ``(per_robot, without)`` (um, ``(n,)``).
+
+    ``per_robot[k]`` is the RMS distance of robot k's four body corners after the best rigid alignment of the whole
+    structure (so the mean of their squares is the square of the shape error, SPEC 6); ``without[k]`` re-aligns the
+    other robots alone (NaN for fewer than two left). Poses ``(n, 3)`` in um and rad."""
     from stressbots.assessment import kabsch_2d
     from stressbots.robots import body_corners
 
-    result, sim = _run(scn, plan, ps)
-    assert result is not None
-    true = sim.true_poses()
-    lengths = np.asarray(scn.lengths_um, float)
-    widths = np.asarray(scn.widths_um, float)
-
     def residuals(keep: np.ndarray) -> np.ndarray:
-        f = body_corners(true[keep], lengths[keep], widths[keep]).reshape(-1, 2)
-        g = body_corners(result.nominal_goals[keep], lengths[keep], widths[keep]).reshape(-1, 2)
+        f = body_corners(final[keep], lengths[keep], widths[keep]).reshape(-1, 2)
+        g = body_corners(goals[keep], lengths[keep], widths[keep]).reshape(-1, 2)
         rot, t = kabsch_2d(f, g)
         return np.hypot(*(f @ rot.T + t - g).T).reshape(int(keep.sum()), 4)
 
-    n = len(scn.names)
-    every = residuals(np.ones(n, dtype=bool))
-    print(f"shape error {result.shape_error_rms_um:.1f} um RMS ({'assembled' if result.success else result.failure})")
-    print("per robot (RMS of its corners, um):", "  ".join(f"{nm} {e:.1f}" for nm, e in zip(scn.names, np.sqrt((every**2).mean(axis=1)),
-                                                                                         strict=True)))
-    without = []
+    n = len(final)
+    per_robot = np.sqrt((residuals(np.ones(n, dtype=bool)) ** 2).mean(axis=1))
+    without = np.full(n, np.nan)
     for k in range(n):
         keep = np.ones(n, dtype=bool)
         keep[k] = False
-        without.append(float(np.sqrt(np.mean(residuals(keep) ** 2))) if keep.sum() >= 2 else float("nan"))
+        if keep.sum() >= 2:
+            without[k] = float(np.sqrt(np.mean(residuals(keep) ** 2)))
+    return per_robot, without
+
+
+def show_shape(scn, plan, ps: int) -> None:
+    result, sim = _run(scn, plan, ps)
+    assert result is not None
+    per_robot, without = shape_shares(sim.true_poses(), result.nominal_goals, np.asarray(scn.lengths_um, float),
+                                      np.asarray(scn.widths_um, float))
+    print(f"shape error {result.shape_error_rms_um:.1f} um RMS ({'assembled' if result.success else result.failure})")
+    print("per robot (RMS of its corners, um):", "  ".join(f"{nm} {e:.1f}" for nm, e in zip(scn.names, per_robot, strict=True)))
     print("RMS without each robot (um):       ", "  ".join(f"{nm} {e:.1f}" for nm, e in zip(scn.names, without, strict=True)))
     for e in result.events:
         if e["kind"] in ("docked", "G_1", "retarget", "late"):

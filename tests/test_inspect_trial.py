@@ -1,0 +1,67 @@
+"""benchmarks/inspect_trial.py: the shape error split by robot against the shape metric itself (SPEC 6), and a
+replayed benchmark trial's events against the benchmark's own run."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stressbots.assessment import shape_error
+
+_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "inspect_trial.py"
+_spec = importlib.util.spec_from_file_location("inspect_trial", _PATH)
+assert _spec is not None and _spec.loader is not None
+it = importlib.util.module_from_spec(_spec)
+sys.modules["inspect_trial"] = it
+_spec.loader.exec_module(it)
+
+# a tee of three: two robots front to front, a third docked on their joint (um, rad)
+GOALS = np.array([[0.0, -130.0, 0.0], [0.0, 130.0, math.pi], [130.0, 0.0, 1.5 * math.pi]])
+L = np.array([260.0, 260.0, 240.0])
+W = np.array([60.0, 55.0, 50.0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-30, 30), st.floats(-30, 30), st.floats(-0.1, 0.1)), min_size=3, max_size=3),
+       st.floats(0, 2 * math.pi), st.floats(-500, 500), st.floats(-500, 500))
+def test_per_robot_shares_make_up_the_shape_error(errors, turn, dx, dy):
+    """The mean square of the robots' shares is the square of the shape error, wherever the structure lies
+    (a rigid motion of the final poses changes neither)."""
+    final = GOALS + np.array(errors)
+    c, s = math.cos(turn), math.sin(turn)
+    moved = final.copy()
+    moved[:, 0] = c * final[:, 0] - s * final[:, 1] + dx
+    moved[:, 1] = s * final[:, 0] + c * final[:, 1] + dy
+    moved[:, 2] = final[:, 2] - turn  # headings clockwise from +y: a counter-clockwise turn lowers them
+    per_robot, _ = it.shape_shares(moved, GOALS, L, W)
+    assert math.isclose(float(np.sqrt(np.mean(per_robot**2))), shape_error(moved, GOALS, L, W).rms_um, rel_tol=1e-9, abs_tol=1e-9)
+
+
+def test_the_robot_that_spoils_the_shape_is_the_one_whose_removal_leaves_none():
+    """One robot docked 30 um along its face, the others exact: without it the shape error is 0; without either of
+    the others it stays (the spoiler is still there)."""
+    final = GOALS.copy()
+    final[2, 1] += 30.0
+    per_robot, without = it.shape_shares(final, GOALS, L, W)
+    assert without[2] < 1e-6
+    assert min(without[0], without[1]) > 5.0
+    assert int(np.argmax(per_robot)) == 2
+
+
+def test_events_replay_the_benchmark_trial(capsys):
+    """The replayed trial (tuning layout 0, a pair, plant seed 0) ends as bench_generality's run of it does."""
+    sys.path.insert(0, str(_PATH.parent))
+    import bench_generality
+
+    rec = bench_generality.run_layout("tuning", 0, [0], 1.0)
+    it.main(["events", "tuning", "0:0"])
+    out = capsys.readouterr().out
+    last = out.strip().splitlines()[-1]
+    assert last.startswith("assembled" if rec["trials"][0]["success"] else "not assembled")
+    assert f"{rec['trials'][0]['shape_error_um']:.1f} um RMS" in last
