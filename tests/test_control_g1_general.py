@@ -175,3 +175,22 @@ def test_keeps_room_stops_before_the_edge_but_not_inside_an_orbit_it_overlaps():
                           other_c[None], [RSTAR_N])
     assert 0.0 < now < 15.0 and end < now
     assert tr.keeps_room(0, 300.0, [1])
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.floats(-500, 500), st.floats(-500, 500), st.floats(0, 2 * math.pi), st.floats(50, 1500),
+       st.floats(-500, 500), st.floats(-500, 500), st.floats(0, 2 * math.pi), st.floats(50, 1500), st.floats(0, 400))
+def test_tracks_apart_is_the_least_distance_of_the_two_tracks(ax, ay, ath, alen, bx, by, bth, blen, gap):
+    """Against brute force: the least distance between points every 0.5 um along both straight tracks (the
+    closest pair of points is within 0.25 um of a sampled pair on each track, so a margin of 1 um decides)."""
+    from stressbots.control.transfer_legs import tracks_apart
+
+    a = move(np.array([ax, ay, ath]), np.linspace(0.0, alen, 7), 0.0)
+    b = move(np.array([bx, by, bth]), np.linspace(0.0, blen, 5), 0.0)
+    pa = move(a[0], np.arange(0.0, alen + 0.5, 0.5), 0.0)[:, :2]
+    pb = move(b[0], np.arange(0.0, blen + 0.5, 0.5), 0.0)[:, :2]
+    from scipy.spatial import cKDTree
+
+    brute = float(cKDTree(pb).query(pa)[0].min())
+    if abs(brute - gap) > 1.0:
+        assert tracks_apart(a, b, gap) == (brute >= gap)

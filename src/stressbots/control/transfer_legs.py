@@ -25,7 +25,23 @@ from .queries import pose_on_orbit
 if TYPE_CHECKING:
     from .pair import PairPhase
 
-__all__ = ["LegChoice", "clear_tracks"]
+__all__ = ["LegChoice", "clear_tracks", "tracks_apart"]
+
+
+def tracks_apart(track_a: np.ndarray, track_b: np.ndarray, gap_um: float) -> bool:
+    """Whether two straight tracks (poses ``(S, 3)`` along each, um) keep their centre lines ``gap_um`` apart anywhere,
+    whatever the timing: the segments from each track's first to its last pose.
+
+    >>> a = np.array([[0.0, 0.0, 0.0], [0.0, 1000.0, 0.0]])            # along +y
+    >>> b = np.array([[-500.0, 500.0, 1.5708], [500.0, 500.0, 1.5708]])  # along +x, across a
+    >>> tracks_apart(a, b, 10.0), tracks_apart(a, b + [0.0, 600.0, 0.0], 10.0)
+    (False, True)
+    """
+    from shapely.geometry import LineString
+
+    la = LineString([tuple(track_a[0, :2]), tuple(track_a[-1, :2])])
+    lb = LineString([tuple(track_b[0, :2]), tuple(track_b[-1, :2])])
+    return bool(la.distance(lb) >= gap_um)
 
 
 def clear_tracks(arena_um, L: float, W: float, run_len: float, buf: float, c: float, lower_c, lower_r, now_disc, new_disc):
@@ -106,7 +122,8 @@ class LegChoice:
         """``(fraction, cost)``: of D_{n-1}'s turn, D_n turns with it for the fraction (then runs straight); or None.
 
         Every fraction whose motion keeps D_n clear of the orbits, the arena edge and D_{n-1} (its orbit
-        while it turns, its body while both drive straight, its new orbit afterwards) is a candidate; the
+        while it turns, its body while both drive straight, with ``Tuning.transfer_tracks_apart`` the whole of its
+        straight track whatever the timing: :func:`tracks_apart`; its new orbit afterwards) is a candidate; the
         one leaving D_n the shortest path to its next target ``q_next`` wins; the cost adds 1e5 um when that
         path is blocked and 1e4 um when D_n has no room to wait on its orbit there.
         """
@@ -133,6 +150,11 @@ class LegChoice:
             if self.blocked(n_track, N, lower, c):
                 continue
             if (penetration_depth(n_track, self.loop.L[N], self.loop.W[N], m_track, self.loop.L[M], self.loop.W[M]) > -c).any():
+                continue
+            # ... and (Tuning.transfer_tracks_apart) never across D_{n-1}'s track: timed to pass in front of it, the pair
+            # met there under noise (D_n's heading error over a straight of a mm and more) and locked
+            apart = 0.5 * float(self.loop.L[N] + self.loop.L[M]) + c
+            if self.loop.tune.transfer_tracks_apart and not tracks_apart(n_track, m_track, apart):
                 continue
             end = move(run[-1], vN * d / vM, 0.0)
             if self.blocked(end[None, :], N, lower, c, discs=new_disc):

@@ -149,6 +149,12 @@ class PairTuning:
     this at the search's samples is taken (no margin: bodies may graze by a few um between samples), the last way
     out before every pair frame fails at the same instant with nothing moved (2x tuning layouts 19 seed 1 and 34
     seed 0: D_n hemmed in beside a waiting robot at t = 9 and 27 s)."""
+    transfer_tracks_apart: bool = False
+    """Whether a turn-together leg of the station transfer must keep D_n's straight track off D_{n-1}'s whatever the
+    timing (:func:`~stressbots.control.transfer_legs.tracks_apart`, half the two body lengths plus the leg
+    clearance). Tracks timed to pass in front of each other met under noise and locked the pair (2x tuning 31:0,
+    10:0). Measured in session 11 at 2x: tuning 84 -> 89/120 (+5 -0), held-out 96 -> 97/120 (+4 -3); off until its
+    1x and independent-plant figures are in (docs/design.md 3.9, session 11)."""
     leg_stall_frames: int = 4
     """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
     (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
