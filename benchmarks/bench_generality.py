@@ -116,8 +116,38 @@ def _cached_plan(cache_dir: str, key: str, make):
     return value
 
 
+def tuning_options(spec: str):
+    """``ControllerOptions`` whose ``Tuning`` has the fields of ``spec`` (``"name=value,..."``) changed; None for ``""``.
+
+    >>> tuning_options("transfer_tracks_apart=true,arrive_um=30").tuning.arrive_um
+    30.0
+    """
+    from dataclasses import fields, replace
+
+    from stressbots.control.tuning import ControllerOptions, Tuning
+
+    if not spec:
+        return None
+    kinds = {f.name: f.type for f in fields(Tuning)}
+    changes = {}
+    for item in spec.split(","):
+        name, _, value = item.partition("=")
+        name = name.strip()
+        if name not in kinds:
+            print(f"error: --tune: {name!r} is not a field of stressbots.control.tuning.Tuning", file=sys.stderr)
+            raise SystemExit(2)
+        kind = str(kinds[name])
+        if kind == "bool":
+            changes[name] = value.strip().lower() in ("1", "true", "yes", "on")
+        elif kind == "int":
+            changes[name] = int(value)
+        else:
+            changes[name] = float(value)
+    return ControllerOptions(tuning=replace(Tuning(), **changes))
+
+
 def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: float | None = None,
-               plan_cache: str = "") -> dict:
+               plan_cache: str = "", tune: str = "") -> dict:
     """Plan layout ``j`` (or load its plan from ``plan_cache``) and run its plant seeds; a JSON-able record."""
     from stressbots.control import assemble, nominal_plan, structure_targets
     from stressbots.errors import PlanningError
@@ -153,7 +183,7 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
     for ps in (range(plant_seeds) if isinstance(plant_seeds, int) else plant_seeds):
         t0 = time.perf_counter()
         try:
-            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan)
+            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan, options=tuning_options(tune))
             ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
             tail = [] if ok else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]]
             counts = dict(Counter(e["kind"] for e in r.events))
@@ -262,6 +292,7 @@ def main(argv=None) -> None:
     ap.add_argument("--plan-cache", default="", help="directory of pickled nominal plans (reused across controller runs)")
     ap.add_argument("--seeds", default="", help="comma-separated plant seeds (overrides --plant-seeds)")
     ap.add_argument("--summarise", default="", help="only print the summary of the records in this JSONL file")
+    ap.add_argument("--tune", default="", help="controller tuning changes, e.g. transfer_tracks_apart=true,arrive_um=30")
     a = ap.parse_args(argv)
     if a.summarise:
         with open(a.summarise) as fh:
@@ -274,11 +305,12 @@ def main(argv=None) -> None:
     idx = [int(x) for x in a.only.split(",")] if a.only else list(range(a.first, a.first + a.layouts))
     workers = max(1, min(a.workers, 2))
     seeds = [int(x) for x in a.seeds.split(",")] if a.seeds else list(range(a.plant_seeds))
+    tuning_options(a.tune)  # a bad --tune fails here, before any work
     print(f"set {a.set}, {len(idx)} layouts x plant seeds {seeds}, noise x{a.noise_scale:g}, {workers} processes, "
-          f"wall-time cap {a.cap_s:g} s per trial", flush=True)
+          f"wall-time cap {a.cap_s:g} s per trial" + (f", tuning {a.tune}" if a.tune else ""), flush=True)
     records = []
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futs = {pool.submit(run_layout, a.set, j, seeds, a.noise_scale, a.cap_s or None, a.plan_cache): j for j in idx}
+        futs = {pool.submit(run_layout, a.set, j, seeds, a.noise_scale, a.cap_s or None, a.plan_cache, a.tune): j for j in idx}
         for fut in as_completed(futs):
             rec = fut.result()
             records.append(rec)
