@@ -154,7 +154,7 @@ class PairTuning:
     timing (:func:`~stressbots.control.transfer_legs.tracks_apart`, half the two body lengths plus the leg
     clearance). Tracks timed to pass in front of each other met under noise and locked the pair (2x tuning 31:0,
     10:0). Measured in session 11 at 2x: tuning 84 -> 89/120 (+5 -0), held-out 96 -> 97/120 (+4 -3); on the
-    independent plant 57/60 (main: 56/60); off until the whole 1x sets are measured (docs/design.md 3.9, session 11)."""
+    independent plant 57/60 (main: 56/60); held-out 1x 288/300 (main: 290/300), so off (docs/design.md 3.9, session 11)."""
     leg_stall_frames: int = 4
     """t_x. A straight leg of D_{n-1}'s station transfer stops after this many frames in a row without progress
     (:class:`~stressbots.control.leg_watch.LegProgress`): the pair pushing each other, one leg ran 242 s."""
