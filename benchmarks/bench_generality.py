@@ -137,12 +137,16 @@ def tuning_options(spec: str):
             print(f"error: --tune: {name!r} is not a field of stressbots.control.tuning.Tuning", file=sys.stderr)
             raise SystemExit(2)
         kind = str(kinds[name])
-        if kind == "bool":
-            changes[name] = value.strip().lower() in ("1", "true", "yes", "on")
-        elif kind == "int":
-            changes[name] = int(value)
-        else:
-            changes[name] = float(value)
+        try:
+            if kind == "bool":
+                changes[name] = value.strip().lower() in ("1", "true", "yes", "on")
+            elif kind in ("int", "float"):
+                changes[name] = int(value) if kind == "int" else float(value)
+            else:
+                raise ValueError(f"a field of type {kind} cannot be set here")
+        except ValueError as exc:
+            print(f"error: --tune: {name}={value!r}: {exc}", file=sys.stderr)
+            raise SystemExit(2) from None
     return ControllerOptions(tuning=replace(Tuning(), **changes))
 
 
@@ -180,10 +184,11 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
             return rec
     rec["plan_s"] = time.perf_counter() - t0
     trials = []
+    options = tuning_options(tune)
     for ps in (range(plant_seeds) if isinstance(plant_seeds, int) else plant_seeds):
         t0 = time.perf_counter()
         try:
-            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan, options=tuning_options(tune))
+            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan, options=options)
             ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
             tail = [] if ok else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]]
             counts = dict(Counter(e["kind"] for e in r.events))

@@ -101,7 +101,7 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Polygon
 
-    from stressbots.robots import body_corners
+    from stressbots.robots import body_corners, turning_centres
 
     _, sim = _run(scn, plan, ps, stop_at=t_s)
     poses, names = sim.true_poses(), sim.names
@@ -112,6 +112,8 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
     lengths = np.asarray(scn.lengths_um, float)
     widths = np.asarray(scn.widths_um, float)
     corners = body_corners(poses, lengths, widths)
+    radii = np.array([rb.turn_radius_um for rb in scn.robots])
+    centres = turning_centres(poses, radii)  # clockwise turning centres, on each robot's right
     for k, name in enumerate(names):
         colour = f"C{k % 10}"
         ax.add_patch(Polygon(corners[k], closed=True, fill=bool(sim.docked[k]), alpha=0.6, color=colour))
@@ -119,9 +121,8 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
         ax.arrow(x, y, 0.6 * lengths[k] * math.sin(th), 0.6 * lengths[k] * math.cos(th), width=3, color="k")
         ax.annotate(f"{name} {math.degrees(th) % 360:.0f}", (x, y), fontsize=8)
         if not sim.docked[k]:
-            r = scn.robots[k].turn_radius_um
-            centre = (x + r * math.cos(th), y - r * math.sin(th))  # clockwise turning centre, on the right
-            ax.add_patch(Circle(centre, r + 0.5 * math.hypot(lengths[k], widths[k]), fill=False, ls=":", color=colour))
+            ax.add_patch(Circle(tuple(centres[k]), radii[k] + 0.5 * math.hypot(lengths[k], widths[k]), fill=False, ls=":",
+                                color=colour))
         if name == robot:
             ax.add_patch(Polygon(corners[k], closed=True, fill=False, lw=2, color="red"))
     ax.set_aspect("equal")

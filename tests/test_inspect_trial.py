@@ -3,7 +3,6 @@ replayed benchmark trial's events against the benchmark's own run."""
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import sys
 from pathlib import Path
@@ -14,12 +13,11 @@ from hypothesis import strategies as st
 
 from stressbots.assessment import shape_error
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "inspect_trial.py"
-_spec = importlib.util.spec_from_file_location("inspect_trial", _PATH)
-assert _spec is not None and _spec.loader is not None
-it = importlib.util.module_from_spec(_spec)
-sys.modules["inspect_trial"] = it
-_spec.loader.exec_module(it)
+_BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+sys.path.insert(0, str(_BENCHMARKS))  # inspect_trial imports its neighbour bench_generality the same way
+
+import bench_generality  # noqa: E402
+import inspect_trial as it  # noqa: E402
 
 # a tee of three: two robots front to front, a third docked on their joint (um, rad)
 GOALS = np.array([[0.0, -130.0, 0.0], [0.0, 130.0, math.pi], [130.0, 0.0, 1.5 * math.pi]])
@@ -56,9 +54,6 @@ def test_the_robot_that_spoils_the_shape_is_the_one_whose_removal_leaves_none():
 
 def test_events_replay_the_benchmark_trial(capsys):
     """The replayed trial (tuning layout 0, a pair, plant seed 0) ends as bench_generality's run of it does."""
-    sys.path.insert(0, str(_PATH.parent))
-    import bench_generality
-
     rec = bench_generality.run_layout("tuning", 0, [0], 1.0)
     it.main(["events", "tuning", "0:0"])
     out = capsys.readouterr().out

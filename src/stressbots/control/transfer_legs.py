@@ -153,8 +153,8 @@ class LegChoice:
                 continue
             # ... and (Tuning.transfer_tracks_apart) never across D_{n-1}'s track: timed to pass in front of it, the pair
             # met there under noise (D_n's heading error over a straight of a mm and more) and locked
-            apart = 0.5 * float(self.loop.L[N] + self.loop.L[M]) + c
-            if self.loop.tune.transfer_tracks_apart and not tracks_apart(n_track, m_track, apart):
+            if self.loop.tune.transfer_tracks_apart and not tracks_apart(n_track, m_track,
+                                                                         0.5 * float(self.loop.L[N] + self.loop.L[M]) + c):
                 continue
             end = move(run[-1], vN * d / vM, 0.0)
             if self.blocked(end[None, :], N, lower, c, discs=new_disc):
