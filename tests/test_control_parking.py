@@ -104,6 +104,7 @@ def _scripted_drive(run, i, held: bool, record_waits: bool = False):
 
     def drive(steps):
         for prim, dur in steps:
+            run.t += dur
             for m in range(run.n):
                 if run.rank[m] > 2 or (held and m == i):
                     continue  # the pair is not simulated here
@@ -146,6 +147,24 @@ def test_an_orbit_move_that_did_not_widen_the_gap_is_not_repeated_in_its_phase()
     run.park_orbits(2)
     run.park_orbits(2)
     assert len(calls) <= 2  # one move (a wait, at most one straight), not repeated
+
+
+def test_a_park_refused_after_its_wait_is_tried_again_once_its_orbit_drifted_closer():
+    """A park whose straight is not clear after its wait (here the robot is held: its heading after the wait is the
+    one it had) is not tried again at the same gap, but is once the orbit drifted ``park_retry_drift_um`` closer."""
+    run, i = _runner_with_orbit_near_the_wall()
+    calls = _scripted_drive(run, i, held=True, record_waits=True)
+    run.park_orbits(2)
+    refused = [e for e in run.events if e["kind"] == "park" and "after the wait its straight is not clear" in e["detail"]]
+    assert len(refused) == 1 and len(calls) == 1  # one wait, no straight
+    run.park_orbits(2)
+    assert len(calls) == 1  # same poses: not again
+    run.estimator.pose[i, 0] -= 0.5 * run.tune.park_retry_drift_um
+    run.park_orbits(2)
+    assert len(calls) == 1  # drifted, but less than park_retry_drift_um
+    run.estimator.pose[i, 0] -= run.tune.park_retry_drift_um
+    run.park_orbits(2)
+    assert len(calls) == 2  # drifted on: a new wait
 
 
 def wall_gap_of(run, i: int) -> float:
@@ -199,3 +218,35 @@ def test_a_group_straight_is_driven_a_t_x_at_a_time_and_stops_before_an_orbit_me
     run.estimator.pose[i, 2] = 0.5 * math.pi  # heading +x: away from it
     run._drive_group_straight(i, 2, 2.0)
     assert math.isclose(run.estimator.pose[i, 0] - before[0], 2.0 * float(run.v_hat[i]), rel_tol=1e-6)
+
+
+def test_tending_during_g1_moves_a_waiting_orbit_near_the_wall_and_counts_the_move():
+    """G_1's timed arrivals tend the waiting orbits (rendezvous.Tending): an orbit 10 um from the wall is moved past the
+    park margin, once; nothing is moved when none is near trouble."""
+    run, i = _runner_with_orbit_near_the_wall()
+    _scripted_drive(run, i, held=False)
+    meeting = run.pair.meeting
+    assert meeting._tended(run.n) and meeting.tend_moves == 1
+    assert wall_gap_of(run, i) > run.tune.park_margin_um
+    assert not meeting._tended(run.n) and meeting.tend_moves == 1
+
+
+def test_a_timed_arrival_that_stops_on_tending_returns_as_soon_as_an_orbit_moved():
+    """Tending.STOP: the timed run to a clear track was planned from poses a park move changed, so it returns False
+    before D_n drives anything; the move is counted (the transfer leg then plans again rather than count a failure)."""
+    from stressbots.control.rendezvous import Tending
+
+    run, _ = _runner_with_orbit_near_the_wall()
+    n = run.n
+    N, M = run.by_rank[n], run.by_rank[n - 1]
+    calls: list[tuple] = []
+    driven: list = []
+
+    def park(k, top=None, margin_um=None, among=()):
+        calls.append((k, top, tuple(among)))
+        run.t += 1.0  # a park move takes time
+
+    run.park_orbits = park
+    run.drive = driven.append
+    assert run.pair.meeting.arrive_timed(N, M, lambda: run.est[N].copy(), 0.0, [], tend=Tending.STOP) is False
+    assert run.pair.meeting.tend_moves == 1 and calls == [(n, n - 2, (M,))] and driven == []

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from enum import Enum
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -28,7 +29,22 @@ from .pairloop import Replan
 if TYPE_CHECKING:
     from .pair import PairPhase
 
-__all__ = ["Rendezvous"]
+__all__ = ["Rendezvous", "Tending"]
+
+
+class Tending(Enum):
+    """Whether D_n's timed arrival (:meth:`Rendezvous.arrive_timed`) first moves waiting orbits that drifted near trouble,
+    every t_x (``park_orbits``: the group move carries D_{n-1} and D_n along). At twice the literature's noise a waiting
+    orbit wanders ~100 um a minute; untended through a long timed arrival, orbits refused a park at t = 0 drifted into
+    the arena edge and trapped their robots at their start."""
+
+    OFF = "off"
+    """Nothing tended (a short or a precise stage)."""
+    FOLLOW = "follow"
+    """Tend, then plan again from the measured poses toward the same ``target_fn()``, which must follow D_{n-1}'s
+    measured orbit (the approach line does: the pair forms wherever D_{n-1} orbits and the later slots follow it)."""
+    STOP = "stop"
+    """Tend, and return False once an orbit was moved: the target was planned from poses that no longer hold."""
 
 
 def arrival_region(target, v_um_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -62,6 +78,8 @@ class Rendezvous:
         self.loop = pair.loop
         self._plan: tuple[Any, Any, float] | None = None
         self.departure = Departure(pair)
+        self.tend_moves = 0
+        """Waiting-orbit moves made while tending (:class:`Tending`) so far."""
 
     def loiter_path(self, N: int, target, arrivals: Sequence[float], lower, disc, tol_s: float = 0.3):
         """D_n waits on its own orbit, then takes its shortest path into the region around ``target``.
@@ -190,21 +208,31 @@ class Rendezvous:
 
     def rendezvous(self, N: int, M: int, D: float, lower) -> bool:
         th_dep = float(self.loop.goals[M, 2])
-        if not self.arrive_timed(N, M, lambda: self.pair.approach_pose(N, M, self.pair.centre(M), D), th_dep, lower):
+        tend = Tending.FOLLOW if self.loop.tune.tend_during_rendezvous else Tending.OFF
+        if not self.arrive_timed(N, M, lambda: self.pair.approach_pose(N, M, self.pair.centre(M), D), th_dep, lower, tend=tend):
             raise Replan(f"{self.loop.scn.names[N]} found no timed path to its approach line")
         return self.departure.depart_and_meet(N, M)
 
-    def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float | None = None) -> bool:
+    def arrive_timed(self, N: int, M: int, target_fn, th_dep: float, lower, early: float | None = None,
+                     tend: Tending = Tending.OFF) -> bool:
         """D_n drives to ``target_fn()`` (a pose on a line it then runs straight along), arriving ``early``
         seconds before D_{n-1}, orbiting, reaches heading ``th_dep``. Replanned every t_x; the last leg
-        runs whole. False if no timed way exists even from a holding orbit.
+        runs whole. False if no timed way exists even from a holding orbit, or (``tend`` STOP) when a waiting orbit
+        was moved (:class:`Tending`; :attr:`tend_moves` counts those moves).
         """
         early = self.loop.tune.early_s if early is None else early
         n = self.loop.n
         self._plan = None
         holds = loops = 0
         prev = None
+        moves0 = self.tend_moves
         for _ in range(600):
+            if tend is not Tending.OFF:
+                self._tended(n)
+                if self.tend_moves > moves0:
+                    if tend is Tending.STOP:
+                        return False
+                    self._plan, prev, moves0 = None, None, self.tend_moves
             vN = self.loop.v_hat[N]
             q = target_fn()
             disc = [(self.pair.centre(M), self.loop.rstar[M])]
@@ -221,7 +249,7 @@ class Rendezvous:
                     # another would too; the caller falls back (another leg option, a holding orbit, a new frame)
                     self.loop.log("retry", N, f"{self.loop.scn.names[N]} missed its time after {loops - 1} timing loops")
                     return False
-                self._drive_timing_loop(N, loop, vN, lower, disc)
+                self._drive_timing_loop(N, loop, vN, lower, disc, tend)
                 prev = None
                 continue
             prev = path
@@ -236,6 +264,16 @@ class Rendezvous:
             self.loop.drive(path_steps(path, vN, n, n - 1, None if whole else self.loop.tx))
             if whole:
                 return True
+        return False
+
+    def _tended(self, n: int) -> bool:
+        """Move the waiting orbits (D_1 .. D_(n-2)) that drifted near trouble, D_{n-1}'s orbit disc counting as trouble
+        (:class:`Tending`); True when anything moved (time passed)."""
+        t0 = self.loop.t
+        self.loop.park_orbits(n, top=n - 2, among=[self.loop.by_rank[n - 1]])
+        if self.loop.t > t0:
+            self.tend_moves += 1
+            return True
         return False
 
     def _arrivals(self, M: int, th_dep: float, early: float) -> list[float]:
@@ -268,15 +306,18 @@ class Rendezvous:
             loop = None if found is None else found[4]
         return path, loop
 
-    def _drive_timing_loop(self, N: int, loop: tuple[float, int], vN: float, lower, disc) -> None:
+    def _drive_timing_loop(self, N: int, loop: tuple[float, int], vN: float, lower, disc, tend: Tending = Tending.OFF) -> None:
         """D_n circles ``loop`` = (radius_um, count) interpolated loops (P_n / P_{n-1} alternating) at ``vN``
-        um/s, a t_x at a time; it stops early where the rest is no longer clear (:meth:`loop_clear`)."""
+        um/s, a t_x at a time; it stops early where the rest is no longer clear (:meth:`loop_clear`), or (``tend``)
+        where a waiting orbit had to be moved (:meth:`_tended`: the timing is then planned again)."""
         n = self.loop.n
         R, m = loop
         self.loop.log("loop", N, f"{self.loop.scn.names[N]} circles {m} time(s) at radius {R:.0f} um to arrive on time")
         self.loop.replans += 1
         total = m * TWO_PI * R / vN
         while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
+            if tend is not Tending.OFF and self._tended(n):
+                break
             if not self.loop_clear(N, R, total, lower, disc):
                 self.loop.log("loop", N, f"{self.loop.scn.names[N]}'s timing loop has drifted toward an obstacle; "
                                          "it plans again from here")

@@ -116,6 +116,7 @@ class _Runner(PlantLoop):
         self._warned: set = set()
         # (robot, phase k) -> park moves so far (parking); a move that did not widen the gap is the last of its phase
         self._parked: dict[tuple[int, int], int] = {}
+        self._park_refused: dict[tuple[int, int], float] = {}  # (robot, phase k) -> gap (um) at its last refused park
         self._unblocks: dict[tuple[int, int], int] = {}  # (robot, phase k) -> orbit moves off a docking robot's way
         # rigid motion (phi, c_nom, c_meas) of the structure once G_1 formed
         self.motion: tuple[float, np.ndarray, np.ndarray] | None = None
@@ -183,8 +184,10 @@ class _Runner(PlantLoop):
         (:mod:`stressbots.control.parking`). Only the orbits of D_1 .. D_top count (``top`` = k; k - 1 while D_k
         moves: it has no orbit then). An orbit may be moved again in the same phase when it drifts back (up to
         ``Tuning.park_moves_per_phase`` moves), unless its last move did not widen its gap by
-        ``Tuning.park_progress_um`` (a trapped robot: repeating the move would not free it). The orbit discs of the
-        robots ``among`` (D_(n-1) orbiting at the end of a station-transfer leg) count as trouble too."""
+        ``Tuning.park_progress_um`` (a trapped robot: repeating the move would not free it). A move refused after its
+        wait (its straight no longer clear) is tried again once the orbit drifted ``Tuning.park_retry_drift_um`` closer to
+        trouble. The orbit discs of the robots ``among`` (D_(n-1) orbiting at the end of a station-transfer leg, or
+        during G_1's timed approach) count as trouble too."""
         margin = self.tune.park_margin_um if margin_um is None else margin_um
         waiting = [self.by_rank[j] for j in range(1, (k if top is None else top) + 1)]
         gaps = self._waiting_gaps(waiting, among)
@@ -193,6 +196,9 @@ class _Runner(PlantLoop):
             j = int(self.rank[i])
             if gaps[idx] >= margin or j == k or self._parked.get((i, k), 0) >= self.tune.park_moves_per_phase:
                 continue
+            refused = self._park_refused.get((i, k))
+            if refused is not None and gaps[idx] > refused - self.tune.park_retry_drift_um:
+                continue  # refused at about this gap: the same poses would be refused again
             park = {"shift_um": self.tune.park_shift_um, "clearance_um": self.tune.park_clearance_um}
             move_ = None
             if gaps[idx] < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
@@ -217,7 +223,8 @@ class _Runner(PlantLoop):
             if move_ is None:
                 self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble, but after the wait "
                                     "its straight is not clear: it stays")
-                self._parked[(i, k)] = self.tune.park_moves_per_phase  # another wait would end the same way
+                # another wait from here would end the same way; once the orbit drifted on, the poses differ
+                self._park_refused[(i, k)] = float(gaps[idx])
                 continue
             self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble: it moves "
                                 f"{self.tune.park_shift_um:.0f} um away")

@@ -21,6 +21,7 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
 from .leg_watch import LegProgress, leg_stop_s, pair_gaps
 from .pairloop import Replan
+from .rendezvous import Tending
 from .station import Body, orbit_room, orbit_route
 from .transfer_legs import LegChoice
 
@@ -123,7 +124,12 @@ class StationTransfer:
                 self.loop.log("transfer", M, f"{self.loop.scn.names[M]} moves its orbit {leg:.0f} um; {self.loop.scn.names[N]} first takes "
                                              "a clear track")
                 t0 = self.loop.t
-                if not self.pair.meeting.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower):
+                moves0 = self.pair.meeting.tend_moves
+                tend = Tending.STOP if self.loop.tune.tend_during_transfer else Tending.OFF
+                if not self.pair.meeting.arrive_timed(N, M, lambda arg=arg: arg, th_dep, lower, tend=tend):
+                    if self.pair.meeting.tend_moves > moves0:
+                        # a waiting orbit was moved (D_{n-1} and D_n with it): the leg is planned from the new poses
+                        continue
                     # D_{n-1} still orbits where it was: choose again from where D_n is now
                     self.loop.log("retry", N, f"{self.loop.scn.names[N]} could not reach its track in time; the leg is planned again")
                     failed_runs += 1

@@ -30,6 +30,14 @@ class PairTuning:
     """G_1: D_(n-1)'s station transfer, D_n's timed rendezvous, the meeting, holding orbits, searched escapes and pair
     rounds (seed App. 3.3; :mod:`~stressbots.control.pair` and its parts)."""
 
+    tend_during_rendezvous: bool = True
+    """Whether D_n's timed approach to D_{n-1}'s orbit (:meth:`~stressbots.control.rendezvous.Rendezvous.arrive_timed`)
+    first moves waiting orbits that drifted near trouble, every t_x (otherwise nothing tends them for the whole
+    rendezvous; :class:`~stressbots.control.rendezvous.Tending`)."""
+    tend_during_transfer: bool = False
+    """Whether D_n's timed run to a clear track (a station-transfer leg) first moves waiting orbits that drifted near
+    trouble, every t_x; the leg is planned again after such a move (:class:`~stressbots.control.rendezvous.Tending`).
+    Off: not measured on the benchmark sets yet."""
     g1_clearance_um: float = 25.0
     """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
     wall_clearance_um: float = 40.0
@@ -326,6 +334,11 @@ class ParkingTuning:
     park_progress_um: float = 20.0
     """um. A park move that widened its orbit's gap by less than this did not help (the robot is held): it is the
     last of its phase."""
+    park_retry_drift_um: float = 20.0
+    """um. A park move refused after its wait (the straight, checked again from the measured poses, was not clear) is
+    tried again in the same phase once its orbit's gap shrank this much more: the poses then differ. Refusing it for the
+    whole phase let orbits refused 70-90 um from trouble at t = 0 drift into the arena edge during G_1 (nothing else
+    tends them then) and trap their robots at their start."""
     park_clearance_um: float = 25.0
     """Clearance every robot driving straight during that move keeps (or, if closer already, does not lose)."""
     unblock_margin_um: float = 30.0
