@@ -25,12 +25,18 @@ from ..collision import arena_gap, bodies_hit_discs, penetration_depth
 from ..kinematics import sample_arclengths
 from ..robots import angle_difference, turning_centres
 from .loopview import LoopView, Steps
+from .prefixed import describe_prefix, first_clear, remaining_prefix
 from .queries import trim_steps
 from .tuning import Tuning
 
 __all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "clear_prefix", "contact_clearance", "escape_moves",
            "escape_sweep", "path_steps", "viable_prefix"]
 
+
+
+_NOWHERE = np.array([np.inf, np.inf, 0.0])
+"""A gross-motion target no sample is near: :meth:`GrossMotion.obstacles_hit` then keeps the docked bodies
+``Tuning.gross_docked_clearance_um`` away everywhere."""
 
 
 class GrossLoop(LoopView, Protocol):
@@ -195,6 +201,8 @@ class GrossMotion:
         # failed roadmap searches per (robot, target, structure, orbits) (:meth:`_search_key`): each costs a full
         # roadmap build, and failing runs spent most of their wall time asking again and again
         self._failed: dict[tuple, int] = {}
+        # per robot: (target, path) of the last prefixed detour (prefixed_detour): its rest is tried first next t_x
+        self._prefixed: dict[int, tuple[np.ndarray, pathlib.Path]] = {}
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
                       target=None) -> bool:
@@ -255,6 +263,10 @@ class GrossMotion:
         ran into the arena edge or the structure and were trapped there (a one-way robot against an
         obstacle can neither turn nor drive off it).
         """
+        if self.loop.tune.prefixed_checks_max > 0:
+            prefixed = self.prefixed_detour(i, target, path, orbiting, extra_discs, clearance)
+            if prefixed is not None:
+                return Detour(prefixed, quiet, escapes, stalled)
         if quiet <= 0 and self._searches_left(i, target, orbiting) > 0:
             c_eff = self.loop.opts.clearance_um if clearance is None else clearance
             # widest clearance first; the last, Tuning.escape_clearance_um, gets a robot in a tight spot (its loop
@@ -295,6 +307,35 @@ class GrossMotion:
             # failure region H: the caller's recovery (backing off) takes over
             return Detour(SteerOutcome.STUCK, quiet, escapes, True)
         return Detour(pathlib.Path(path.start, path.radius, _cut(path.segments, ahead)), quiet, escapes, stalled)
+
+    def prefixed_detour(self, i: int, target: np.ndarray, path: pathlib.Path, orbiting: Sequence[int], extra_discs,
+                        clearance) -> pathlib.Path | None:
+        """Robot ``i``'s :func:`~stressbots.control.prefixed.first_clear` prefixed path to ``target`` from its measured pose
+        instead of the blocked shortest ``path`` (checked as that is: the docked bodies' clearance relaxed near
+        ``target``), the rest of its last choice tried first; None when none is clear. A new choice is logged."""
+        last = self._prefixed.get(i)
+        rest = remaining_prefix(last[1], self.loop.est[i]) if last is not None and np.allclose(last[0], target) else None
+
+        def hits(cand: pathlib.Path) -> bool:
+            # only its arrival (the last body length) may come closer to the structure than the gross-motion clearance: a
+            # longer way round passes near the target more than once, and robots stopped against the structure there
+            samples = cand.sample(10.0)
+            s = sample_arclengths(cand.lengths, 10.0)
+            tail = s >= cand.length - float(self.loop.L[i])
+            return (self.obstacles_hit(samples[~tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=_NOWHERE)
+                    or self.obstacles_hit(samples[tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target))
+
+        found = first_clear(self.loop.est[i], target, float(self.loop.r_hat[i]), hits, checks=self.loop.tune.prefixed_checks_max,
+                            max_length_um=path.length + self.loop.tune.prefixed_extra_um, rest=rest)
+        if found is None:
+            self._prefixed.pop(i, None)
+            return None
+        cand, k = found
+        self._prefixed[i] = (np.asarray(target, float).copy(), cand)
+        if k > 0 or rest is None:  # a new choice (its continuation is not logged again)
+            self.loop.log("detour", i, f"its shortest path is blocked: it takes a {cand.length:.0f} um path that first "
+                                       f"{describe_prefix(cand)} (checked {k + 1})")
+        return cand
 
     def free_moves(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> Iterator[tuple[float, float]]:
         """The escapes of the kind :meth:`escape` drives (turn clockwise ``Tuning.escape_turns`` of a loop, none

@@ -238,6 +238,19 @@ class GrossTuning:
     their path to a stop 10-50 um short of the structure, the arena edge or a waiting robot, heading into it,
     and were pinned there by the next blind move. Above the camera's and one t_x of drift's error (a few um),
     well below the controller's 15 um clearance."""
+    prefixed_checks_max: int = 0
+    """Off (0) by default. When > 0, a blocked shortest path is first replaced by the shortest clear "turn, straight, then
+    shortest path" (:mod:`~stressbots.control.prefixed`), at most this many candidates checked, before the roadmap is
+    asked. Each check is one swept-body test of a path of a few mm (~0.5 ms); the rest of the last t_x's choice is checked
+    first, so a robot on its way costs one; near-equal candidates crowd the front of the list (beside a tee's stem the
+    first clear one was the 125th), hence 200 when on. Measured with 200 (session 12): held-out 1x, first 31 layouts,
+    145/155 against 149/155 without: it took robots along the structure near their target, where they stopped against
+    it off their slot (the long roadmap detours it replaces were safer). Only a candidate's last body length may now
+    come within ``gross_docked_clearance_um`` of the structure; on 9 traced held-out 1x trials that won 2 of main's
+    failures (6:3, 27:0) and still lost 5 of its successes, so it stays off."""
+    prefixed_extra_um: float = 3000.0
+    """um. Such a path may be at most this much longer than the blocked shortest path; a longer way round is the
+    roadmap's."""
     viable_step_um: float = 25.0
     """um. Spacing of the ends tried back along the clear part for one that does not box the robot in (a fifth
     of a body length)."""
