@@ -5,6 +5,7 @@ geometry). The straight-drift identification's tests are in test_straight_drift.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from hypothesis import given, settings
@@ -153,6 +154,7 @@ def test_a_park_refused_after_its_wait_is_tried_again_once_its_orbit_drifted_clo
     """A park whose straight is not clear after its wait (here the robot is held: its heading after the wait is the
     one it had) is not tried again at the same gap, but is once the orbit drifted ``park_retry_drift_um`` closer."""
     run, i = _runner_with_orbit_near_the_wall()
+    run.tune = replace(run.tune, park_retry_drift_um=20.0)  # off (inf) by default
     calls = _scripted_drive(run, i, held=True, record_waits=True)
     run.park_orbits(2)
     refused = [e for e in run.events if e["kind"] == "park" and "after the wait its straight is not clear" in e["detail"]]
@@ -165,6 +167,15 @@ def test_a_park_refused_after_its_wait_is_tried_again_once_its_orbit_drifted_clo
     run.estimator.pose[i, 0] -= run.tune.park_retry_drift_um
     run.park_orbits(2)
     assert len(calls) == 2  # drifted on: a new wait
+
+
+def test_by_default_a_park_refused_after_its_wait_is_not_tried_again_in_its_phase():
+    run, i = _runner_with_orbit_near_the_wall()
+    calls = _scripted_drive(run, i, held=True, record_waits=True)
+    run.park_orbits(2)
+    run.estimator.pose[i, 0] -= 100.0  # however far it drifts
+    run.park_orbits(2)
+    assert len(calls) == 1
 
 
 def wall_gap_of(run, i: int) -> float:

@@ -30,10 +30,12 @@ class PairTuning:
     """G_1: D_(n-1)'s station transfer, D_n's timed rendezvous, the meeting, holding orbits, searched escapes and pair
     rounds (seed App. 3.3; :mod:`~stressbots.control.pair` and its parts)."""
 
-    tend_during_rendezvous: bool = True
+    tend_during_rendezvous: bool = False
     """Whether D_n's timed approach to D_{n-1}'s orbit (:meth:`~stressbots.control.rendezvous.Rendezvous.arrive_timed`)
     first moves waiting orbits that drifted near trouble, every t_x (otherwise nothing tends them for the whole
-    rendezvous; :class:`~stressbots.control.rendezvous.Tending`)."""
+    rendezvous; :class:`~stressbots.control.rendezvous.Tending`). Off: with it on (and ``park_retry_drift_um`` = 20)
+    only the tuning set gained (session 12: tuning 2x 84 -> 90/120; held-out 2x seeds 0-3 185 -> 185/240; held-out 1x
+    290 -> 290/300; independent plant 57 -> 56/60)."""
     tend_during_transfer: bool = False
     """Whether D_n's timed run to a clear track (a station-transfer leg) first moves waiting orbits that drifted near
     trouble, every t_x; the leg is planned again after such a move (:class:`~stressbots.control.rendezvous.Tending`).
@@ -347,11 +349,12 @@ class ParkingTuning:
     park_progress_um: float = 20.0
     """um. A park move that widened its orbit's gap by less than this did not help (the robot is held): it is the
     last of its phase."""
-    park_retry_drift_um: float = 20.0
+    park_retry_drift_um: float = math.inf
     """um. A park move refused after its wait (the straight, checked again from the measured poses, was not clear) is
-    tried again in the same phase once its orbit's gap shrank this much more: the poses then differ. Refusing it for the
-    whole phase let orbits refused 70-90 um from trouble at t = 0 drift into the arena edge during G_1 (nothing else
-    tends them then) and trap their robots at their start."""
+    tried again in the same phase once its orbit's gap shrank this much more: the poses then differ (inf: never again in
+    the phase). Refusing it for the whole phase let orbits refused 70-90 um from trouble at t = 0 drift into the arena
+    edge during G_1 and trap their robots at their start; with 20 um (and ``tend_during_rendezvous``) see there; alone,
+    tuning 2x 83/120 against 84."""
     park_clearance_um: float = 25.0
     """Clearance every robot driving straight during that move keeps (or, if closer already, does not lose)."""
     unblock_margin_um: float = 30.0
