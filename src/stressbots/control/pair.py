@@ -45,6 +45,7 @@ from .pair_geometry import (
     framed_goals,
     frames_apart,
     meet_distance,
+    pressed_together,
     station_centre,
     tight_discs,
 )
@@ -114,7 +115,19 @@ class PairPhase:
                 return
         if self.meeting.departure.meet_as_they_are(N, M):
             return
-        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); last: {last}")
+        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); {self.wedge_note(N, M)}last: {last}")
+
+    def wedge_note(self, N: int, M: int) -> str:
+        """'R7 is pressed against R6 (...); ' when D_n and D_{n-1} are wedged (:func:`pressed_together`, within
+        ``Tuning.escape_body_clearance_um``), else ''."""
+        lp = self.loop
+        bodies = [(float(lp.L[j]), float(lp.W[j]), float(lp.v_hat[j]), float(lp.r_hat[j])) for j in (N, M)]
+        sep = pressed_together(lp.est[N], bodies[0], lp.est[M], bodies[1], within_um=lp.tune.escape_body_clearance_um)
+        if sep is None:
+            return ""
+        names = lp.scn.names
+        gap = f"{sep:.0f} um apart" if sep >= 0.0 else f"{-sep:.0f} um into each other"
+        return f"{names[N]} is pressed against {names[M]} ({gap} as measured) and every primitive drives them closer; "
 
     def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int) -> tuple[bool, int, str]:
         """One round of at most ``frames_max`` pair frames from where the robots are (:meth:`form`): ``(formed,
