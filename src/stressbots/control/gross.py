@@ -319,8 +319,8 @@ class GrossMotion:
         def hits(cand: pathlib.Path) -> bool:
             # only its arrival (the last body length) may come closer to the structure than the gross-motion clearance: a
             # longer way round passes near the target more than once, and robots stopped against the structure there
-            samples = cand.sample(10.0)
             s = sample_arclengths(cand.lengths, 10.0)
+            samples = cand.pose_at(s)
             tail = s >= cand.length - float(self.loop.L[i])
             return (self.obstacles_hit(samples[~tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=_NOWHERE)
                     or self.obstacles_hit(samples[tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target))

@@ -71,7 +71,6 @@ def prefixed_paths(start, target, radius_um: float, *, turn_step_deg: float = 15
             yield path
 
 
-
 def remaining_prefix(path: pathlib.Path, pose, *, off_um: float = 30.0) -> tuple[float, float] | None:
     """What is left of the prefix (a turn, then a straight: :func:`prefixed_paths`) of ``path`` for a robot now at
     ``pose``: ``(turn_um, straight_um)`` from the point of ``path`` nearest to ``pose`` (um); None when the robot is

@@ -35,7 +35,7 @@ __all__ = ["Rendezvous", "Tending"]
 class Tending(Enum):
     """Whether D_n's timed arrival (:meth:`Rendezvous.arrive_timed`) first moves waiting orbits that drifted near trouble,
     every t_x (``park_orbits``: the group move carries D_{n-1} and D_n along). At twice the literature's noise a waiting
-    orbit wanders ~100 um a minute; untended through a long timed arrival, orbits refused a park at t = 0 drifted into
+    orbit wanders ~90 um a minute; untended through a long timed arrival, orbits refused a park at t = 0 drifted into
     the arena edge and trapped their robots at their start."""
 
     OFF = "off"
