@@ -84,15 +84,16 @@ def layout_spec(set_name: str, j: int) -> tuple[int, int, str]:
     return SETS[set_name] + j, n, shape
 
 
-_NUM = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
-
-
 def failure_kind(failure: str, names) -> str:
-    """A failure reason with robot names replaced by ``R`` and numbers by ``#`` (to group like failures)."""
+    """A failure reason with robot names replaced by ``R`` and numbers by ``#`` (to group like failures), as
+    ``stressbots montecarlo`` groups them (:func:`stressbots.montecarlo.failure_kind`: G_1, D_(n-1) and
+    "stage-2" keep their names)."""
+    from stressbots.montecarlo import failure_kind as kind
+
     text = str(failure)
     for nm in sorted(names, key=len, reverse=True):
         text = re.sub(rf"\b{re.escape(nm)}\b", "R", text)
-    return _NUM.sub("#", text).strip()
+    return kind(text) or ""
 
 
 def _cached_plan(cache_dir: str, key: str, make):

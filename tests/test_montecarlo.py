@@ -271,6 +271,9 @@ def test_failure_kind_keeps_named_objects():
     assert mc.failure_kind("G_1 did not form: D_n stopped 12.5 um from D_{n-1}") == "G_1 did not form: D_n stopped # um from D_{n-1}"
     assert mc.failure_kind("D3 did not dock in 6 attempts") == "D# did not dock in # attempts"
     assert mc.failure_kind("A_2* is empty after 1e3 s") == "A_2* is empty after # s"
+    # a hyphen inside a word is not a minus sign; a minus sign after a space is part of the number
+    assert mc.failure_kind("no clear straight stage-2 run for C") == "no clear straight stage-# run for C"
+    assert mc.failure_kind("R2: -34 um from an obstacle") == "R#: # um from an obstacle"
 
 
 @given(st.text(alphabet=st.characters().filter(lambda c: not c.isdigit()), max_size=40))

@@ -127,7 +127,8 @@ def percentiles(values, qs: Sequence[float] = (50, 90, 95)) -> dict[str, float |
     return out
 
 
-_NUMBER = r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?"
+# a sign only where it cannot be a hyphen inside a word ("stage-2" keeps its hyphen: "stage-#")
+_NUMBER = r"(?:(?<![A-Za-z0-9_])[-+])?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?"
 # a named object of the seed's vocabulary: a letter, "_", then a subscript (G_1, D_n, D_(n-1), D_{n-1}, A_2*, t_4pi)
 _NAMED = r"(?<![A-Za-z0-9])[A-Za-z]+_(?:\([^()]*\)|\{[^{}]*\}|[A-Za-z0-9]+)"
 _KIND = re.compile(f"(?P<named>{_NAMED})|(?P<number>{_NUMBER})")
@@ -143,6 +144,8 @@ def failure_kind(failure: str | None) -> str | None:
     "D_(n-1)'s straight move to its station orbit is blocked after # s"
     >>> failure_kind("G_1 did not form: D3 stopped 40 um from D_n")
     'G_1 did not form: D# stopped # um from D_n'
+    >>> failure_kind("no clear straight stage-2 run; R2 is -34 um from an obstacle")
+    'no clear straight stage-# run; R# is # um from an obstacle'
     """
     if failure is None:
         return None
