@@ -12,11 +12,17 @@ is the benchmark's run, event for event) and shows one of:
 - ``shape``: each robot's share of the final shape error (RMS of its body-corner residuals after the best rigid
   alignment, um), the RMS without each robot, and the docking and G_1 events: which robot spoiled the shape.
 
+``--plant independent`` replays the trial on ``bench_independent_plant``'s plant (SPEC 3, 4 and 6 alone) instead
+of the simulator, as that benchmark ran it; ``--tune k=v,...`` changes the controller's tuning as
+``bench_generality --tune`` does, so a tuning experiment's failure can be looked at too.
+
 Examples::
 
     python benchmarks/inspect_trial.py events tuning 25:0 --noise-scale 2 --robot R2 --from 300
     python benchmarks/inspect_trial.py snap tuning 31:0 --noise-scale 2 --at 10.4 --robot R4 --out snap.png
     python benchmarks/inspect_trial.py shape tuning 33:1 --noise-scale 2
+    python benchmarks/inspect_trial.py events tuning 30:0 --plant independent --robot R1
+    python benchmarks/inspect_trial.py events heldout 20:4 --tune pair_rounds=4
 
 ``--plan-cache DIR`` reuses ``bench_generality``'s pickled nominal plans (the same key, so a benchmark run's
 cache serves here). Poses are ``(x_um, y_um, heading)``, heading clockwise from +y, as everywhere in stressbots.
@@ -33,7 +39,10 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from bench_generality import SETS, ProtocolOnly, _cached_plan, _plan_or_error, layout_spec  # noqa: E402
+from bench_generality import SETS, ProtocolOnly, _cached_plan, _plan_or_error, layout_spec, tuning_options  # noqa: E402
+
+PLANTS = ("sim", "independent")
+"""The plants a trial replays on: the project's simulator (``bench_generality``) or ``bench_independent_plant``'s."""
 
 
 class _StopAt(Exception):
@@ -50,9 +59,30 @@ class _UntilTime:
         return self._inner.observe()
 
     def apply(self, waveform):
-        if self._inner.time_s >= self._t_s:
+        if _plant_time(self._inner) >= self._t_s:
             raise _StopAt
         self._inner.apply(waveform)
+
+
+def _plant_time(plant) -> float:
+    """Simulated time (s) of either plant (the simulator's ``time_s``, the independent plant's ``t``)."""
+    return float(plant.time_s if hasattr(plant, "time_s") else plant.t)
+
+
+def _plant_docked(plant) -> np.ndarray:
+    """Which robots are part of the structure, per the plant (the independent plant calls them members)."""
+    return np.asarray(plant.docked if hasattr(plant, "docked") else plant.member, dtype=bool)
+
+
+def _new_plant(scn, ps: int, kind: str):
+    """A fresh plant of ``kind`` (:data:`PLANTS`) for scenario ``scn`` and plant seed ``ps``."""
+    if kind == "independent":
+        import independent_plant
+
+        return independent_plant.IndependentPlant(scn, seed=ps)
+    from stressbots.sim import SimulatedPlant
+
+    return SimulatedPlant(scn, seed=ps)
 
 
 def _trial(set_name: str, spec: str, noise_scale: float, plan_cache: str):
@@ -67,26 +97,37 @@ def _trial(set_name: str, spec: str, noise_scale: float, plan_cache: str):
     return scn, plan, ps
 
 
+_REPLAY = {"plant": "sim", "tune": ""}
+"""The plant kind and ``--tune`` changes every replay uses (set once by :func:`main`)."""
+
+
 def _run(scn, plan, ps: int, stop_at: float | None = None):
-    """Replay the trial; ``(result or None if stopped, simulator)``."""
+    """Replay the trial; ``(result or None if stopped, plant)``."""
     from stressbots.control import assemble
     from stressbots.errors import PlanningError
-    from stressbots.sim import SimulatedPlant
 
-    sim = SimulatedPlant(scn, seed=ps)
+    sim = _new_plant(scn, ps, _REPLAY["plant"])
     plant = ProtocolOnly(sim) if stop_at is None else _UntilTime(sim, stop_at)
     if isinstance(plan, PlanningError):
         plan = None
     try:
-        return assemble(scn, plant, seed=ps, plan=plan), sim
+        return assemble(scn, plant, seed=ps, plan=plan, options=tuning_options(_REPLAY["tune"])), sim
     except _StopAt:
         return None, sim
+
+
+def docking_order(scn) -> list[str]:
+    """The robots' names in STRING order D_1 .. D_n (D_n and D_{n-1} form G_1, D_1 docks last), not scenario order."""
+    from stressbots.electrostatics import analyse_scenario
+
+    order = analyse_scenario(scn).order_index
+    return [scn.names[i] for i in order] if order is not None else list(scn.names)
 
 
 def show_events(scn, plan, ps: int, robot: str | None, t0: float, t1: float) -> None:
     result, _ = _run(scn, plan, ps)
     assert result is not None
-    print("robots in docking order D_1 .. D_n:", " ".join(scn.names))
+    print("robots in docking order D_1 .. D_n:", " ".join(docking_order(scn)))
     for e in result.events:
         if (robot is None or e["robot"] == robot) and t0 <= e["t_s"] <= t1:
             print(f"{e['t_s']:8.1f} {e['kind']:<12} {e['robot']}: {e['detail']}")
@@ -104,7 +145,7 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
     from stressbots.robots import body_corners, turning_centres
 
     _, sim = _run(scn, plan, ps, stop_at=t_s)
-    poses, names = sim.true_poses(), sim.names
+    poses, names, docked = sim.true_poses(), sim.names, _plant_docked(sim)
     fig, ax = plt.subplots(figsize=(8, 8))
     if scn.arena_um is not None:
         w, h = scn.arena_um
@@ -116,19 +157,19 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
     centres = turning_centres(poses, radii)  # clockwise turning centres, on each robot's right
     for k, name in enumerate(names):
         colour = f"C{k % 10}"
-        ax.add_patch(Polygon(corners[k], closed=True, fill=bool(sim.docked[k]), alpha=0.6, color=colour))
+        ax.add_patch(Polygon(corners[k], closed=True, fill=bool(docked[k]), alpha=0.6, color=colour))
         x, y, th = poses[k]
         ax.arrow(x, y, 0.6 * lengths[k] * math.sin(th), 0.6 * lengths[k] * math.cos(th), width=3, color="k")
         ax.annotate(f"{name} {math.degrees(th) % 360:.0f}", (x, y), fontsize=8)
-        if not sim.docked[k]:
+        if not docked[k]:
             ax.add_patch(Circle(tuple(centres[k]), radii[k] + 0.5 * math.hypot(lengths[k], widths[k]), fill=False, ls=":",
                                 color=colour))
         if name == robot:
             ax.add_patch(Polygon(corners[k], closed=True, fill=False, lw=2, color="red"))
     ax.set_aspect("equal")
-    ax.set_title(f"t = {sim.time_s:.1f} s (true poses; dotted: orbit discs from here)")
+    ax.set_title(f"t = {_plant_time(sim):.1f} s (true poses; dotted: orbit discs from here)")
     fig.savefig(out, dpi=90)
-    print(f"wrote {out} at t = {sim.time_s:.1f} s; docked: {', '.join(n for n, d in zip(names, sim.docked, strict=True) if d) or 'none'}")
+    print(f"wrote {out} at t = {_plant_time(sim):.1f} s; docked: {', '.join(n for n, d in zip(names, docked, strict=True) if d) or 'none'}")
 
 
 def shape_shares(final: np.ndarray, goals: np.ndarray, lengths: np.ndarray, widths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -182,7 +223,12 @@ def main(argv=None) -> None:
     ap.add_argument("--at", type=float, default=0.0, help="snap: simulated time (s) of the picture")
     ap.add_argument("--out", default="snap.png", help="snap: the picture's file")
     ap.add_argument("--plan-cache", default="", help="bench_generality's directory of pickled nominal plans")
+    ap.add_argument("--plant", choices=PLANTS, default="sim",
+                    help="replay on the simulator (bench_generality) or the independent plant (bench_independent_plant)")
+    ap.add_argument("--tune", default="", help="controller tuning changes as bench_generality --tune, e.g. pair_rounds=4")
     a = ap.parse_args(argv)
+    tuning_options(a.tune)  # a bad --tune fails here (error: ..., exit 2), before any work
+    _REPLAY.update(plant=a.plant, tune=a.tune)
     try:
         scn, plan, ps = _trial(a.set, a.trial, a.noise_scale, a.plan_cache)
     except ValueError:

@@ -60,3 +60,36 @@ def test_events_replay_the_benchmark_trial(capsys):
     last = out.strip().splitlines()[-1]
     assert last.startswith("assembled" if rec["trials"][0]["success"] else "not assembled")
     assert f"{rec['trials'][0]['shape_error_um']:.1f} um RMS" in last
+
+
+def test_events_replay_the_independent_plant_trial(capsys):
+    """``--plant independent`` replays bench_independent_plant's run of the trial (tuning layout 0, plant seed 0)."""
+    import bench_independent_plant
+
+    rec = bench_independent_plant.run_layout("tuning", 0, [0], 1.0, None, "")
+    it.main(["events", "tuning", "0:0", "--plant", "independent"])
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    trial = rec["trials"][0]
+    assert last.startswith("assembled" if trial["claimed"] else "not assembled")
+    assert f"{trial['shape_error_um']:.1f} um RMS" in last
+
+
+def test_docking_order_ends_with_the_g1_pair(capsys):
+    """The printed docking order D_1 .. D_n ends with the pair that formed G_1 (D_{n-1}, D_n), whatever the scenario's
+    own order of the robots (tuning layout 1, a tee of three)."""
+    it.main(["events", "tuning", "1:0"])
+    out = capsys.readouterr().out.splitlines()
+    order = out[0].split(":", 1)[1].split()
+    g1 = next(line for line in out if " G_1 " in line)
+    d_n, d_n1 = g1.split()[2].rstrip(":"), g1.split("formed with ")[1].split()[0]
+    assert order[-2:] == [d_n1, d_n]
+
+
+def test_a_bad_tune_is_one_error_line_and_status_2(capsys):
+    try:
+        it.main(["events", "tuning", "0:0", "--tune", "no_such_field=1"])
+    except SystemExit as exc:
+        assert exc.code == 2
+    else:
+        raise AssertionError("a bad --tune must exit")
+    assert capsys.readouterr().err.startswith("error: --tune: 'no_such_field'")
