@@ -11,6 +11,10 @@ is the benchmark's run, event for event) and shows one of:
   is outlined in red;
 - ``shape``: each robot's share of the final shape error (RMS of its body-corner residuals after the best rigid
   alignment, um), the RMS without each robot, and the docking and G_1 events: which robot spoiled the shape.
+- ``pins``: every applied step list that took ``--robot`` (default: the robot the failure names) from a pose where it
+  can move on to one where it is *boxed in* (:meth:`stressbots.control.gross.GrossMotion.boxed_in`: no turn of
+  ``Tuning.escape_turns`` then one body length straight keeps ``Tuning.viable_clearance_um`` clear), with the
+  controller calls that applied it: which manoeuvre pinned a robot that then gave up its target.
 
 ``--plant independent`` replays the trial on ``bench_independent_plant``'s plant (SPEC 3, 4 and 6 alone) instead
 of the simulator, as that benchmark ran it; ``--tune k=v,...`` changes the controller's tuning as
@@ -21,6 +25,7 @@ Examples::
     python benchmarks/inspect_trial.py events tuning 25:0 --noise-scale 2 --robot R2 --from 300
     python benchmarks/inspect_trial.py snap tuning 31:0 --noise-scale 2 --at 10.4 --robot R4 --out snap.png
     python benchmarks/inspect_trial.py shape tuning 33:1 --noise-scale 2
+    python benchmarks/inspect_trial.py pins tuning 118:0
     python benchmarks/inspect_trial.py events tuning 30:0 --plant independent --robot R1
     python benchmarks/inspect_trial.py events heldout 20:4 --tune pair_rounds=4
 
@@ -33,6 +38,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 
 import numpy as np
@@ -211,13 +217,90 @@ def show_shape(scn, plan, ps: int) -> None:
             print(f"{e['t_s']:8.1f} {e['kind']:<9} {e['robot']}: {e['detail']}")
 
 
+def failing_robot(failure: str | None, names) -> str | None:
+    """The first robot name (``R3``) a failure message mentions, if any.
+
+    >>> failing_robot("R3 did not dock in 6 attempts (last: no route ...)", ("R0", "R3"))
+    'R3'
+    """
+    for word in re.findall(r"\bR\w+", failure or ""):
+        if word in names:
+            return word
+    return None
+
+
+class _PinWatch:
+    """Wraps the closed loop's ``drive`` (the one place steps reach the plant) and records, for robot ``i``, every step
+    list after which it is boxed in though it was not before: ``(t_s, pose_before, pose_after, steps, callers)``.
+    While it is docked nothing is checked (docked robots are meant to be pressed against the structure)."""
+
+    def __init__(self, i: int):
+        self.i = i
+        self.pins: list[tuple[float, np.ndarray, np.ndarray, list, list[str]]] = []
+        self.freed = 0
+
+    def _boxed(self, loop) -> bool | None:
+        if loop.docked[self.i] or not hasattr(loop, "gross"):
+            return None
+        return bool(loop.gross.boxed_in(self.i, loop.est[self.i], loop.orbiting_below(int(loop.rank[self.i]))))
+
+    def __enter__(self):
+        import traceback
+
+        from stressbots.control.loop import PlantLoop
+
+        self._orig = orig = PlantLoop.drive
+        watch = self
+
+        def drive(loop, steps):
+            before, pose = watch._boxed(loop), loop.est[watch.i].copy()
+            orig(loop, steps)
+            after = watch._boxed(loop)
+            if before is False and after is True:
+                callers = [f"{f.name} ({os.path.basename(f.filename)}:{f.lineno})" for f in traceback.extract_stack()[:-1]
+                           if f"stressbots{os.sep}control" in f.filename]
+                watch.pins.append((loop.t, pose, loop.est[watch.i].copy(), list(steps), callers[::-1]))
+            elif before is True and after is False:
+                watch.freed += 1
+
+        PlantLoop.drive = drive  # type: ignore[method-assign]
+        return self
+
+    def __exit__(self, *exc):
+        from stressbots.control.loop import PlantLoop
+
+        PlantLoop.drive = self._orig  # type: ignore[method-assign]
+        return False
+
+
+def show_pins(scn, plan, ps: int, robot: str | None) -> None:
+    if robot is None:
+        result, _ = _run(scn, plan, ps)
+        assert result is not None
+        robot = failing_robot(result.failure, scn.names)
+        if robot is None:
+            print("the run names no robot in a failure: pass --robot")
+            return
+    with _PinWatch(scn.names.index(robot)) as watch:
+        result, _ = _run(scn, plan, ps)
+    assert result is not None
+    for t, p0, p1, steps, callers in watch.pins:
+        moves = ", ".join(f"P_{k} {d:.2f} s" for k, d in steps)
+        print(f"{t:8.1f} {robot} boxed in: ({p0[0]:.0f}, {p0[1]:.0f}) um {math.degrees(p0[2]) % 360:.0f} deg -> "
+              f"({p1[0]:.0f}, {p1[1]:.0f}) um {math.degrees(p1[2]) % 360:.0f} deg by {moves}")
+        print("         applied by", " < ".join(callers))
+    verdict = "assembled" if result.success else f"not assembled: {result.failure}"
+    print(f"{robot}: boxed in {len(watch.pins)} time(s), freed {watch.freed} time(s); {verdict}")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("events", "snap", "shape"))
+    ap.add_argument("what", choices=("events", "snap", "shape", "pins"))
     ap.add_argument("set", choices=sorted(SETS))
     ap.add_argument("trial", help="layout index and plant seed, e.g. 25:0")
     ap.add_argument("--noise-scale", type=float, default=1.0, help="multiple of the literature's noise (as the benchmark ran)")
-    ap.add_argument("--robot", default=None, help="one robot's events (events), outlined in red (snap)")
+    ap.add_argument("--robot", default=None,
+                    help="one robot's events (events), outlined in red (snap), watched (pins; default: the failing one)")
     ap.add_argument("--from", dest="t0", type=float, default=0.0, help="events from this simulated time (s)")
     ap.add_argument("--to", dest="t1", type=float, default=math.inf, help="events up to this simulated time (s)")
     ap.add_argument("--at", type=float, default=0.0, help="snap: simulated time (s) of the picture")
@@ -239,6 +322,8 @@ def main(argv=None) -> None:
         show_events(scn, plan, ps, a.robot, a.t0, a.t1)
     elif a.what == "snap":
         show_snap(scn, plan, ps, a.at, a.robot, a.out)
+    elif a.what == "pins":
+        show_pins(scn, plan, ps, a.robot)
     else:
         show_shape(scn, plan, ps)
 
