@@ -284,11 +284,12 @@ def show_pins(scn, plan, ps: int, robot: str | None) -> None:
     with _PinWatch(scn.names.index(robot)) as watch:
         result, _ = _run(scn, plan, ps)
     assert result is not None
+    rank = docking_order(scn).index(robot) + 1  # the watched robot is D_rank: P_k turns D_1 .. D_k, drives the rest straight
     for t, p0, p1, steps, callers in watch.pins:
-        moves = ", ".join(f"P_{k} {d:.2f} s" for k, d in steps)
+        moves = ", ".join(f"P_{k} {d:.2f} s ({'turns' if rank <= k else 'straight'})" for k, d in steps)
         print(f"{t:8.1f} {robot} boxed in: ({p0[0]:.0f}, {p0[1]:.0f}) um {math.degrees(p0[2]) % 360:.0f} deg -> "
               f"({p1[0]:.0f}, {p1[1]:.0f}) um {math.degrees(p1[2]) % 360:.0f} deg by {moves}")
-        print("         applied by", " < ".join(callers))
+        print(f"         {robot} is D_{rank}; applied by", " < ".join(callers))
     verdict = "assembled" if result.success else f"not assembled: {result.failure}"
     print(f"{robot}: boxed in {len(watch.pins)} time(s), freed {watch.freed} time(s); {verdict}")
 
