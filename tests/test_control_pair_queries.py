@@ -169,3 +169,45 @@ def test_meeting_cost_matches_stepping_both_bodies_straight(lateral, gap, mismat
     assert (got is None) == (want is None)
     if got is not None and want is not None:
         assert abs(got - want) < 0.01
+
+
+def test_enters_discs_only_when_a_turn_carries_d_n_onto_an_orbit_it_is_not_on():
+    """D_n at (1000, 1000) heading +y turns clockwise about (1150, 1000) (r = 150 um, 100 um/s; body 200 x 50 um).
+    By hand: after a turn of a it is at (1150 - 150 cos a, 1000 + 150 sin a) heading a. A lower robot's orbit disc of
+    r* = 200 um about (1150, 1350): at a = 90 deg D_n's long side lies at y = 1175, 175 um from the disc's centre
+    (inside); at a = 20 deg its nearest corner is over 220 um away (outside), and at the start 279 um. A disc about
+    (1000, 1250), which D_n's front already reaches (150 um), is not *entered* by any turn."""
+    from dataclasses import replace
+
+    from stressbots.control.tuning import Tuning
+
+    def made(disc_centre):
+        other = [disc_centre[0] - 150.0, disc_centre[1], 0.0]  # heading +y: its turning centre 150 um to its right
+        rec, loop = fake_pair([[1000.0, 1000.0, 0.0], other], [150.0, 150.0], [150.0, 200.0])
+        loop.v_hat, loop.L, loop.W = np.array([100.0, 100.0]), np.array([200.0, 200.0]), np.array([50.0, 50.0])
+        loop.tune = replace(Tuning(), recovery_keeps_off_discs=True)
+        return rec, loop
+
+    def nearest(loop, a_deg, centre):
+        a = math.radians(a_deg)
+        pose = (1150.0 - 150.0 * math.cos(a), 1000.0 + 150.0 * math.sin(a), a)
+        c = corners(pose, 200.0, 50.0)
+        # distance from the centre to the rectangle: to each edge segment, by hand
+        best = math.inf
+        for p, q in ((c[0], c[1]), (c[1], c[3]), (c[3], c[2]), (c[2], c[0])):
+            t = float(np.clip(np.dot(centre - p, q - p) / np.dot(q - p, q - p), 0.0, 1.0))
+            best = min(best, float(np.hypot(*(centre - (p + t * (q - p))))))
+        return best
+
+    ahead = np.array([1150.0, 1350.0])
+    rec, loop = made(ahead)
+    assert nearest(loop, 0.0, ahead) > 200.0 and nearest(loop, 20.0, ahead) > 200.0 and nearest(loop, 90.0, ahead) < 200.0
+    turn_s = lambda deg: math.radians(deg) * 150.0 / 100.0  # noqa: E731
+    assert rec.enters_discs(0, [1], turn_s(90.0))
+    assert not rec.enters_discs(0, [1], turn_s(20.0))
+    on = np.array([1000.0, 1250.0])
+    rec_on, loop_on = made(on)
+    assert nearest(loop_on, 0.0, on) < 200.0
+    assert not rec_on.enters_discs(0, [1], turn_s(90.0))
+    loop.tune = Tuning()  # the default: off (session 13 measured no gain)
+    assert not rec.enters_discs(0, [1], turn_s(90.0))

@@ -60,8 +60,8 @@ class PairRecovery:
                 self.loop.drive([(n - 1, self.loop.tx)])
             else:
                 dt = min(turn + math.radians(5.0), self.loop.omega_hat[N] * self.loop.tx) / self.loop.omega_hat[N]
-                if self.meets_others(N, others, 1.0 / float(self.loop.r_hat[N]), dt):
-                    break  # turning here would sweep D_n into a robot orbiting beside it
+                if self.meets_others(N, others, 1.0 / float(self.loop.r_hat[N]), dt) or self.enters_discs(N, lower, dt):
+                    break  # turning here would sweep D_n into a robot orbiting beside it, or onto its orbit
                 self.loop.drive([(n, dt)])
         # the direct way out is blocked (or ran out): the searched turn-then-straight, body to body in time
         return self.searched_escape(N, others)
@@ -145,6 +145,25 @@ class PairRecovery:
                                 edge_clearance=tune.wall_clearance_um, docked=(L.est[dk], L.L[dk], L.W[dk]),
                                 turn_step_deg=tune.escape_search_step_deg, max_straight_um=tune.escape_search_straight_um,
                                 lead_ins_um=(0.0, 0.25 * float(L.L[N]), 0.5 * float(L.L[N])))
+
+    def enters_discs(self, N: int, others, dt: float) -> bool:
+        """Whether D_n, turning ``dt`` s in place (P_n) from its measured pose, would carry its body into the orbit
+        disc (radius ``r*``) of one of ``others`` (the lower robots: D_{n-1} is the one it is to meet) that it is not
+        in now. :meth:`meets_others` compares bodies at the same instants, so the turn itself is safe while the other
+        body is elsewhere on its orbit; but D_n is then left where that body comes round, and every way out meets it
+        (held-out 20:4: D_n's recovery turn at t = 2-5 s carried it into a lower robot's disc, and G_1 gave up at
+        6 s). Only with ``Tuning.recovery_keeps_off_discs`` (off by default)."""
+        if not self.loop.tune.recovery_keeps_off_discs:
+            return False
+        from ..collision import bodies_hit_discs
+        from ..kinematics import move
+
+        ts = np.linspace(0.0, dt, 12)
+        mine = move(self.loop.est[N], self.loop.v_hat[N] * ts, 1.0 / float(self.loop.r_hat[N]))
+        o = list(others)
+        hits = bodies_hit_discs(mine, self.loop.L[N], self.loop.W[N], turning_centres(self.loop.est[o], self.loop.r_hat[o]),
+                                self.loop.rstar[o])
+        return bool((hits[1:] & ~hits[0]).any())
 
     def meets_others(self, N: int, others, curvature: float, dt: float) -> bool:
         """Whether D_n, driving ``dt`` s at ``curvature`` (1/um; 0 straight) from its measured pose, would come

@@ -132,6 +132,12 @@ class PairTuning:
     """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
     measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
     ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
+    recovery_keeps_off_discs: bool = False
+    """When True, D_n's direct way out of the orbits around it (:meth:`~stressbots.control.pair_recovery.PairRecovery.escape`)
+    stops turning before its body would enter a lower robot's orbit disc it is not in (then the searched escape, body
+    to body in time, takes over): turning in place, D_n was carried onto a waiting orbit whose body then blocked every
+    way out (held-out 20:4 at 1x). Off: it gained that trial and lost 20:1, held-out 2x 90/120 against 89, the
+    independent plant 57/60 both (design.md 3.9, session 13)."""
     pair_rounds: int = 2
     """Rounds of pair frames G_1 may try (each up to ``pair_frames``); between rounds D_n goes to wait on a free
     orbit (or gets clear of the orbits), so a round plans from new poses. Every frame of a round failed at one
