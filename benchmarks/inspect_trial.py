@@ -40,6 +40,7 @@ import math
 import os
 import re
 import sys
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -103,21 +104,25 @@ def _trial(set_name: str, spec: str, noise_scale: float, plan_cache: str):
     return scn, plan, ps
 
 
-_REPLAY = {"plant": "sim", "tune": ""}
-"""The plant kind and ``--tune`` changes every replay uses (set once by :func:`main`)."""
+class Replay(NamedTuple):
+    """How a trial is replayed: on which plant (:data:`PLANTS`), with which controller options (``--tune``; None:
+    the defaults)."""
+
+    plant: str = "sim"
+    options: Any = None
 
 
-def _run(scn, plan, ps: int, stop_at: float | None = None):
+def _run(scn, plan, ps: int, stop_at: float | None = None, replay: Replay = Replay()):
     """Replay the trial; ``(result or None if stopped, plant)``."""
     from stressbots.control import assemble
     from stressbots.errors import PlanningError
 
-    sim = _new_plant(scn, ps, _REPLAY["plant"])
+    sim = _new_plant(scn, ps, replay.plant)
     plant = ProtocolOnly(sim) if stop_at is None else _UntilTime(sim, stop_at)
     if isinstance(plan, PlanningError):
         plan = None
     try:
-        return assemble(scn, plant, seed=ps, plan=plan, options=tuning_options(_REPLAY["tune"])), sim
+        return assemble(scn, plant, seed=ps, plan=plan, options=replay.options), sim
     except _StopAt:
         return None, sim
 
@@ -130,8 +135,8 @@ def docking_order(scn) -> list[str]:
     return [scn.names[i] for i in order] if order is not None else list(scn.names)
 
 
-def show_events(scn, plan, ps: int, robot: str | None, t0: float, t1: float) -> None:
-    result, _ = _run(scn, plan, ps)
+def show_events(scn, plan, ps: int, robot: str | None, t0: float, t1: float, replay: Replay = Replay()) -> None:
+    result, _ = _run(scn, plan, ps, replay=replay)
     assert result is not None
     print("robots in docking order D_1 .. D_n:", " ".join(docking_order(scn)))
     for e in result.events:
@@ -141,7 +146,7 @@ def show_events(scn, plan, ps: int, robot: str | None, t0: float, t1: float) -> 
     print(f"{verdict} (shape error {result.shape_error_rms_um:.1f} um RMS, {result.duration_s:.0f} s simulated)")
 
 
-def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> None:
+def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str, replay: Replay = Replay()) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -150,7 +155,7 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str) -> No
 
     from stressbots.robots import body_corners, turning_centres
 
-    _, sim = _run(scn, plan, ps, stop_at=t_s)
+    _, sim = _run(scn, plan, ps, stop_at=t_s, replay=replay)
     poses, names, docked = sim.true_poses(), sim.names, _plant_docked(sim)
     fig, ax = plt.subplots(figsize=(8, 8))
     if scn.arena_um is not None:
@@ -204,8 +209,8 @@ def shape_shares(final: np.ndarray, goals: np.ndarray, lengths: np.ndarray, widt
     return per_robot, without
 
 
-def show_shape(scn, plan, ps: int) -> None:
-    result, sim = _run(scn, plan, ps)
+def show_shape(scn, plan, ps: int, replay: Replay = Replay()) -> None:
+    result, sim = _run(scn, plan, ps, replay=replay)
     assert result is not None
     per_robot, without = shape_shares(sim.true_poses(), result.nominal_goals, np.asarray(scn.lengths_um, float),
                                       np.asarray(scn.widths_um, float))
@@ -273,16 +278,16 @@ class _PinWatch:
         return False
 
 
-def show_pins(scn, plan, ps: int, robot: str | None) -> None:
+def show_pins(scn, plan, ps: int, robot: str | None, replay: Replay = Replay()) -> None:
     if robot is None:
-        result, _ = _run(scn, plan, ps)
+        result, _ = _run(scn, plan, ps, replay=replay)
         assert result is not None
         robot = failing_robot(result.failure, scn.names)
         if robot is None:
             print("the run names no robot in a failure: pass --robot")
             return
     with _PinWatch(scn.names.index(robot)) as watch:
-        result, _ = _run(scn, plan, ps)
+        result, _ = _run(scn, plan, ps, replay=replay)
     assert result is not None
     rank = docking_order(scn).index(robot) + 1  # the watched robot is D_rank: P_k turns D_1 .. D_k, drives the rest straight
     for t, p0, p1, steps, callers in watch.pins:
@@ -311,8 +316,7 @@ def main(argv=None) -> None:
                     help="replay on the simulator (bench_generality) or the independent plant (bench_independent_plant)")
     ap.add_argument("--tune", default="", help="controller tuning changes as bench_generality --tune, e.g. pair_rounds=4")
     a = ap.parse_args(argv)
-    tuning_options(a.tune)  # a bad --tune fails here (error: ..., exit 2), before any work
-    _REPLAY.update(plant=a.plant, tune=a.tune)
+    replay = Replay(a.plant, tuning_options(a.tune))  # a bad --tune fails here (error: ..., exit 2), before any work
     try:
         scn, plan, ps = _trial(a.set, a.trial, a.noise_scale, a.plan_cache)
     except ValueError:
@@ -320,13 +324,13 @@ def main(argv=None) -> None:
     if a.robot is not None and a.robot not in scn.names:
         ap.error(f"--robot: {a.robot!r} is not one of {', '.join(scn.names)}")
     if a.what == "events":
-        show_events(scn, plan, ps, a.robot, a.t0, a.t1)
+        show_events(scn, plan, ps, a.robot, a.t0, a.t1, replay)
     elif a.what == "snap":
-        show_snap(scn, plan, ps, a.at, a.robot, a.out)
+        show_snap(scn, plan, ps, a.at, a.robot, a.out, replay)
     elif a.what == "pins":
-        show_pins(scn, plan, ps, a.robot)
+        show_pins(scn, plan, ps, a.robot, replay)
     else:
-        show_shape(scn, plan, ps)
+        show_shape(scn, plan, ps, replay)
 
 
 if __name__ == "__main__":

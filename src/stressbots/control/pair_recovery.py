@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..collision import bodies_hit_discs, penetration_depth
+from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, escape_manoeuvre
 from .group_escape import Group, group_escape
@@ -155,9 +157,6 @@ class PairRecovery:
         6 s). Only with ``Tuning.recovery_keeps_off_discs`` (off by default)."""
         if not self.loop.tune.recovery_keeps_off_discs:
             return False
-        from ..collision import bodies_hit_discs
-        from ..kinematics import move
-
         ts = np.linspace(0.0, dt, 12)
         mine = move(self.loop.est[N], self.loop.v_hat[N] * ts, 1.0 / float(self.loop.r_hat[N]))
         o = list(others)
@@ -169,9 +168,6 @@ class PairRecovery:
         """Whether D_n, driving ``dt`` s at ``curvature`` (1/um; 0 straight) from its measured pose, would come
         within ``Tuning.g1_clearance_um`` of the body of one of ``others`` orbiting meanwhile (P_n and P_{n-1}
         turn them all): bodies compared at the same instants, not orbit discs."""
-        from ..collision import penetration_depth
-        from ..kinematics import move
-
         ts = np.linspace(0.0, dt, 12)
         mine = move(self.loop.est[N], self.loop.v_hat[N] * ts, curvature)
         for j in others:
