@@ -28,7 +28,7 @@ from .escape_search import Orbiting, orbit_slack
 
 _NO_ORBITS = Orbiting(np.zeros((0, 3)), *(np.zeros(0),) * 6)
 
-__all__ = ["Group", "GroupMove", "group_escape"]
+__all__ = ["EscapeSequence", "Group", "GroupMove", "group_escape", "group_escape_sequence"]
 
 
 class Group(NamedTuple):
@@ -99,7 +99,8 @@ def _disc_gaps(c: np.ndarray, rs: float, arena_um, docked, discs_c: np.ndarray, 
 
 
 def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float, edge_clearance: float, disc_clearance: float,
-                 docked=None, wait_steps: int = 24, max_straight_um: float = 600.0, sample_um: float = 20.0) -> GroupMove | None:
+                 docked=None, wait_steps: int = 24, max_straight_um: float = 600.0, sample_um: float = 20.0,
+                 alone: bool = False) -> GroupMove | None:
     """The quickest group manoeuvre that takes D_n's orbit clear (:func:`~stressbots.control.escape_search.orbit_slack`
     >= 0); None when none.
 
@@ -110,7 +111,9 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
     ``edge_clearance`` from the arena edge and the docked bodies (likewise), and every other mover's orbit disc,
     carried along its track, keeps ``disc_clearance`` (or its present gap, if smaller) from the arena edge, the docked
     bodies and the other discs but D_n's (D_n's own disc must end clear of them with ``g.need``, ``edge_need``).
-    ``docked``: ``(poses, L, W)`` of the docked bodies.
+    ``docked``: ``(poses, L, W)`` of the docked bodies. ``alone``: P_(n-1) too (D_n straight alone, the rest
+    orbiting), which :func:`~stressbots.control.escape_search.escape_manoeuvre` covers from the measured poses but
+    not after another manoeuvre (:func:`group_escape_sequence`).
 
     >>> poses = np.array([[0.0, 0.0, 0.0], [0.0, -300.0, np.pi]])   # back to back, D_n's orbit 40 um short of its gap
     >>> g = Group((0, 1), poses, np.full(2, 100.0), np.full(2, 100.0), np.full(2, 200.0), np.full(2, 50.0),
@@ -138,7 +141,7 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
         if w > max_wait or (best is not None and w >= best.total_s):
             break
         after = {j: move(g.poses[j], g.speeds[j] * w, 1.0 / g.radii[j]) for j in order}
-        for k in range(n - 2, -1, -1):
+        for k in range(n - 1 if alone else n - 2, -1, -1):
             movers = order[k:]
             tracks = {j: move(after[j], g.speeds[j] * t_run, 0.0 if j in movers else 1.0 / g.radii[j]) for j in order}
             free = _first_hit(tracks[N], {j: tracks[j] for j in others}, g, N, floor, arena_um, edge_floor, docked)
@@ -156,6 +159,104 @@ def group_escape(g: Group, arena_um, *, edge_need: float, body_clearance: float,
             if best is None or m.total_s < best.total_s:
                 best = m
     return best
+
+
+class EscapeSequence(NamedTuple):
+    """A way out in steps: ``steps`` ``((k, seconds), ...)`` drive P_k in turn (k = n: everyone orbits; k = n-1: D_n
+    straight alone; k < n-1: D_(k+1) .. D_n straight); afterwards D_n's orbit disc has ``slack_um`` (>= 0) over the
+    gaps it needs."""
+
+    steps: tuple[tuple[int, float], ...]
+    slack_um: float
+
+    @property
+    def total_s(self) -> float:
+        """Duration of the whole sequence (s)."""
+        return float(sum(d for _, d in self.steps))
+
+
+def group_escape_sequence(g: Group, arena_um, *, edge_need: float, body_clearance: float, edge_clearance: float,
+                          disc_clearance: float, docked=None, wait_steps: int = 24, max_straight_um: float = 600.0,
+                          cut_um: float = 60.0) -> EscapeSequence | None:
+    """The quickest way out of at most two manoeuvres: a first primitive (any P_k, k = n .. 0, driven up to one of D_n's
+    orbit periods and cut every ``cut_um`` of D_n's travel), then a :func:`group_escape` (with P_(n-1) alone) from
+    where it leaves everyone; the :func:`group_escape` itself when that exists. None when neither finds one.
+
+    Every way out of one manoeuvre can be closed while a two-step one is open: two robots whose orbits overlap by
+    half meet within a second if both orbit, and D_n's straight alone runs through the other's disc; D_n straight
+    alone for a second and then both straight leaves them clear (below). Each step is checked as
+    :func:`group_escape` checks its own (bodies at the same instants, D_n's edge and docked gaps, the other movers'
+    discs), so the sequence keeps its clearances throughout.
+
+    >>> poses = np.array([[1500.0, 1500.0, 3.3], [1254.33, 1825.48, 2.52]])   # D_1, D_2: orbit discs overlap
+    >>> g = Group((0, 1), poses, np.array([100.0, 110.0]), np.full(2, 200.0), np.full(2, 250.0), np.full(2, 60.0),
+    ...           np.full(2, 260.0), np.array([25.0, 40.0]))
+    >>> kw = dict(edge_need=40.0, body_clearance=10.0, edge_clearance=10.0, disc_clearance=25.0)
+    >>> group_escape(g, (3000.0, 3000.0), **kw) is None
+    True
+    >>> seq = group_escape_sequence(g, (3000.0, 3000.0), **kw)
+    >>> [k for k, _ in seq.steps], seq.slack_um >= 0.0   # D_2 straight alone (P_1), then both straight (P_0)
+    ([1, 0], True)
+    """
+    kw = dict(edge_need=edge_need, body_clearance=body_clearance, edge_clearance=edge_clearance, disc_clearance=disc_clearance,
+              docked=docked, wait_steps=wait_steps, max_straight_um=max_straight_um)
+    one = group_escape(g, arena_um, **kw)
+    if one is not None:
+        return EscapeSequence(_move_steps(one, len(g.order)), one.slack_um)
+    best: EscapeSequence | None = None
+    for k in range(len(g.order), -1, -1):
+        for dt, after in _cuts(g, k, arena_um, body_clearance, edge_clearance, disc_clearance, docked, cut_um):
+            if best is not None and dt >= best.total_s:
+                break
+            m = group_escape(g._replace(poses=after), arena_um, alone=True, **kw)
+            if m is not None:
+                seq = EscapeSequence(_merged(((k, dt), *_move_steps(m, len(g.order)))), m.slack_um)
+                if best is None or seq.total_s < best.total_s:
+                    best = seq
+                break
+    return best
+
+
+def _move_steps(m: GroupMove, n: int) -> tuple[tuple[int, float], ...]:
+    """A :class:`GroupMove` as steps ``((n, wait_s), (k, straight_s))``, parts of no duration left out."""
+    return tuple((k, d) for k, d in ((n, m.wait_s), (m.k, m.straight_s)) if d > 1e-9)
+
+
+def _merged(steps) -> tuple[tuple[int, float], ...]:
+    """``steps`` with neighbours under the same primitive joined into one."""
+    out: list[tuple[int, float]] = []
+    for k, d in steps:
+        if out and out[-1][0] == k:
+            out[-1] = (k, out[-1][1] + d)
+        else:
+            out.append((k, d))
+    return tuple(out)
+
+
+def _cuts(g: Group, k: int, arena_um, body_clearance: float, edge_clearance: float, disc_clearance: float, docked,
+          cut_um: float):
+    """``(seconds, poses)`` every ``cut_um`` of D_n's travel along P_k (k = n: everyone orbits), up to one of D_n's orbit
+    periods or the first sample that breaks :func:`group_escape`'s checks (bodies, edges, the other movers' discs)."""
+    order = list(g.order)
+    n, N = len(order), order[-1]
+    docked = docked if docked is not None else (np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+    movers = order[k:] if k < n else []
+    others = [j for j in order if j != N]
+    vN = float(g.speeds[N])
+    ts = np.arange(0.0, TWO_PI * float(g.radii[N]) / vN, 10.0 / vN)
+    tracks = {j: move(g.poses[j], g.speeds[j] * ts, 0.0 if j in movers else 1.0 / g.radii[j]) for j in order}
+    edge_floor = edge_clearance if arena_um is None else min(edge_clearance, float(arena_gap(g.poses[N][None], g.lengths[N],
+                                                                                               g.widths[N], arena_um)[0]) - 1e-6)
+    free = _first_hit(tracks[N], {j: tracks[j] for j in others}, g, N, _floors(g, N, body_clearance), arena_um, edge_floor, docked)
+    if free > 1 and len(movers) > 1:
+        centres = turning_centres(g.poses, g.radii)
+        mc = {j: turning_centres(tracks[j][:free], g.radii[j]) if j in movers else np.broadcast_to(centres[j], (free, 2))
+              for j in order}
+        ok = _movers_discs_clear(g, movers, others, mc, free, arena_um, docked, disc_clearance)
+        free = free if ok.all() else int(np.argmin(ok))
+    step = max(1, int(round(cut_um / 10.0)))
+    for i in range(step, free, step):
+        yield float(ts[i]), np.stack([tracks[j][i] if j in tracks else g.poses[j] for j in range(len(g.poses))])
 
 
 def _longest_wait(g: Group, order: list[int], N: int, others: list[int], floor: np.ndarray, arena_um, edge_floor: float, docked,

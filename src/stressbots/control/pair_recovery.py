@@ -7,6 +7,7 @@ orbit when D_n has no timed way is :mod:`~stressbots.control.holding`, which fal
 from __future__ import annotations
 
 import math
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,7 +16,7 @@ from ..collision import bodies_hit_discs, penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, escape_manoeuvre
-from .group_escape import Group, group_escape
+from .group_escape import EscapeSequence, Group, group_escape, group_escape_sequence
 from .station import orbit_room
 
 if TYPE_CHECKING:
@@ -90,37 +91,49 @@ class PairRecovery:
 
     def group_escape(self, N: int) -> bool:
         """D_n leaves together with the robots hemming it in (:func:`~stressbots.control.group_escape.group_escape`:
-        wait under P_n, then P_k drives D_(k+1) .. D_n straight), searched again from the measured poses every t_x,
-        at most ``Tuning.escape_search_frames`` t_x. True when D_n's orbit is clear. D_{n-1}'s station is planned
-        again from wherever its orbit ends (every pair frame plans from the measured poses)."""
-        n, tune, names = self.loop.n, self.loop.tune, self.loop.scn.names
+        wait under P_n, then P_k drives D_(k+1) .. D_n straight), or by two such manoeuvres in turn
+        (:func:`~stressbots.control.group_escape.group_escape_sequence`, with ``Tuning.group_escape_sequences``),
+        searched again from the measured poses every t_x, at most ``Tuning.escape_search_frames`` t_x. True when D_n's
+        orbit is clear. D_{n-1}'s station is planned again from wherever its orbit ends (every pair frame plans from
+        the measured poses)."""
+        tune, names = self.loop.tune, self.loop.scn.names
         said = False
         tight = False  # no way out with the body margin: one without it (bodies still kept apart) is taken
+        rest: tuple[tuple[int, float], ...] = ()  # what is left of the sequence being driven
         for _ in range(tune.escape_search_frames):
             m = self.group_plan(tight)
             if m is None and not tight:
                 tight = True
                 m = self.group_plan(tight)
-            if m is None or m.total_s <= 1e-3:
+            if m is not None and m.total_s <= 1e-3:
                 break
+            if m is not None:
+                rest = m.steps
+            elif not rest:
+                break
+            # else: no way from the new measured poses (a plan without margin misses by the prediction error of a
+            # t_x): the sequence already begun is driven on, as planned
             if not said:
                 said = True
                 margin = " (no body margin)" if tight else ""
-                self.loop.log("escape", N, f"{names[N]} has no way out alone: after {m.wait_s:.1f} s, D_{m.k + 1} .. D_{n} "
-                                           f"drive straight together {m.straight_s:.1f} s (P_{m.k}){margin}")
-            k, dt = (n, m.wait_s) if m.wait_s > 1e-3 else (m.k, m.straight_s)
-            self.loop.drive([(k, dt if dt <= 1.6 * self.loop.tx else self.loop.tx)])
+                how = ", then ".join(f"P_{k} {d:.1f} s" for k, d in rest)
+                self.loop.log("escape", N, f"{names[N]} has no way out alone: {how}{margin}")
+            k, d = rest[0]
+            dt = d if d <= 1.6 * self.loop.tx else self.loop.tx
+            self.loop.drive([(k, dt)])
+            rest = ((k, d - dt), *rest[1:]) if d - dt > 1e-9 else rest[1:]
         m = self.group_plan(tight)
         if m is None or m.total_s > 1e-3:
             self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
             return False
         return True
 
-    def group_plan(self, tight: bool = False):
-        """D_n's group way out from the measured poses (:func:`~stressbots.control.group_escape.group_escape`), the
-        gaps as in :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``.
-        D_n's body keeps ``Tuning.escape_body_clearance_um`` from the others, or ``Tuning.group_tight_body_um`` when
-        ``tight``."""
+    def group_plan(self, tight: bool = False) -> EscapeSequence | None:
+        """D_n's group way out from the measured poses as steps ``(k, seconds)`` of P_k: one group manoeuvre
+        (:func:`~stressbots.control.group_escape.group_escape`), or with ``Tuning.group_escape_sequences`` the quickest
+        of at most two (:func:`~stressbots.control.group_escape.group_escape_sequence`); the gaps as in
+        :meth:`escape_plan`; every other mover's orbit disc keeps ``Tuning.group_disc_clearance_um``. D_n's body keeps
+        ``Tuning.escape_body_clearance_um`` from the others, or ``Tuning.group_tight_body_um`` when ``tight``."""
         L, tune = self.loop, self.loop.tune
         order = tuple(L.by_rank[r] for r in range(1, L.n + 1) if not L.docked[L.by_rank[r]])
         need = np.full(L.n, tune.wall_clearance_um)
@@ -128,10 +141,13 @@ class PairRecovery:
         g = Group(order, L.est, L.v_hat, L.r_hat, L.L, L.W, L.rstar, need)
         dk = np.flatnonzero(L.docked)
         body = tune.group_tight_body_um if tight else tune.escape_body_clearance_um
-        return group_escape(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=body,
-                            edge_clearance=tune.wall_clearance_um, disc_clearance=tune.group_disc_clearance_um,
-                            docked=(L.est[dk], L.L[dk], L.W[dk]), wait_steps=tune.group_escape_waits,
-                            max_straight_um=tune.group_escape_straight_um)
+        search = partial(group_escape_sequence, cut_um=tune.group_sequence_cut_um) if tune.group_escape_sequences else group_escape
+        found = search(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=body, edge_clearance=tune.wall_clearance_um,
+                       disc_clearance=tune.group_disc_clearance_um, docked=(L.est[dk], L.L[dk], L.W[dk]),
+                       wait_steps=tune.group_escape_waits, max_straight_um=tune.group_escape_straight_um)
+        if found is None or isinstance(found, EscapeSequence):
+            return found
+        return EscapeSequence(tuple((k, d) for k, d in ((L.n, found.wait_s), (found.k, found.straight_s)) if d > 1e-9), found.slack_um)
 
     def escape_plan(self, N: int, others):
         """D_n's way out from the measured poses (:func:`~stressbots.control.escape_search.escape_manoeuvre`): gaps

@@ -160,6 +160,15 @@ class PairTuning:
     """um. Gap the orbit disc of every robot but D_n that drives straight in a group escape keeps from the arena edge,
     the docked bodies and the other discs along its track (or its present gap, if smaller): ``park_clearance_um``,
     since the move is a park move of the group."""
+    group_escape_sequences: bool = True
+    """Whether D_n's group way out may be two manoeuvres in turn (any primitive first, then a group manoeuvre:
+    :func:`~stressbots.control.group_escape.group_escape_sequence`) when no single one exists. 24 of the 28 G_1
+    failures of sessions 12-13's baselines gave up with "no way out of the orbits around it" (held-out 14:3 at 2x:
+    two robots alone in the arena, orbits overlapping by 254 um; every single manoeuvre met the other body)."""
+    group_sequence_cut_um: float = 60.0
+    """um of D_n's travel between the points where a sequence's first manoeuvre may end: about one degree of heading
+    error's worth of lateral offset over a body length, and few enough cuts (an orbit of ~1400 um) to search
+    every t_x."""
     group_tight_body_um: float = 0.0
     """um. When no group way out keeps ``escape_body_clearance_um`` between D_n's body and the others, one that keeps
     this at the search's samples is taken (no margin: bodies may graze by a few um between samples), the last way
