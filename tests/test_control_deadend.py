@@ -145,6 +145,21 @@ def test_a_robot_heading_into_the_arena_edge_a_few_um_ahead_is_boxed_in_one_alon
     assert not gm.boxed_in(0, np.array([1000.0, 1000.0, 0.3]), [])
 
 
+def test_a_g1_failure_names_a_d_n_boxed_in_against_the_arena_edge():
+    """PairPhase.boxed_note: the failure message says D_n is pinned against the edge (tuning 116:0 gave up with only
+    "found no timed path to its approach line"), and says nothing for a D_n that can still move on."""
+    from stressbots.control.pair import PairPhase
+
+    into = np.array([1000.0, 2000.0 - 0.5 * L - 20.0, 0.0])
+    for pose, boxed in ((into, True), (np.array([1000.0, 1000.0, 0.3]), False)):
+        lp = hand_loop(pose)
+        lp.gross = GrossMotion(lp)
+        lp.scn.names = ("R5",)
+        note = PairPhase.boxed_note(SimpleNamespace(loop=lp), 0)  # type: ignore[arg-type]
+        assert (note == "R5 is boxed in against the arena edge (no clockwise turn and straight of it keeps 5 um from it); ") == boxed
+        assert boxed or note == ""
+
+
 # -- back_off: a free robot is never driven blindly --------------------------------------------------
 
 class BackOffLoop:
