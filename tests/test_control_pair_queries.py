@@ -211,3 +211,44 @@ def test_enters_discs_only_when_a_turn_carries_d_n_onto_an_orbit_it_is_not_on():
     assert not rec_on.enters_discs(0, [1], turn_s(90.0))
     loop.tune = Tuning()  # the default: off (session 13 measured no gain)
     assert not rec.enters_discs(0, [1], turn_s(90.0))
+
+
+def _arc_or_line(pose, s: float, radius: float | None):
+    """Pose after ``s`` um along a clockwise circle of ``radius`` (None: straight), by hand."""
+    x, y, th = pose
+    if radius is None:
+        return x + s * math.sin(th), y + s * math.cos(th), th
+    cx, cy = x + radius * math.cos(th), y - radius * math.sin(th)
+    th2 = th + s / radius
+    return cx - radius * math.cos(th2), cy + radius * math.sin(th2), th2
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(0.0, 2 * math.pi), st.floats(120.0, 420.0), st.floats(0.0, 2 * math.pi), st.floats(0.0, 2 * math.pi))
+def test_pair_can_keep_apart_agrees_with_a_replay_of_the_three_primitives(bearing, dist, th_n, th_m):
+    """True iff one of P_n (both turn), P_(n-1) (D_n straight), P_(n-2) (both straight), replayed by hand with
+    shapely's polygon distance, keeps the bodies 10 um apart over the horizon (same instants, 1 um tolerance)."""
+    from shapely.geometry import Polygon
+
+    from stressbots.control.pair_geometry import pair_can_keep_apart
+
+    body_n, body_m = (250.0, 60.0, 110.0, 200.0), (270.0, 55.0, 125.0, 240.0)
+    pn = np.array([1000.0, 1000.0, th_n])
+    pm = np.array([1000.0 + dist * math.sin(bearing), 1000.0 + dist * math.cos(bearing), th_m])
+
+    def gap(a, b) -> float:
+        ring = lambda p, body: Polygon(corners(p, body[0], body[1])[[0, 1, 3, 2]])  # noqa: E731
+        return float(ring(a, body_n).distance(ring(b, body_m)))
+
+    if gap(pn, pm) < 15.0:
+        return  # the "as far apart as they are" clause: not what this replay checks
+    ts = np.linspace(0.0, 3.0, 31)
+    verdicts = []
+    for rn, rm in ((body_n[3], body_m[3]), (None, body_m[3]), (None, None)):
+        gaps = [gap(_arc_or_line(pn, body_n[2] * t, rn), _arc_or_line(pm, body_m[2] * t, rm)) for t in ts]
+        verdicts.append(min(gaps))
+    got = pair_can_keep_apart(pn, body_n, pm, body_m, horizon_s=3.0, floor_um=10.0)
+    if got:
+        assert max(verdicts) >= 10.0 - 1.0
+    else:
+        assert max(verdicts) < 10.0 + 1.0

@@ -18,7 +18,8 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints
 from .queries import pose_on_orbit
 
-__all__ = ["approach_pose", "framed_goals", "frames_apart", "meet_distance", "pressed_together", "station_centre", "tight_discs"]
+__all__ = ["approach_pose", "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart", "pressed_together",
+           "station_centre", "tight_discs"]
 
 
 def frames_apart(a, b) -> bool:
@@ -105,3 +106,35 @@ def pressed_together(pose_N, body_N, pose_M, body_M, *, within_um: float, dt_s: 
         if sep(a, b) >= now:
             return None
     return now
+
+
+def pair_can_keep_apart(pose_N, body_N, pose_M, body_M, *, horizon_s: float, floor_um: float) -> bool:
+    """Whether one of the pair's primitives, P_n (both turn), P_{n-1} (D_n straight, D_{n-1} turns) or P_{n-2} (both
+    straight), held ``horizon_s`` s from these poses by exact kinematics, keeps the bodies ``floor_um`` apart (or as
+    far apart as they are, if closer already) throughout. ``body_*`` = ``(length_um, width_um, speed_um_s, radius_um)``.
+
+    A pair that fails this is one step from :func:`pressed_together`: whatever G_1 drives next brings the bodies into
+    each other within the horizon. Checked on the predicted end of a step before the step is driven, it stops a
+    transfer leg while the pair still has a way apart (held-out 47:2 and 9:2 at 2x: D_{n-1} stopped its leg at the
+    last instant, "would touch", 60 um from D_n with every primitive closing at 100 um/s, and G_1 gave up).
+
+    >>> n, m = (236.7, 67.4, 97.6, 162.2), (269.7, 66.5, 128.3, 251.7)   # held-out 47:2 at 2x, t = 90.2 s
+    >>> pair_can_keep_apart(np.array([1897.3, 1822.9, 0.811]), n, np.array([2036.9, 1636.5, 5.622]), m, horizon_s=3.0,
+    ...                     floor_um=10.0)
+    False
+    >>> pair_can_keep_apart(np.array([1826.5, 1755.7, 0.811]), n, np.array([2115.7, 1535.2, 5.622]), m, horizon_s=3.0,
+    ...                     floor_um=10.0)   # one second of both straight earlier
+    True
+    """
+    (L_N, W_N, v_N, r_N), (L_M, W_M, v_M, r_M) = body_N, body_M
+    ts = np.linspace(0.0, horizon_s, max(2, int(horizon_s / 0.1) + 1))
+    pN, pM = np.asarray(pose_N, float), np.asarray(pose_M, float)
+    now = -float(penetration_depth(pN[None], L_N, W_N, pM[None], L_M, W_M)[0])
+    floor = min(floor_um, now - 1e-6)
+    for k_N, k_M in ((1.0 / r_N, 1.0 / r_M), (0.0, 1.0 / r_M), (0.0, 0.0)):
+        a = move(pN, v_N * ts, k_N)
+        b = move(pM, v_M * ts, k_M)
+        if (-penetration_depth(a, L_N, W_N, b, L_M, W_M) >= floor).all():
+            return True
+    return False
+

@@ -20,6 +20,7 @@ from ..collision import penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, turning_centres
 from .leg_watch import LegProgress, leg_stop_s, pair_gaps
+from .pair_geometry import pair_can_keep_apart
 from .pairloop import Replan
 from .rendezvous import Tending
 from .station import Body, orbit_room, orbit_route
@@ -192,6 +193,11 @@ class StationTransfer:
                 dt = min(dt, stop)
             steps.append((n - 2, dt))
             run = sum(d for _, d in steps) * self.loop.v_hat[N]
+            if self.would_wedge(N, M, steps):
+                self.loop.log("transfer", M, f"after another t_x every primitive would bring {self.loop.scn.names[N]} and "
+                                             f"{self.loop.scn.names[M]} together; {self.loop.scn.names[M]} stops {rem:.0f} um short "
+                                             "and moves on from there")
+                return
             if not self.track_clear(N, run + 40.0, lower) or not self.keeps_room(N, run, lower):
                 self.loop.log("transfer", N, f"{self.loop.scn.names[N]}'s track runs out; {self.loop.scn.names[M]} stops short and moves "
                                              "on from there")
@@ -208,6 +214,29 @@ class StationTransfer:
         b = move(L.est[M], L.v_hat[M] * ts, 0.0)
         depth = penetration_depth(a, L.L[N], L.W[N], b, L.L[M], L.W[M])
         return bool(depth.max() > max(-L.tune.escape_body_clearance_um, float(depth[0])))
+
+    def would_wedge(self, N: int, M: int, steps) -> bool:
+        """Whether driving ``steps`` (``(k, seconds)`` with k = n-1: D_n straight, D_{n-1} turning; n-2: both straight)
+        takes the pair from poses where some primitive keeps their bodies apart for ``Tuning.wedge_horizon_s`` to
+        poses where none does (:func:`~stressbots.control.pair_geometry.pair_can_keep_apart`, floor
+        ``Tuning.escape_body_clearance_um``), predicted by exact kinematics from the measured poses. Only with
+        ``Tuning.transfer_stops_before_wedge``."""
+        L, tune = self.loop, self.loop.tune
+        if not tune.transfer_stops_before_wedge:
+            return False
+        bodies = [(float(L.L[j]), float(L.W[j]), float(L.v_hat[j]), float(L.r_hat[j])) for j in (N, M)]
+        pN, pM = L.est[N].copy(), L.est[M].copy()
+
+        def apart(a, b) -> bool:
+            return pair_can_keep_apart(a, bodies[0], b, bodies[1], horizon_s=tune.wedge_horizon_s,
+                                       floor_um=tune.escape_body_clearance_um)
+
+        if not apart(pN, pM):
+            return False  # wedged already: stopping here changes nothing (bodies_meet still stops a meeting)
+        for k, d in steps:
+            pN = move(pN, np.array([L.v_hat[N] * d]), 0.0)[-1]
+            pM = move(pM, np.array([L.v_hat[M] * d]), 0.0 if k <= L.n - 2 else 1.0 / float(L.r_hat[M]))[-1]
+        return not apart(pN, pM)
 
     def leg_end_clear(self, N: int, M: int, rem: float) -> float | None:
         """How long (s) the straight leg may still run so that D_n's orbit ends ``Tuning.g1_clearance_um`` clear of

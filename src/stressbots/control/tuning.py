@@ -169,6 +169,15 @@ class PairTuning:
     """um of D_n's travel between the points where a sequence's first manoeuvre may end: about one degree of heading
     error's worth of lateral offset over a body length, and few enough cuts (an orbit of ~1400 um) to search
     every t_x."""
+    transfer_stops_before_wedge: bool = True
+    """Whether a straight leg of the station transfer stops before a t_x after which every primitive of the pair
+    would bring D_n's and D_{n-1}'s bodies together within ``wedge_horizon_s``
+    (:meth:`~stressbots.control.transfer.StationTransfer.would_wedge`). Tracks planned apart converge under heading
+    drift (3.7 deg/mm, twice that at 2x); stopped only when they "would touch" in the next t_x, the pair was
+    already wedged and G_1 gave up (held-out 47:2, 9:2 at 2x)."""
+    wedge_horizon_s: float = 3.0
+    """s. How long one primitive must keep the pair's bodies apart for the pair to count as having a way apart: about
+    a quarter of an orbit, time for the next leg's wait or turn to begin."""
     group_tight_body_um: float = 0.0
     """um. When no group way out keeps ``escape_body_clearance_um`` between D_n's body and the others, one that keeps
     this at the search's samples is taken (no margin: bodies may graze by a few um between samples), the last way
