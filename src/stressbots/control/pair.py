@@ -42,6 +42,7 @@ from ..robots import TWO_PI, turning_centres
 from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
+    approach_room,
     framed_goals,
     frames_apart,
     meet_distance,
@@ -105,11 +106,17 @@ class PairPhase:
         D = self.meet_distance(N, M)
         frames = 0
         last = ""
+        first = self.room_frame(N, M, D, lower)
+        if first != (0.0, 0.0, 0.0):
+            self.set_pair_frame(*first)
+            phi, dx, dy = first
+            self.loop.log("replan", N, f"G_1 planned with room for the later robots' approaches: the structure turned "
+                                       f"{math.degrees(phi):.0f} deg and shifted {math.hypot(dx, dy):.0f} um")
         for round_no in range(self.loop.tune.pair_rounds):
             if round_no > 0 and not self.between_rounds(N, M, D, lower, last):
                 break
             done, tried, last = self.form_round(N, M, D, lower, last,
-                                                self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames)
+                                                self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames, first)
             frames += tried
             if done:
                 return
@@ -128,6 +135,33 @@ class PairPhase:
         return (f"{lp.scn.names[N]} is boxed in against the arena edge (no clockwise turn and straight of it keeps "
                 f"{lp.tune.viable_clearance_um:.0f} um from it); ")
 
+    def room_frame(self, N: int, M: int, D: float, lower) -> tuple[float, float, float]:
+        """The pair frame G_1 first aims at: the nominal one, unless a later robot's approach has less than
+        ``Tuning.approach_room_um`` of room in the arena there (:func:`~stressbots.control.pair_geometry.approach_room`);
+        then the cheapest frame of :meth:`pair_frames` with that room, else the roomiest if it gains
+        ``Tuning.approach_room_gain_um``. Only with ``Tuning.frame_for_approach_room``. Success is judged on the shape
+        after a best rigid alignment (SPEC 6), and every later slot follows the pair wherever G_1 forms."""
+        lp, tune = self.loop, self.loop.tune
+        nominal = (0.0, 0.0, 0.0)
+        later = [i for i in range(lp.n) if i not in (N, M) and not lp.docked[i]]
+        if not tune.frame_for_approach_room or not later:
+            return nominal
+
+        def room(g) -> float:
+            return approach_room(g, lp.r_hat, lp.rstar, lp.scn.arena_um, lp.opts.fine_distance_um, later, tune.approach_room_behind_radii)
+
+        now = room(lp.goals)
+        if now >= tune.approach_room_um:
+            return nominal
+        best = (now + tune.approach_room_gain_um, nominal)
+        for f in self.pair_frames(N, M, D, lower):  # cheapest first
+            r = room(self.framed_goals(*f))
+            if r >= tune.approach_room_um:
+                return f
+            if r >= best[0]:
+                best = (r, f)
+        return best[1]
+
     def wedge_note(self, N: int, M: int) -> str:
         """'R7 is pressed against R6 (...); ' when D_n and D_{n-1} are wedged (:func:`pressed_together`, within
         ``Tuning.escape_body_clearance_um``), else ''."""
@@ -140,10 +174,11 @@ class PairPhase:
         gap = f"{sep:.0f} um apart" if sep >= 0.0 else f"{-sep:.0f} um into each other"
         return f"{names[N]} is pressed against {names[M]} ({gap} as measured) and every primitive drives them closer; "
 
-    def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int) -> tuple[bool, int, str]:
+    def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int,
+                   first: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[bool, int, str]:
         """One round of at most ``frames_max`` pair frames from where the robots are (:meth:`form`): ``(formed,
-        frames tried, last reason)``."""
-        tried: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] if not last else []
+        frames tried, last reason)``; the first round starts in the frame ``first`` (:meth:`room_frame`)."""
+        tried: list[tuple[float, float, float]] = [first] if not last else []
         for frame_no in range(frames_max):
             if frame_no > 0 or last:
                 # a re-plan costs the pair its timing anyway: the waiting orbits, untended while G_1 runs (one phase

@@ -58,6 +58,20 @@ class PairTuning:
     """Turns of the structure about the G_1 junction tried when G_1 is re-planned (clockwise)."""
     frame_shifts_um: tuple[float, ...] = (0.0, 200.0, 400.0)
     """Shifts of the structure tried when G_1 is re-planned (each in 8 directions)."""
+    frame_for_approach_room: bool = False
+    """Whether G_1 first aims at a pair frame in which every later robot has room to come round onto its approach
+    (:meth:`~stressbots.control.pair.PairPhase.room_frame`) when the nominal frame leaves one without. Off: on the
+    layouts where it fires it fixed the tee dead ends by a wall at 1x (tuning +6 -3, held-out +1 -0) but lost at 2x
+    (held-out +1 -3) and on the independent plant (+2 -4): a wash (design.md 3.9, session 14)."""
+    approach_room_um: float = 0.0
+    """um. Room a later robot's approach needs (:func:`~stressbots.control.pair_geometry.approach_room`): its orbit disc
+    one turning radius behind the start of its fine motion fits inside the arena (0: just)."""
+    approach_room_behind_radii: float = 1.0
+    """Turning radii behind the start of fine motion where ``approach_room_um`` is measured: a robot comes round onto
+    its approach there (0: at the start of fine motion itself)."""
+    approach_room_gain_um: float = 100.0
+    """um. When no frame gives every approach ``approach_room_um``, the roomiest is taken only if it gains this much
+    over the nominal (a frame costs the pair a longer way to its station)."""
     frame_slot_clearance_um: float = 30.0
     """Clearance of a re-planned frame's slots and station orbit from the measured orbits."""
     track_overshoot: float = 0.15
