@@ -180,9 +180,10 @@ class PairTuning:
     failures of sessions 12-13's baselines gave up with "no way out of the orbits around it" (held-out 14:3 at 2x:
     two robots alone in the arena, orbits overlapping by 254 um; every single manoeuvre met the other body)."""
     group_sequence_cut_um: float = 60.0
-    """um of D_n's travel between the points where a sequence's first manoeuvre may end: about one degree of heading
-    error's worth of lateral offset over a body length, and few enough cuts (an orbit of ~1400 um) to search
-    every t_x."""
+    """um of D_n's travel between the points where a sequence's first manoeuvre may end: a quarter of a body length,
+    so the window in which a body passing beside D_n's track leaves the way open is not stepped over, and about 24
+    cuts per primitive over an orbit of ~1400 um, few enough to search again every t_x (only when no single
+    manoeuvre exists)."""
     transfer_stops_before_wedge: bool = True
     """Whether a straight leg of the station transfer stops before a t_x after which every primitive of the pair
     would bring D_n's and D_{n-1}'s bodies together within ``wedge_horizon_s``
