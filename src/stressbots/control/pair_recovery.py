@@ -116,8 +116,8 @@ class PairRecovery:
             if not said:
                 said = True
                 margin = " (no body margin)" if tight else ""
-                how = ", then ".join(f"P_{k} {d:.1f} s" for k, d in rest)
-                self.loop.log("escape", N, f"{names[N]} has no way out alone: {how}{margin}")
+                how = ", then ".join(self._step_words(N, k, d) for k, d in rest)
+                self.loop.log("escape", N, f"{names[N]} has no searched turn-and-straight of its own; way out: {how}{margin}")
             k, d = rest[0]
             dt = d if d <= 1.6 * self.loop.tx else self.loop.tx
             self.loop.drive([(k, dt)])
@@ -127,6 +127,16 @@ class PairRecovery:
             self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
             return False
         return True
+
+    def _step_words(self, N: int, k: int, d: float) -> str:
+        """One step of a group way out in words: 'everyone orbits 1.0 s (P_8)', 'R7 straight alone 2.5 s (P_7)',
+        'D_6 .. D_8 straight 0.6 s (P_5)'."""
+        n = self.loop.n
+        if k >= n:
+            return f"everyone orbits {d:.1f} s (P_{k})"
+        if k == n - 1:
+            return f"{self.loop.scn.names[N]} straight alone {d:.1f} s (P_{k})"
+        return f"D_{k + 1} .. D_{n} straight {d:.1f} s (P_{k})"
 
     def group_plan(self, tight: bool = False) -> EscapeSequence | None:
         """D_n's group way out from the measured poses as steps ``(k, seconds)`` of P_k: one group manoeuvre
