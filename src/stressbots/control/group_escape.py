@@ -177,10 +177,11 @@ class EscapeSequence(NamedTuple):
 
 def group_escape_sequence(g: Group, arena_um, *, edge_need: float, body_clearance: float, edge_clearance: float,
                           disc_clearance: float, docked=None, wait_steps: int = 24, max_straight_um: float = 600.0,
-                          cut_um: float = 60.0) -> EscapeSequence | None:
+                          cut_um: float = 60.0, two_step: bool = True) -> EscapeSequence | None:
     """The quickest way out of at most two manoeuvres: a first primitive (any P_k, k = n .. 0, driven up to one of D_n's
     orbit periods and cut every ``cut_um`` of D_n's travel), then a :func:`group_escape` (with P_(n-1) alone) from
-    where it leaves everyone; the :func:`group_escape` itself when that exists. None when neither finds one.
+    where it leaves everyone; the :func:`group_escape` itself when that exists (and only that when ``two_step`` is
+    False). None when none is found.
 
     Every way out of one manoeuvre can be closed while a two-step one is open: two robots whose orbits overlap by
     half meet within a second if both orbit, and D_n's straight alone runs through the other's disc; D_n straight
@@ -201,8 +202,8 @@ def group_escape_sequence(g: Group, arena_um, *, edge_need: float, body_clearanc
     kw = dict(edge_need=edge_need, body_clearance=body_clearance, edge_clearance=edge_clearance, disc_clearance=disc_clearance,
               docked=docked, wait_steps=wait_steps, max_straight_um=max_straight_um)
     one = group_escape(g, arena_um, **kw)
-    if one is not None:
-        return EscapeSequence(_move_steps(one, len(g.order)), one.slack_um)
+    if one is not None or not two_step:
+        return None if one is None else EscapeSequence(_move_steps(one, len(g.order)), one.slack_um)
     best: EscapeSequence | None = None
     for k in range(len(g.order), -1, -1):
         for dt, after in _cuts(g, k, arena_um, body_clearance, edge_clearance, disc_clearance, docked, cut_um):

@@ -162,12 +162,18 @@ class PairPhase:
                 best = (r, f)
         return best[1]
 
+    def body(self, i: int) -> tuple[float, float, float, float]:
+        """Robot ``i`` as the pair's body queries take it (:func:`pressed_together`,
+        :func:`~stressbots.control.pair_geometry.pair_can_keep_apart`):
+        ``(length_um, width_um, speed_um_s, radius_um)``, speed and radius as identified."""
+        lp = self.loop
+        return float(lp.L[i]), float(lp.W[i]), float(lp.v_hat[i]), float(lp.r_hat[i])
+
     def wedge_note(self, N: int, M: int) -> str:
         """'R7 is pressed against R6 (...); ' when D_n and D_{n-1} are wedged (:func:`pressed_together`, within
         ``Tuning.escape_body_clearance_um``), else ''."""
         lp = self.loop
-        bodies = [(float(lp.L[j]), float(lp.W[j]), float(lp.v_hat[j]), float(lp.r_hat[j])) for j in (N, M)]
-        sep = pressed_together(lp.est[N], bodies[0], lp.est[M], bodies[1], within_um=lp.tune.escape_body_clearance_um)
+        sep = pressed_together(lp.est[N], self.body(N), lp.est[M], self.body(M), within_um=lp.tune.escape_body_clearance_um)
         if sep is None:
             return ""
         names = lp.scn.names

@@ -16,7 +16,7 @@ from .. import se2
 from ..collision import penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints
-from .queries import pose_on_orbit
+from .queries import fine_motion_length, pose_on_orbit
 
 __all__ = ["approach_pose", "approach_room", "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart", "pressed_together",
            "station_centre", "tight_discs"]
@@ -143,10 +143,9 @@ def approach_room(goals: np.ndarray, radii: np.ndarray, rstar: np.ndarray, arena
                   robots, behind_radii: float = 1.0) -> float:
     """The least room (um) any of ``robots`` has to come round onto its approach in the arena: for each, the gap
     between the arena edge and its orbit disc (radius ``rstar``) about the point ``behind_radii`` turning radii behind
-    the start of its fine motion (``min(2.5 r, 3 fine_distance_um)`` behind its slot, as
-    :func:`~stressbots.control.single.fine_start`, straight back along the slot's heading). inf without an arena or
-    robots. Negative: a robot there cannot circle inside the arena; one whose slot faces away from a nearby wall
-    must arrive from that wall's side.
+    the start of its fine motion (:func:`~stressbots.control.queries.fine_motion_length` behind its slot, straight
+    back along the slot's heading). inf without an arena or robots. Negative: a robot there cannot circle inside the
+    arena; one whose slot faces away from a nearby wall must arrive from that wall's side.
 
     Slots whose approach starts at or beyond the arena edge (tee stems ending near a wall, tuning layouts 89 and
     118: 0 of 4 trials at 1x) left the robot in a dead end between the structure and the wall, boxed in.
@@ -163,7 +162,7 @@ def approach_room(goals: np.ndarray, radii: np.ndarray, rstar: np.ndarray, arena
     idx = list(robots)
     g = np.asarray(goals, float)[idx]
     r = np.asarray(radii, float)[idx]
-    back = np.minimum(2.5 * r, 3.0 * fine_distance_um) + behind_radii * r
+    back = fine_motion_length(r, fine_distance_um) + behind_radii * r
     q = g[:, :2] - back[:, None] * np.stack([np.sin(g[:, 2]), np.cos(g[:, 2])], axis=1)
     edge = np.min(np.stack([q[:, 0], w - q[:, 0], q[:, 1], h - q[:, 1]], axis=1), axis=1)
     return float((edge - np.asarray(rstar, float)[idx]).min())

@@ -7,7 +7,6 @@ orbit when D_n has no timed way is :mod:`~stressbots.control.holding`, which fal
 from __future__ import annotations
 
 import math
-from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -16,7 +15,7 @@ from ..collision import bodies_hit_discs, penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, escape_manoeuvre
-from .group_escape import EscapeSequence, Group, group_escape, group_escape_sequence
+from .group_escape import EscapeSequence, Group, group_escape_sequence
 from .station import orbit_room
 
 if TYPE_CHECKING:
@@ -106,11 +105,11 @@ class PairRecovery:
                 tight = True
                 m = self.group_plan(tight)
             if m is not None and m.total_s <= 1e-3:
-                break
+                return True
             if m is not None:
                 rest = m.steps
             elif not rest:
-                break
+                break  # nothing from here, nothing begun
             # else: no way from the new measured poses (a plan without margin misses by the prediction error of a
             # t_x): the sequence already begun is driven on, as planned
             if not said:
@@ -122,11 +121,12 @@ class PairRecovery:
             dt = d if d <= 1.6 * self.loop.tx else self.loop.tx
             self.loop.drive([(k, dt)])
             rest = ((k, d - dt), *rest[1:]) if d - dt > 1e-9 else rest[1:]
-        m = self.group_plan(tight)
-        if m is None or m.total_s > 1e-3:
-            self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
-            return False
-        return True
+        else:  # the frames ran out while driving: clear by now?
+            m = self.group_plan(tight)
+            if m is not None and m.total_s <= 1e-3:
+                return True
+        self.loop.log("hold", N, f"{names[N]} has no way out of the orbits around it")
+        return False
 
     def _step_words(self, N: int, k: int, d: float) -> str:
         """One step of a group way out in words: 'everyone orbits 1.0 s (P_8)', 'R7 straight alone 2.5 s (P_7)',
@@ -151,13 +151,11 @@ class PairRecovery:
         g = Group(order, L.est, L.v_hat, L.r_hat, L.L, L.W, L.rstar, need)
         dk = np.flatnonzero(L.docked)
         body = tune.group_tight_body_um if tight else tune.escape_body_clearance_um
-        search = partial(group_escape_sequence, cut_um=tune.group_sequence_cut_um) if tune.group_escape_sequences else group_escape
-        found = search(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=body, edge_clearance=tune.wall_clearance_um,
-                       disc_clearance=tune.group_disc_clearance_um, docked=(L.est[dk], L.L[dk], L.W[dk]),
-                       wait_steps=tune.group_escape_waits, max_straight_um=tune.group_escape_straight_um)
-        if found is None or isinstance(found, EscapeSequence):
-            return found
-        return EscapeSequence(tuple((k, d) for k, d in ((L.n, found.wait_s), (found.k, found.straight_s)) if d > 1e-9), found.slack_um)
+        return group_escape_sequence(g, L.scn.arena_um, edge_need=tune.wall_clearance_um, body_clearance=body,
+                                     edge_clearance=tune.wall_clearance_um, disc_clearance=tune.group_disc_clearance_um,
+                                     docked=(L.est[dk], L.L[dk], L.W[dk]), wait_steps=tune.group_escape_waits,
+                                     max_straight_um=tune.group_escape_straight_um, cut_um=tune.group_sequence_cut_um,
+                                     two_step=tune.group_escape_sequences)
 
     def escape_plan(self, N: int, others):
         """D_n's way out from the measured poses (:func:`~stressbots.control.escape_search.escape_manoeuvre`): gaps

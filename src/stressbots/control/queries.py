@@ -13,8 +13,18 @@ import numpy as np
 from .. import paths as pathlib
 from ..robots import TWO_PI, angle_difference
 
-__all__ = ["turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel", "in_corridor",
-           "best_departure", "meeting_cost", "interpolated_steps"]
+__all__ = ["fine_motion_length", "turn_fraction", "trim_steps", "pose_on_orbit", "line_pose", "line_coords", "merge", "in_funnel",
+           "in_corridor", "best_departure", "meeting_cost", "interpolated_steps"]
+
+
+def fine_motion_length(r, fine_distance_um: float):
+    """How far behind its slot (um) a robot of turning radius ``r`` (um, scalar or array) starts its fine motion:
+    ``s_f = min(2.5 r, 3 fine_distance_um)`` (:func:`~stressbots.control.single.fine_start`).
+
+    >>> float(fine_motion_length(200.0, 200.0)), fine_motion_length(np.array([200.0, 300.0]), 200.0).tolist()
+    (500.0, [500.0, 600.0])
+    """
+    return np.minimum(2.5 * np.asarray(r, float), 3.0 * fine_distance_um)
 
 
 def turn_fraction(pose: np.ndarray, point: np.ndarray, r: float, lateral_tol_um: float = 3.0):

@@ -31,7 +31,7 @@ from . import docking
 from .docking import DockOutcome, DockView
 from .gross import SteerOutcome
 from .loopview import DockingLoop
-from .queries import in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
+from .queries import fine_motion_length, in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
 __all__ = ["SingleDocking", "SingleLoop", "approach_length", "approach_start_on_route", "before_on_route", "fine_start", "retarget",
            "way_points"]
@@ -73,7 +73,7 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
     docked ``bodies`` by 0.5 um and stay inside the arena (tight gaps need an almost straight entry);
     when none does, a_i is ``s_f`` straight behind the slot.
     """
-    s_f = min(2.5 * r, 3.0 * fine_distance_um)
+    s_f = fine_motion_length(r, fine_distance_um)
     for phi_deg in (25.0, 15.0, 8.0, 4.0):
         R = s_f / math.radians(phi_deg)
         back = move(goal, -np.linspace(0.0, s_f, 40), 1.0 / R)  # poses along the arc, slot first

@@ -224,12 +224,11 @@ class StationTransfer:
         L, tune = self.loop, self.loop.tune
         if not tune.transfer_stops_before_wedge:
             return False
-        bodies = [(float(L.L[j]), float(L.W[j]), float(L.v_hat[j]), float(L.r_hat[j])) for j in (N, M)]
+        body_N, body_M = self.pair.body(N), self.pair.body(M)
         pN, pM = L.est[N].copy(), L.est[M].copy()
 
         def apart(a, b) -> bool:
-            return pair_can_keep_apart(a, bodies[0], b, bodies[1], horizon_s=tune.wedge_horizon_s,
-                                       floor_um=tune.escape_body_clearance_um)
+            return pair_can_keep_apart(a, body_N, b, body_M, horizon_s=tune.wedge_horizon_s, floor_um=tune.escape_body_clearance_um)
 
         if not apart(pN, pM):
             return False  # wedged already: stopping here changes nothing (bodies_meet still stops a meeting)
