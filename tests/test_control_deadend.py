@@ -184,6 +184,9 @@ class BackOffLoop:
     def drive(self, steps):
         self.driven.append(list(steps))
 
+    def drive_move(self, i, turn_k, straight_k, move_, orbiting):
+        self.drive([(k, d) for k, d in ((turn_k, move_[0]), (straight_k, move_[1])) if d > 0.0])
+
     def log(self, kind, robot=None, detail=""):
         self.logged.append(kind)
 

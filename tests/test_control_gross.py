@@ -294,3 +294,25 @@ def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was
     assert out is SteerOutcome.ARRIVED and arrived(loop.est[0], waypoint, loop.tune)
     trail = np.array(loop.trail)
     assert (penetration_depth(trail, L, W, body[None], L, W) < -15.0).all()
+
+
+def test_a_blocked_gross_motion_ends_where_its_cut_in_says_the_fine_motion_can_start_and_only_then():
+    """``ready_if_blocked`` is asked only when the path to the target is blocked; its reason is logged as "cut-in" and
+    the gross motion has arrived. A clear path never asks it."""
+    asked: list[float] = []
+
+    def cut_in() -> str:
+        asked.append(1.0)
+        return "cuts in"
+
+    # heading +y at the bottom wall's edge, target behind it: every path back loops into the wall
+    start = np.array([1000.0, 0.5 * L + 30.0, math.pi])
+    target = np.array([1000.0, 800.0, 0.0])
+    loop = KinematicLoop(start)
+    assert GrossMotion(loop).steer(0, target, 1, 0, [], ready_if_blocked=cut_in) is SteerOutcome.ARRIVED
+    assert asked and ("cut-in", "cuts in") in loop.events and loop.t == 0.0  # nothing driven
+    # in the open, the same call drives to the target and never asks
+    asked.clear()
+    open_loop = KinematicLoop(np.array([700.0, 700.0, 0.0]))
+    assert GrossMotion(open_loop).steer(0, np.array([1100.0, 1300.0, 0.5]), 1, 0, [], ready_if_blocked=cut_in) is SteerOutcome.ARRIVED
+    assert not asked and open_loop.t > 0.0

@@ -117,11 +117,11 @@ def merge(behind: float, right: float, psi: float, r: float, min_left_um: float 
 
 def in_funnel(behind: float, right: float, psi: float, back: float, r: float, tuning) -> bool:
     """Whether a robot at line coordinates ``(behind, right, psi)`` is in the approach funnel of a corridor
-    ``back`` um long: within the funnel's bounds (:class:`~stressbots.control.tuning.Tuning`), and able to
-    merge onto the line even if it points ``merge_heading_margin_deg`` less to the left than measured
-    (or already on the line, aligned)."""
+    ``back`` um long: within the funnel's bounds (:class:`~stressbots.control.tuning.Tuning`; pointing at most
+    ``Tuning.funnel_psi_deg`` left of the line), and able to merge onto the line even if it points
+    ``merge_heading_margin_deg`` less to the left than measured (or already on the line, aligned)."""
     if (not (tuning.funnel_min_behind_um <= behind <= back + tuning.funnel_extra_um) or right > tuning.funnel_right_um
-            or right < -2.0 or psi < -math.radians(12.0)):
+            or right < -2.0 or psi < -math.radians(tuning.funnel_psi_deg)):
         return False
     if abs(right + behind * math.sin(psi)) <= 3.0 and abs(psi) <= math.radians(1.0) and abs(right) <= 5.0:
         return True

@@ -57,7 +57,7 @@ from ..collision import point_rectangle_distance
 from ..errors import PlanningError
 from ..kinematics import move
 from ..robots import angle_difference, turning_centres
-from .gross import GrossMotion, SteerOutcome, escape_sweep
+from .gross import GrossMotion, SteerOutcome
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
 from .parking import blocking_orbits, orbit_gaps, park_move, straights_clear, unblock_move
@@ -340,15 +340,12 @@ class _Runner(PlantLoop):
         return self.gross.escape(i, turn_k, straight_k, orbiting)
 
     def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None:
-        """A checked move on for robot ``i`` from where it is, ``(turn_s, straight_s)``: of its
-        :meth:`~stressbots.control.gross.GrossMotion.free_moves`, the cheapest that does not box it in at its end,
-        else the cheapest; None when it is boxed in."""
-        moves = list(self.gross.free_moves(i, self.est[i], orbiting))
-        v, r = float(self.v_hat[i]), float(self.r_hat[i])
-        for m in moves:
-            if not self.gross.boxed_in(i, escape_sweep(self.est[i], m, v, r)[-1], orbiting):
-                return m
-        return moves[0] if moves else None
+        """A checked move on for robot ``i`` from where it is (:meth:`~stressbots.control.gross.GrossMotion.free_move`)."""
+        return self.gross.free_move(i, orbiting)
+
+    def drive_move(self, i: int, turn_k: int, straight_k: int, move_: tuple[float, float], orbiting: Sequence[int]) -> None:
+        """Drive robot ``i``'s move ``move_`` checked again every t_x (:meth:`~stressbots.control.gross.GrossMotion.drive_move`)."""
+        self.gross.drive_move(i, turn_k, straight_k, move_, orbiting)
 
     def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool:
         """Whether robot ``i`` cannot move on from where it is (:meth:`~stressbots.control.gross.GrossMotion.boxed_in`)."""
@@ -361,10 +358,10 @@ class _Runner(PlantLoop):
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
-              clearance: float | None = None) -> SteerOutcome:
+              clearance: float | None = None, ready_if_blocked: Callable[[], str | None] | None = None) -> SteerOutcome:
         """Gross motion of robot ``i`` to ``target``; ARRIVED when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
         return self.gross.steer(i, target, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=max_cycles, ready=ready,
-                                via=via, clearance=clearance)
+                                via=via, clearance=clearance, ready_if_blocked=ready_if_blocked)
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
         """S_2f for ``duration`` s (:func:`~stressbots.control.queries.interpolated_steps`)."""

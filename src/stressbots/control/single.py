@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any, Protocol
 
 import numpy as np
@@ -58,6 +59,8 @@ class SingleLoop(DockingLoop, Protocol):
     def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool: ...
 
     def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None: ...
+
+    def drive_move(self, i: int, turn_k: int, straight_k: int, move_: tuple[float, float], orbiting: Sequence[int]) -> None: ...
 
 
 # -- pure geometry ------------------------------------------------------------------------------------
@@ -248,7 +251,7 @@ class SingleDocking:
             goal, back, a_pose, ready = self._aim(i, attempt, route_phase)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
-            stuck = self._steer_through(i, k, orbiting, targets, ready)
+            stuck = self._steer_through(i, k, orbiting, targets, ready, partial(self.cut_in, i, k, back))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
             # left the robot there) it would miss again, and six attempts ran out at the same instant
@@ -298,10 +301,13 @@ class SingleDocking:
             ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
         return goal, back, a_pose, ready
 
-    def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None) -> bool:
+    def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None,
+                       cut_in: Callable[[], str | None]) -> bool:
         """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
-        its aim); whether one ended stuck (failure region H: the rest are skipped, the caller's recovery takes over)."""
-        return any(self.loop.steer(i, tgt, k, k - 1, orbiting, ready=ready) is SteerOutcome.STUCK for tgt in targets)
+        its aim; ``cut_in`` ends one whose path is blocked where the fine motion can start, :meth:`cut_in`); whether one
+        ended stuck (failure region H: the rest are skipped, the caller's recovery takes over)."""
+        return any(self.loop.steer(i, tgt, k, k - 1, orbiting, ready=ready, ready_if_blocked=cut_in) is SteerOutcome.STUCK
+                   for tgt in targets)
 
     def _clear_the_way(self, i: int, k: int, goal: np.ndarray, a_pose: np.ndarray, back: float | None) -> None:
         """Recovery of robot ``i`` (D_k) whose gross motion toward ``a_pose`` stopped it in failure region H: waiting
@@ -348,6 +354,48 @@ class SingleDocking:
     def in_funnel(self, i: int, back: float) -> bool:
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
+
+    def cut_in(self, i: int, k: int, back: float | None, into: list[str] | None = None) -> str | None:
+        """Why robot ``i`` (D_k), whose gross motion to its intermediate pose a_i is blocked, may start its fine motion
+        from where it is (:meth:`can_arc_in`; also appended to ``into``); None when it may not, or when it has an
+        approach line (``back``): the line approach's clockwise bursts merge only from the funnel's shallow angles, and
+        from 32 deg they docked a robot 74 um off its slot."""
+        lp = self.loop
+        if back is not None or not self.can_arc_in(i, k):
+            return None
+        reason = (f"{lp.scn.names[i]} arcs into its slot from here ({np.hypot(*(lp.est[i, :2] - lp.goals[i, :2])):.0f} um "
+                  "away): its way to a_i is blocked and a loop would meet an obstacle")
+        if into is not None:
+            into.append(reason)
+        return reason
+
+    def can_arc_in(self, i: int, k: int) -> bool:
+        """Whether robot ``i`` (D_k), short of its intermediate pose a_i where a loop would meet the structure, the arena
+        edge or a lower orbit, goes on with the fine motion from where it is: within ``Tuning.arc_in_reach`` S_2f lengths of
+        its slot, one interpolated clockwise arc reaches it (as :meth:`fine_dock` steers: arriving within 40 deg of the
+        slot's heading, its compliant aim within ``Tuning.arc_in_aim_um`` of the slot) and that arc's body keeps off the
+        docked bodies (``Tuning.escape_clearance_um`` until one body length from the slot, then not into them), the orbits
+        and the arena edge. A robot that came
+        within 100 um of a_i 30 deg off (a gap between docked neighbours) had only the loop back, no route, and
+        escaped into the gap, pinned."""
+        lp = self.loop
+        p, goal, r = lp.est[i], lp.goals[i], float(lp.r_hat[i])
+        if np.hypot(*(p[:2] - goal[:2])) > lp.tune.arc_in_reach * fine_motion_length(r, lp.opts.fine_distance_um):
+            return False
+        aim = docking.compliant_aim(p, goal, r, float(lp.L[i]))
+        if aim is not None and np.hypot(*(aim - goal[:2])) > lp.tune.arc_in_aim_um:
+            return False  # an arc that must end that far along the face is not one into the slot
+        fr = turn_fraction(p, goal if aim is None else aim, r)
+        if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40.0) or not self.loop_blocked(i, k):
+            return False
+        rho, length, _ = fr
+        arc = move(p, np.linspace(0.0, length, 40), rho / r)
+        # off the docked bodies by the escape clearance until a body length from the slot (a gap's sides are
+        # touched only there), and off the orbits and the arena edge all the way
+        far = np.hypot(*(arc[:, :2] - goal[:2]).T) > lp.L[i]
+        return not (lp.obstacles_hit(arc[far], i, lp.orbiting_below(k), clearance=lp.tune.escape_clearance_um)
+                    or any((penetration_depth(arc[:-1], lp.L[i], lp.W[i], pj, lj, wj) > 0.5).any()
+                           for pj, lj, wj in zip(*self._bodies(), strict=True)))
 
     # -- fine motion ----------------------------------------------------------------------------------
 
@@ -453,6 +501,6 @@ class SingleDocking:
         if m is not None:
             lp.log("move-on", i, f"{lp.scn.names[i]} finds no clear way off; turns {m[0]:.1f} s, then {m[1]:.1f} s straight where it "
                                  "can still move on")
-            lp.drive([(kk, d) for kk, d in ((k, m[0]), (k - 1, m[1])) if d > 0.0])
+            lp.drive_move(i, k, k - 1, m, orbiting)
             return
         lp.drive([(k, 0.5 * math.pi * lp.r[i] / lp.v[i]), (k - 1, 150.0 / lp.v[i])])

@@ -240,6 +240,19 @@ class GrossTuning:
     funnel_right_um: float = 60.0
     """(funnel_min_behind_um, funnel_extra_um, funnel_right_um) The approach funnel: at least this far behind the slot,
     at most the corridor plus the extra, at most this far right of the line."""
+    funnel_psi_deg: float = 12.0
+    """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
+    merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
+    off its slot."""
+    arc_in_reach: float = 2.0
+    """Lengths of the S_2f arc (:func:`~stressbots.control.queries.fine_motion_length`). Where a loop is blocked, a robot
+    within this of its slot that one interpolated arc takes in starts its fine motion from there
+    (:meth:`~stressbots.control.single.SingleDocking.can_arc_in`): a_i lies one such length out, and a robot short of it
+    by 100 um and 30 deg had only the loop back."""
+    arc_in_aim_um: float = 40.0
+    """um. That arc aims where docking compliance ends the robot in the slot (:func:`~stressbots.control.docking.compliant_aim`),
+    29 um along the face for a robot arriving 13 deg off; an aim further from the slot than this is not taken (one 170 um
+    off ended the arc against a neighbour's end)."""
     merge_heading_margin_deg: float = 1.5
     """The merge onto the approach line must survive this much less left heading than measured."""
     no_route_quiet_cycles: int = 5
