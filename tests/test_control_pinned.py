@@ -6,7 +6,8 @@ checked against kinematics and closed-form geometry.
   of it meets the arena edge;
 - ``GrossMotion.free_move``: a move on whose first t_x would already box the robot in is not taken;
 - ``SingleDocking.can_arc_in`` / ``cut_in``: without an approach line, a robot short of a_i starts its S_2f arc from
-  there only where a loop is blocked and the arc keeps off the structure.
+  there only where a loop is blocked and the arc keeps off the structure;
+- ``Rendezvous._drive_rest_open_loop``: D_n's open-loop final seconds only where they keep off the arena edge.
 """
 
 from __future__ import annotations
@@ -141,3 +142,35 @@ def test_a_robot_short_of_a_i_arcs_in_from_there_only_where_a_loop_is_blocked_an
     mid = move(goal, -150.0, 1.0 / (2.0 * R))
     assert not docking_loop(pose, goal, blocked=True, bodies=[(mid,)]).can_arc_in(0, 2)
 
+
+# -- G_1: D_n's open-loop final seconds ---------------------------------------------------------------
+
+def test_d_n_drives_the_rest_of_its_timed_plan_open_loop_only_where_it_keeps_off_the_arena_edge():
+    from stressbots import paths as pathlib
+    from stressbots.control.rendezvous import Rendezvous
+
+    def attempt(gap_um: float):
+        # D_n heading north, its front gap_um from the north edge; its last plan: 100 um driven, 150 um straight left
+        pose = np.array([1000.0, 2000.0 - 0.5 * L - gap_um, 0.0])
+        lp = DriftLoop(pose)
+        lp.obstacles_hit = GrossMotion(lp).obstacles_hit  # type: ignore[attr-defined,arg-type]
+        prev = pathlib.Path(pose - np.array([0.0, 100.0, 0.0]), R, (("S", 250.0),))
+        done = Rendezvous(SimpleNamespace(loop=lp))._drive_rest_open_loop(0, prev, V, [], [])  # type: ignore[arg-type]
+        return done, lp
+
+    done, lp = attempt(200.0)  # 150 um on: 50 um short of the edge
+    assert done and lp.driven == [[(0, 1.5)]] and np.isclose(lp.est[0, 1], 2000.0 - 0.5 * L - 50.0)
+    done, lp = attempt(100.0)  # 150 um on would run 50 um into the edge: nothing driven, the caller plans again
+    assert not done and lp.driven == [] and lp.logged == ["final"]
+
+
+def test_an_arc_whose_compliant_aim_lies_far_along_the_face_is_not_an_arc_in():
+    goal = np.array([1000.0, 1000.0, 0.0])
+    # an arc of radius 2 r through the slot's centre, arriving 35 deg counter-clockwise of the slot's heading: compliance
+    # would turn it flush, so the arc must aim ~(L/2) sin 35 deg = 72 um along the face
+    off = np.array([goal[0], goal[1], -math.radians(35.0)])
+    pose = move(off, -300.0, 1.0 / (2.0 * R))
+    sd = docking_loop(pose, goal, blocked=True)
+    assert not sd.can_arc_in(0, 2)
+    sd.loop.tune = Tuning(arc_in_aim_um=1000.0)  # the same arc, the aim allowed anywhere: taken
+    assert sd.can_arc_in(0, 2)

@@ -171,12 +171,17 @@ class Rendezvous:
         ``Tuning.g1_clearance_um`` less the same shortfall). Checked every t_x: a loop is driven open loop by
         interpolation, and at 2x noise two loops drifted 300 um and ended with D_n against the arena edge,
         where a one-way robot cannot turn."""
-        tune = self.loop.tune
         s = np.linspace(0.0, float(self.loop.v_hat[N]) * left_s, max(2, int(left_s * 4) + 2))
-        rest = move(self.loop.est[N], s, 1.0 / R)
+        return self._open_loop_clear(N, move(self.loop.est[N], s, 1.0 / R), lower, disc)
+
+    def _open_loop_clear(self, N: int, poses: np.ndarray, lower, disc) -> bool:
+        """Whether D_n's ``poses`` (M, 3), driven open loop, keep ``Tuning.loop_clearance_um`` from the arena edge, the
+        orbits and the structure, and D_{n-1}'s orbit ``disc`` at ``Tuning.g1_clearance_um`` less the same shortfall
+        from ``Tuning.wall_clearance_um``."""
+        tune = self.loop.tune
         short = tune.wall_clearance_um - tune.loop_clearance_um
         tight = tight_discs(disc, tune.loop_clearance_um, tune.g1_clearance_um - short)
-        return not self.loop.obstacles_hit(rest, N, lower, extra_discs=tight, clearance=tune.loop_clearance_um)
+        return not self.loop.obstacles_hit(poses, N, lower, extra_discs=tight, clearance=tune.loop_clearance_um)
 
     def _tight(self, disc, clearance: float | None = None):
         """D_{n-1}'s orbit disc(s) shrunk so that checks at ``Tuning.wall_clearance_um`` keep ``clearance``
@@ -239,8 +244,7 @@ class Rendezvous:
             arrivals = self._arrivals(M, th_dep, early)
             path = self.continued(N, arrivals, lower, disc)
             if path is None and prev is not None and prev.length - vN * self.loop.tx <= self.loop.tune.final_leg_s * vN:
-                self._drive_rest_open_loop(N, prev, vN)
-                return True
+                return self._drive_rest_open_loop(N, prev, vN, lower, disc)
             path, loop = self._timed_path(N, q, arrivals, lower, disc, path)
             if loop is not None:
                 loops += 1
@@ -283,14 +287,22 @@ class Rendezvous:
         period = TWO_PI / self.loop.omega_hat[M]
         return [a for a in (t_dep + k * period - early for k in range(4)) if a > 0.3]
 
-    def _drive_rest_open_loop(self, N: int, prev: pathlib.Path, vN: float) -> None:
+    def _drive_rest_open_loop(self, N: int, prev: pathlib.Path, vN: float, lower, disc) -> bool:
         """The final seconds of :meth:`arrive_timed`: D_n drives the rest of its last plan ``prev`` (less the
         t_x already driven) open loop at ``vN`` um/s. A small error can make a replanned path a loop (one-way
-        robot); the rest of the plan misses by a few um at most."""
+        robot); the rest of the plan misses by a few um at most. False (nothing driven) when that rest, driven from
+        the measured pose, would not keep ``Tuning.loop_clearance_um`` from the arena edge, the orbits and the
+        structure (as :meth:`loop_clear`): at 2x noise it drove D_n into the arena edge, pinned for good."""
         n = self.loop.n
         rest = pathlib.sub_path(prev, min(vN * self.loop.tx, prev.length), prev.length)
+        from_here = pathlib.Path(self.loop.est[N].copy(), rest.radius, rest.segments)
+        if not self._open_loop_clear(N, from_here.sample(10.0), lower, disc):
+            self.loop.log("final", N, f"{self.loop.scn.names[N]}'s last {rest.length:.0f} um, driven from where it is, would meet "
+                                      "an obstacle: it plans again")
+            return False
         self.loop.log("final", N, f"{self.loop.scn.names[N]} drives the last {rest.length:.0f} um of its plan open loop")
         self.loop.drive(path_steps(rest, vN, n, n - 1, None))
+        return True
 
     def _timed_path(self, N: int, q, arrivals: Sequence[float], lower, disc, path: pathlib.Path | None):
         """``(path, loop)``: the continued plan ``path`` if there is one, else a new :meth:`loiter_path` to ``q``
