@@ -372,8 +372,8 @@ class SingleDocking:
     def can_arc_in(self, i: int, k: int) -> bool:
         """Whether robot ``i`` (D_k), short of its intermediate pose a_i where a loop would meet the structure, the arena
         edge or a lower orbit, goes on with the fine motion from where it is: within ``Tuning.arc_in_reach`` S_2f lengths of
-        its slot, one interpolated clockwise arc reaches it (as :meth:`fine_dock` steers: arriving within 40 deg of the
-        slot's heading, its compliant aim within ``Tuning.arc_in_aim_um`` of the slot) and that arc's body keeps off the
+        its slot, one interpolated clockwise arc reaches it (as :meth:`fine_dock` steers: arriving within ``Tuning.fine_arc_arrival_deg`` of
+        the slot's heading, its compliant aim within ``Tuning.arc_in_aim_um`` of the slot) and that arc's body keeps off the
         docked bodies (``Tuning.escape_clearance_um`` until one body length from the slot, then not into them), the orbits
         and the arena edge. A robot that came
         within 100 um of a_i 30 deg off (a gap between docked neighbours) had only the loop back, no route, and
@@ -386,7 +386,7 @@ class SingleDocking:
         if aim is not None and np.hypot(*(aim - goal[:2])) > lp.tune.arc_in_aim_um:
             return False  # an arc that must end that far along the face is not one into the slot
         fr = turn_fraction(p, goal if aim is None else aim, r)
-        if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40.0) or not self.loop_blocked(i, k):
+        if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(lp.tune.fine_arc_arrival_deg) or not self.loop_blocked(i, k):
             return False
         rho, length, _ = fr
         arc = move(p, np.linspace(0.0, length, 40), rho / r)
@@ -459,7 +459,7 @@ class SingleDocking:
                 return self.check_docked(i, k)
             aim = docking.compliant_aim(lp.est[i], goal, r, float(lp.L[i]))  # arrive where compliance ends it in the slot
             fr = turn_fraction(lp.est[i], goal if aim is None else aim, r)
-            if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(40):
+            if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(lp.tune.fine_arc_arrival_deg):
                 return False  # not reachable on one interpolated arc: gross motion again
             rho, length, _ = fr
             t_arc = length / v

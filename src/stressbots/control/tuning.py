@@ -244,6 +244,9 @@ class GrossTuning:
     """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
     merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
     off its slot."""
+    fine_arc_arrival_deg: float = 40.0
+    """deg. The S_2f fine motion steers one interpolated arc into the slot only while that arc arrives within this of the
+    slot's heading (docking compliance turns the robot flush from there); beyond it, gross motion again."""
     arc_in_reach: float = 2.0
     """Lengths of the S_2f arc (:func:`~stressbots.control.queries.fine_motion_length`). Where a loop is blocked, a robot
     within this of its slot that one interpolated arc takes in starts its fine motion from there
