@@ -355,29 +355,28 @@ class SingleDocking:
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
 
-    def cut_in(self, i: int, k: int, back: float | None, into: list[str] | None = None) -> str | None:
+    def cut_in(self, i: int, k: int, back: float | None) -> str | None:
         """Why robot ``i`` (D_k), whose gross motion to its intermediate pose a_i is blocked, may start its fine motion
-        from where it is (:meth:`can_arc_in`; also appended to ``into``); None when it may not, or when it has an
-        approach line (``back``): the line approach's clockwise bursts merge only from the funnel's shallow angles, and
-        from 32 deg they docked a robot 74 um off its slot."""
+        from where it is (:meth:`can_arc_in`); None when it may not, or when it has an approach line (``back``): the line
+        approach's clockwise bursts merge only from the funnel's shallow angles, and from 32 deg they docked a robot
+        74 um off its slot."""
         lp = self.loop
         if back is not None or not self.can_arc_in(i, k):
             return None
-        reason = (f"{lp.scn.names[i]} arcs into its slot from here ({np.hypot(*(lp.est[i, :2] - lp.goals[i, :2])):.0f} um "
-                  "away): its way to a_i is blocked and a loop would meet an obstacle")
-        if into is not None:
-            into.append(reason)
-        return reason
+        return (f"{lp.scn.names[i]} arcs into its slot from here ({np.hypot(*(lp.est[i, :2] - lp.goals[i, :2])):.0f} um "
+                "away): its way to a_i is blocked and a loop would meet an obstacle")
 
     def can_arc_in(self, i: int, k: int) -> bool:
         """Whether robot ``i`` (D_k), short of its intermediate pose a_i where a loop would meet the structure, the arena
-        edge or a lower orbit, goes on with the fine motion from where it is: within ``Tuning.arc_in_reach`` S_2f lengths of
-        its slot, one interpolated clockwise arc reaches it (as :meth:`fine_dock` steers: arriving within ``Tuning.fine_arc_arrival_deg`` of
-        the slot's heading, its compliant aim within ``Tuning.arc_in_aim_um`` of the slot) and that arc's body keeps off the
-        docked bodies (``Tuning.escape_clearance_um`` until one body length from the slot, then not into them), the orbits
-        and the arena edge. A robot that came
-        within 100 um of a_i 30 deg off (a gap between docked neighbours) had only the loop back, no route, and
-        escaped into the gap, pinned."""
+        edge or a lower orbit, goes on with the fine motion from where it is.
+
+        It must be within ``Tuning.arc_in_reach`` S_2f lengths of its slot, and one interpolated clockwise arc must reach
+        the slot as :meth:`fine_dock` steers it: arriving within ``Tuning.fine_arc_arrival_deg`` of the slot's heading,
+        its compliant aim within ``Tuning.arc_in_aim_um`` of the slot. The arc keeps ``Tuning.escape_clearance_um`` from
+        the docked bodies, the orbits and the arena edge until one body length from the slot (a gap's sides are met
+        only there), and from there does not run into the docked bodies. A robot that came within 100 um of a_i 30 deg
+        off (a gap between docked neighbours) had only the loop back, no route, and escaped into the gap, pinned.
+        """
         lp = self.loop
         p, goal, r = lp.est[i], lp.goals[i], float(lp.r_hat[i])
         if np.hypot(*(p[:2] - goal[:2])) > lp.tune.arc_in_reach * fine_motion_length(r, lp.opts.fine_distance_um):
@@ -390,8 +389,6 @@ class SingleDocking:
             return False
         rho, length, _ = fr
         arc = move(p, np.linspace(0.0, length, 40), rho / r)
-        # off the docked bodies by the escape clearance until a body length from the slot (a gap's sides are
-        # touched only there), and off the orbits and the arena edge all the way
         far = np.hypot(*(arc[:, :2] - goal[:2]).T) > lp.L[i]
         return not (lp.obstacles_hit(arc[far], i, lp.orbiting_below(k), clearance=lp.tune.escape_clearance_um)
                     or any((penetration_depth(arc[:-1], lp.L[i], lp.W[i], pj, lj, wj) > 0.5).any()
