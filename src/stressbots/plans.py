@@ -118,6 +118,22 @@ def merge_steps(steps: Sequence[PlanStep], *, min_duration_s: float = 0.0) -> tu
     return tuple(out)
 
 
+def join_steps(steps: Sequence[tuple[int, float]]) -> tuple[tuple[int, float], ...]:
+    """Primitive steps ``(k, duration_s)`` (``P_k`` by index, as planner and controller build them) with neighbours
+    under the same primitive joined into one; durations are kept as given (none dropped).
+
+    >>> join_steps([(3, 1.0), (3, 0.5), (2, 2.0), (3, 1.0)])
+    ((3, 1.5), (2, 2.0), (3, 1.0))
+    """
+    out: list[tuple[int, float]] = []
+    for k, d in steps:
+        if out and out[-1][0] == k:
+            out[-1] = (k, out[-1][1] + d)
+        else:
+            out.append((k, d))
+    return tuple(out)
+
+
 def _fail(problem: str, source: str | None, field_: str | None = None) -> StressbotsError:
     return StressbotsError(problem, source=source, field=field_)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from . import paths as pathlib
 from .kinematics import advance, move
+from .plans import join_steps
 from .robots import TWO_PI
 
 __all__ = ["PrepositionSettings", "follower_ends", "docking_costs", "splice_straight", "straight_windows"]
@@ -105,10 +106,4 @@ def splice_straight(steps: list[tuple[int, float]], k: int, t0: float, dt: float
         for lo, hi, kind in ((a, max(a, t0), kk), (max(a, t0), min(b, t1), k - 2), (min(b, t1), b, kk)):
             if hi - lo > 1e-12:
                 out.append((kind, hi - lo))
-    merged: list[tuple[int, float]] = []
-    for kk, d in out:
-        if merged and merged[-1][0] == kk:
-            merged[-1] = (kk, merged[-1][1] + d)
-        else:
-            merged.append((kk, d))
-    return merged
+    return list(join_steps(out))

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..collision import arena_gap, penetration_depth, point_rectangle_distance
 from ..kinematics import move
+from ..plans import join_steps
 from ..robots import TWO_PI, turning_centres
 from .escape_search import Orbiting, orbit_slack
 
@@ -211,7 +212,7 @@ def group_escape_sequence(g: Group, arena_um, *, edge_need: float, body_clearanc
                 break
             m = group_escape(g._replace(poses=after), arena_um, alone=True, **kw)
             if m is not None:
-                seq = EscapeSequence(_merged(((k, dt), *_move_steps(m, len(g.order)))), m.slack_um)
+                seq = EscapeSequence(join_steps(((k, dt), *_move_steps(m, len(g.order)))), m.slack_um)
                 if best is None or seq.total_s < best.total_s:
                     best = seq
                 break
@@ -221,17 +222,6 @@ def group_escape_sequence(g: Group, arena_um, *, edge_need: float, body_clearanc
 def _move_steps(m: GroupMove, n: int) -> tuple[tuple[int, float], ...]:
     """A :class:`GroupMove` as steps ``((n, wait_s), (k, straight_s))``, parts of no duration left out."""
     return tuple((k, d) for k, d in ((n, m.wait_s), (m.k, m.straight_s)) if d > 1e-9)
-
-
-def _merged(steps) -> tuple[tuple[int, float], ...]:
-    """``steps`` with neighbours under the same primitive joined into one."""
-    out: list[tuple[int, float]] = []
-    for k, d in steps:
-        if out and out[-1][0] == k:
-            out[-1] = (k, out[-1][1] + d)
-        else:
-            out.append((k, d))
-    return tuple(out)
 
 
 def _cuts(g: Group, k: int, arena_um, body_clearance: float, edge_clearance: float, disc_clearance: float, docked,
