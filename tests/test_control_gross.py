@@ -29,7 +29,7 @@ from stressbots.control.gross import (
     escape_moves,
     escape_sweep,
 )
-from stressbots.control.single import approach_length, lead_in_clear
+from stressbots.control.single import SingleDocking, approach_length, lead_in_clear
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 
@@ -192,8 +192,8 @@ def test_failed_route_searches_are_capped_per_target(monkeypatch):
     target = np.array([150.0, 1400.0, 0.5 * math.pi])
     for _ in range(6):  # the caller's docking attempts
         gm.steer(0, target, 1, 0, [], max_cycles=40)
-    # each failed search asks at three clearances; after route_searches_max failures it asks no more
-    assert 0 < calls["n"] <= 3 * tune.route_searches_max
+    # each failed search asks at four clearances (the wide one first); after route_searches_max failures it asks no more
+    assert 0 < calls["n"] <= 4 * tune.route_searches_max
     assert any(kind == "no-route" for kind, _ in loop.events)
     assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0  # and it never drove into the wall
 
@@ -297,13 +297,13 @@ def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was
 
 
 def test_a_blocked_gross_motion_ends_where_its_cut_in_says_the_fine_motion_can_start_and_only_then():
-    """``ready_if_blocked`` is asked only when the path to the target is blocked; its reason is logged as "cut-in" and
+    """``ready_if_blocked`` is asked only when the path to the target is blocked; its ``(event, reason)`` is logged and
     the gross motion has arrived. A clear path never asks it."""
     asked: list[float] = []
 
-    def cut_in() -> str:
+    def cut_in() -> tuple[str, str]:
         asked.append(1.0)
-        return "cuts in"
+        return "cut-in", "cuts in"
 
     # heading +y at the bottom wall's edge, target behind it: every path back loops into the wall
     start = np.array([1000.0, 0.5 * L + 30.0, math.pi])
@@ -316,3 +316,29 @@ def test_a_blocked_gross_motion_ends_where_its_cut_in_says_the_fine_motion_can_s
     open_loop = KinematicLoop(np.array([700.0, 700.0, 0.0]))
     assert GrossMotion(open_loop).steer(0, np.array([1100.0, 1300.0, 0.5]), 1, 0, [], ready_if_blocked=cut_in) is SteerOutcome.ARRIVED
     assert not asked and open_loop.t > 0.0
+
+
+# -- a nominal route's waypoint that is no longer reachable ---------------------------------------------
+
+def _through(waypoint, target, skip: bool):
+    """``SingleDocking._steer_through`` from the open toward ``waypoint``, then ``target``, on a kinematic loop."""
+    tune = Tuning(skip_blocked_waypoints=skip)
+    loop = KinematicLoop(np.array([1000.0, 1000.0, 0.0]), tune)
+    loop.steer = GrossMotion(loop).steer  # type: ignore[attr-defined]
+    stuck = SingleDocking(loop)._steer_through(0, 1, [], [waypoint, target], None, lambda: None)  # type: ignore[arg-type]
+    return loop, stuck
+
+
+def test_a_nominal_waypoint_whose_way_is_blocked_is_dropped_and_the_aim_reached_from_where_the_robot_is():
+    # a waypoint heading into the bottom wall 40 um from it (its body would be half outside): no path ends there
+    waypoint, target = np.array([1000.0, 40.0, math.pi]), np.array([1400.0, 1500.0, 0.5])
+    loop, stuck = _through(waypoint, target, skip=True)
+    assert not stuck and arrived(loop.est[0], target, loop.tune)
+    assert [kind for kind, _ in loop.events].count("skip") == 1
+    assert float(arena_gap(np.array(loop.trail), L, W, ARENA).min()) > 0.0
+    # without the skip the gross motion spends its time on the waypoint it cannot reach before it gets to the aim
+    held, _ = _through(waypoint, target, skip=False)
+    assert "skip" not in [kind for kind, _ in held.events] and held.t > loop.t
+    # a reachable waypoint is driven to, not skipped
+    ok, _ = _through(np.array([1000.0, 1300.0, 0.0]), target, skip=True)
+    assert "skip" not in [kind for kind, _ in ok.events] and arrived(ok.est[0], target, ok.tune)

@@ -19,7 +19,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control.gross import GrossMotion, escape_sweep, move_stops
+from stressbots.control.queries import in_funnel, line_coords, line_pose
 from stressbots.control.single import SingleDocking
 from stressbots.control.tuning import ControllerOptions, Tuning
 from stressbots.kinematics import move
@@ -134,7 +136,8 @@ def test_a_robot_short_of_a_i_arcs_in_from_there_only_where_a_loop_is_blocked_an
     assert not docking_loop(pose, goal, blocked=False).can_arc_in(0, 2)
     sd = docking_loop(pose, goal, blocked=True)
     sd.loop.scn.names = ("R0", "R1")
-    assert "arcs into its slot" in (sd.cut_in(0, 2, None) or "")
+    event, reason = sd.cut_in(0, 2, None) or ("", "")
+    assert event == "cut-in" and "arcs into its slot" in reason
     assert sd.cut_in(0, 2, 450.0) is None  # a robot with an approach line merges from its funnel only
     # pointing away from the slot: no clockwise arc reaches it
     assert not docking_loop(np.array([pose[0], pose[1], pose[2] + math.pi]), goal, blocked=True).can_arc_in(0, 2)
@@ -174,3 +177,35 @@ def test_an_arc_whose_compliant_aim_lies_far_along_the_face_is_not_an_arc_in():
     assert not sd.can_arc_in(0, 2)
     sd.loop.tune = Tuning(arc_in_aim_um=1000.0)  # the same arc, the aim allowed anywhere: taken
     assert sd.can_arc_in(0, 2)
+
+
+# -- where the gross motion aims in the approach funnel ---------------------------------------------------
+
+def test_the_funnel_aim_moves_back_from_the_corridors_end_only_as_far_as_a_loop_through_it_needs():
+    """A docked body across the approach line ever nearer ahead of the slot: the aim is the nearest of (corridor's end,
+    + half of ``aim_behind_extra_um``, + all of it) whose clockwise loop (the only way back to it for a one-way robot
+    that arrived off it) keeps the clearance from the body and the arena edge, recomputed here from the swept bodies;
+    the corridor's end when none does. Every aim is in the approach funnel."""
+    back, tune, clearance = 450.0, Tuning(), ControllerOptions().clearance_um
+    extra = tune.aim_behind_extra_um
+    goal = np.array([1000.0, 1200.0, 0.0])  # slot heading +y: its approach line runs back toward -y
+    seen = set()
+    for ahead in np.linspace(-300.0, 400.0, 36):
+        body = np.array([1000.0, goal[1] + ahead, 0.5 * math.pi])  # across the line
+        sd = docking_loop(np.array([1000.0, 1900.0, 0.0]), goal, blocked=False, bodies=[(body,)])
+        b, right, psi = line_coords(goal, sd._aim_behind(0, goal, back, []))
+        assert abs(right - 20.0) < 1e-6 and abs(psi + math.radians(6.0)) < 1e-9
+        assert in_funnel(b, right, psi, back, R, tune)
+
+        def loop_clear(bb: float, body=body) -> bool:
+            # the gross motion's rule: the docked clearance applies beyond a body length from the aim
+            pose = line_pose(goal, bb, 20.0, -math.radians(6.0))
+            swept = move(pose, np.linspace(0.0, 2.0 * math.pi * R, 400), 1.0 / R)
+            need = np.where(np.hypot(*(swept[:, :2] - pose[:2]).T) > L, max(clearance, tune.gross_docked_clearance_um), clearance)
+            return bool((penetration_depth(swept, L, W, body[None], L, W) <= -need).all()
+                        and arena_gap(swept, L, W, (2000.0, 2000.0)).min() >= clearance)
+
+        expected = next((bb for bb in (back, back + 0.5 * extra, back + extra) if loop_clear(bb)), back)
+        assert abs(b - expected) < 1e-6
+        seen.add(round(b - back))
+    assert seen == {0, round(0.5 * extra), round(extra)}  # the sweep reaches all three

@@ -286,7 +286,8 @@ class GrossMotion:
             c_eff = self.loop.opts.clearance_um if clearance is None else clearance
             # widest clearance first; the last, Tuning.escape_clearance_um, gets a robot in a tight spot (its loop
             # 12 um from the arena edge, say) out of it, where no route at the full clearance starts
-            for c in (max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um, self.loop.tune.escape_clearance_um):
+            for c in (self.loop.tune.route_wide_clearance_um, max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um,
+                      self.loop.tune.escape_clearance_um):
                 points, routed = self.roadmap_route(i, target, orbiting, extra_discs, c)
                 if routed is None:
                     continue
@@ -400,12 +401,13 @@ class GrossMotion:
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
-              clearance: float | None = None, ready_if_blocked: Callable[[], str | None] | None = None) -> SteerOutcome:
+              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None) -> SteerOutcome:
         """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; ARRIVED when there.
 
         ``ready()`` True ends the gross motion early (the robot is already in the region from which the
-        next step works: the seed's regions A_i instead of a point); so does ``ready_if_blocked()`` (a reason, logged)
-        when the path to ``target`` is blocked (a wider region the next step also works from). A blocked path is routed around the
+        next step works: the seed's regions A_i instead of a point); so does ``ready_if_blocked()`` (``(event, reason)``,
+        logged) when the path to ``target`` is blocked (a wider region the next step also works from, or a waypoint
+        the caller can do without). A blocked path is routed around the
         obstacles (:meth:`_blocked`); NO_WAY when there is no way (the caller re-plans), STUCK when the robot
         stalled or has no route and nothing clear to drive (failure region H; see :class:`SteerOutcome`).
 
@@ -430,9 +432,9 @@ class GrossMotion:
                                   target=target if via else None):
                 if not via:
                     return _ended(False, stalled)  # a waypoint of a committed route is out of reach: the caller re-plans
-                reason = ready_if_blocked() if ready_if_blocked is not None else None
-                if reason:
-                    self.loop.log("cut-in", i, reason)
+                why = ready_if_blocked() if ready_if_blocked is not None else None
+                if why is not None:
+                    self.loop.log(why[0], i, why[1])
                     return _ended(True, stalled)
                 outcome, quiet, escapes, stalled = self._blocked(i, target, turn_k, straight_k, orbiting, extra_discs, ready, clearance,
                                                                  path, quiet, escapes, stalled)

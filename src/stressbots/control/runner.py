@@ -358,7 +358,7 @@ class _Runner(PlantLoop):
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
-              clearance: float | None = None, ready_if_blocked: Callable[[], str | None] | None = None) -> SteerOutcome:
+              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None) -> SteerOutcome:
         """Gross motion of robot ``i`` to ``target``; ARRIVED when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
         return self.gross.steer(i, target, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=max_cycles, ready=ready,
                                 via=via, clearance=clearance, ready_if_blocked=ready_if_blocked)

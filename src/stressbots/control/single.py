@@ -248,7 +248,7 @@ class SingleDocking:
         misses = 0
         missed_at = -1.0  # time (s) of the last missed line approach
         for attempt in range(lp.tune.dock_attempts):
-            goal, back, a_pose, ready = self._aim(i, attempt, route_phase)
+            goal, back, a_pose, ready = self._aim(i, attempt, route_phase, orbiting)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
             stuck = self._steer_through(i, k, orbiting, targets, ready, partial(self.cut_in, i, k, back))
@@ -284,8 +284,10 @@ class SingleDocking:
         raise lp.abort(f"{lp.scn.names[i]} did not dock in {lp.tune.dock_attempts} attempts (last: "
                        f"{lp.events[-1]['detail'] if lp.events else ''})")
 
-    def _aim(self, i: int, attempt: int, route_phase) -> tuple[np.ndarray, float | None, np.ndarray, Callable[[], bool] | None]:
-        """``(goal, back, a_pose, ready)`` of docking attempt ``attempt`` (from 0) of robot ``i``: its slot (um, um, rad),
+    def _aim(self, i: int, attempt: int, route_phase,
+             orbiting: Sequence[int]) -> tuple[np.ndarray, float | None, np.ndarray, Callable[[], bool] | None]:
+        """``(goal, back, a_pose, ready)`` of docking attempt ``attempt`` (from 0) of robot ``i`` (``orbiting``: the robots
+        waiting on their orbits): its slot (um, um, rad),
         the approach line's length behind it (um; None: the line's corridor is blocked, the fine motion takes the S_2f
         arc from the intermediate pose a_i), the pose its gross motion sigma_1 aims at, and the test that ends that
         gross motion early (in the approach funnel; None: at a_i)."""
@@ -297,17 +299,50 @@ class SingleDocking:
             a_pose = retarget(a_pose, lp.motion)
             ready = None
         else:
-            a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
+            a_pose = self._aim_behind(i, goal, back, orbiting)
             ready = lambda back=back: self.in_funnel(i, back)  # noqa: E731
         return goal, back, a_pose, ready
 
+    def _aim_behind(self, i: int, goal: np.ndarray, back: float, orbiting: Sequence[int]) -> np.ndarray:
+        """The pose robot ``i``'s gross motion aims at in the approach funnel of slot ``goal`` (corridor ``back`` um): 20 um
+        right of the line, pointing 6 deg left of it (the errors of the last leg then keep it in the funnel), at the
+        corridor's end, or half or all of ``Tuning.aim_behind_extra_um`` further back: the nearest from which a clockwise
+        loop keeps clear of the ``orbiting`` robots, the structure and the arena edge (the corridor's end when none does).
+
+        A one-way robot that arrives off its aim (30 um too far right, say) gets back to it only by a loop. Aimed at the
+        corridor's end, that loop met the structure ahead, the roadmap sent the robot on a tour round the structure,
+        and every tour ended the same way (1400 s for one robot). Only as far back as the loop needs: every um further
+        is a longer straight approach, and aimed 150 um back throughout, marginal shape errors and missed approaches
+        cost as many trials as the loops saved."""
+        lp = self.loop
+        extra, r = lp.tune.aim_behind_extra_um, float(lp.r_hat[i])
+        for b in (back, back + 0.5 * extra, back + extra):
+            pose = line_pose(goal, b, 20.0, -math.radians(6.0))
+            loop = move(pose, np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2), 1.0 / r)  # every 10 um
+            if not lp.obstacles_hit(loop, i, orbiting, target=pose):  # as the gross motion checks its way to the aim
+                return pose
+        return line_pose(goal, back, 20.0, -math.radians(6.0))
+
     def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None,
-                       cut_in: Callable[[], str | None]) -> bool:
+                       cut_in: Callable[[], tuple[str, str] | None]) -> bool:
         """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
         its aim; ``cut_in`` ends one whose path is blocked where the fine motion can start, :meth:`cut_in`); whether one
-        ended stuck (failure region H: the rest are skipped, the caller's recovery takes over)."""
-        return any(self.loop.steer(i, tgt, k, k - 1, orbiting, ready=ready, ready_if_blocked=cut_in) is SteerOutcome.STUCK
-                   for tgt in targets)
+        ended stuck (failure region H: the rest are skipped, the caller's recovery takes over).
+
+        A waypoint whose path is blocked is dropped (``Tuning.skip_blocked_waypoints``): the nominal route was planned
+        around the nominal orbits and structure, and routing to its waypoint around the measured ones led a robot down
+        a 300 um corridor between two drifted orbits and the arena edge, where it was boxed in; the aim (or the
+        next waypoint) is routed from where the robot is instead."""
+        lp = self.loop
+
+        def skip_or_cut_in(tgt: np.ndarray) -> tuple[str, str] | None:
+            return cut_in() or ("skip", f"{lp.scn.names[i]}'s way to its nominal route's waypoint ({tgt[0]:.0f}, {tgt[1]:.0f}) um "
+                                        "is blocked: it heads for its next target")
+
+        last = len(targets) - 1
+        return any(lp.steer(i, tgt, k, k - 1, orbiting, ready=ready,
+                            ready_if_blocked=partial(skip_or_cut_in, tgt) if n < last and lp.tune.skip_blocked_waypoints else cut_in)
+                   is SteerOutcome.STUCK for n, tgt in enumerate(targets))
 
     def _clear_the_way(self, i: int, k: int, goal: np.ndarray, a_pose: np.ndarray, back: float | None) -> None:
         """Recovery of robot ``i`` (D_k) whose gross motion toward ``a_pose`` stopped it in failure region H: waiting
@@ -355,7 +390,7 @@ class SingleDocking:
         """Whether robot ``i`` can merge onto its approach line (:func:`~stressbots.control.queries.in_funnel`)."""
         return in_funnel(*self.line_coords(i), back, float(self.loop.r_hat[i]), self.loop.tune)
 
-    def cut_in(self, i: int, k: int, back: float | None) -> str | None:
+    def cut_in(self, i: int, k: int, back: float | None) -> tuple[str, str] | None:
         """Why robot ``i`` (D_k), whose gross motion to its intermediate pose a_i is blocked, may start its fine motion
         from where it is (:meth:`can_arc_in`); None when it may not, or when it has an approach line (``back``): the line
         approach's clockwise bursts merge only from the funnel's shallow angles, and from 32 deg they docked a robot
@@ -363,8 +398,8 @@ class SingleDocking:
         lp = self.loop
         if back is not None or not self.can_arc_in(i, k):
             return None
-        return (f"{lp.scn.names[i]} arcs into its slot from here ({np.hypot(*(lp.est[i, :2] - lp.goals[i, :2])):.0f} um "
-                "away): its way to a_i is blocked and a loop would meet an obstacle")
+        return "cut-in", (f"{lp.scn.names[i]} arcs into its slot from here ({np.hypot(*(lp.est[i, :2] - lp.goals[i, :2])):.0f} um "
+                          "away): its way to a_i is blocked and a loop would meet an obstacle")
 
     def can_arc_in(self, i: int, k: int) -> bool:
         """Whether robot ``i`` (D_k), short of its intermediate pose a_i where a loop would meet the structure, the arena

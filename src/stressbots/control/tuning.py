@@ -233,6 +233,13 @@ class GrossTuning:
     """Consecutive stalls after which gross motion gives up (stuck) and recovery begins."""
     dock_attempts: int = 6
     """Docking attempts of a single robot before the run fails."""
+    route_wide_clearance_um: float = 50.0
+    """um. A blocked gross motion asks the roadmap for a route at this clearance first, then at narrower ones: a route at
+    20 um led a robot down a corridor between two waiting orbits and the arena edge; the orbits drift, its heading
+    drifts, and it was boxed in there. A wide route is longer but stays passable."""
+    skip_blocked_waypoints: bool = True
+    """A waypoint of the nominal route whose path is blocked is dropped and the gross motion heads for the next target
+    (:meth:`~stressbots.control.single.SingleDocking._steer_through`): the waypoint was planned for the nominal poses."""
     approach_lengths_um: tuple[float, ...] = (450.0, 350.0, 250.0, 150.0)
     """Candidate clear corridor lengths behind a slot, longest first."""
     funnel_min_behind_um: float = 120.0
@@ -240,6 +247,10 @@ class GrossTuning:
     funnel_right_um: float = 60.0
     """(funnel_min_behind_um, funnel_extra_um, funnel_right_um) The approach funnel: at least this far behind the slot,
     at most the corridor plus the extra, at most this far right of the line."""
+    aim_behind_extra_um: float = 150.0
+    """um. How far behind the corridor's end the gross motion to a slot with an approach line may aim (half of it, then
+    all), where a clockwise loop through the corridor's end would meet something
+    (:meth:`~stressbots.control.single.SingleDocking._aim_behind`); within the funnel (``funnel_extra_um``)."""
     funnel_psi_deg: float = 12.0
     """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
     merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
