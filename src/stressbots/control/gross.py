@@ -286,8 +286,7 @@ class GrossMotion:
             c_eff = self.loop.opts.clearance_um if clearance is None else clearance
             # widest clearance first; the last, Tuning.escape_clearance_um, gets a robot in a tight spot (its loop
             # 12 um from the arena edge, say) out of it, where no route at the full clearance starts
-            for c in (self.loop.tune.route_wide_clearance_um, max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um,
-                      self.loop.tune.escape_clearance_um):
+            for c in (max(c_eff + 5.0, 20.0), self.loop.opts.clearance_um, self.loop.tune.escape_clearance_um):
                 points, routed = self.roadmap_route(i, target, orbiting, extra_discs, c)
                 if routed is None:
                     continue

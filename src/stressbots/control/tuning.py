@@ -233,10 +233,6 @@ class GrossTuning:
     """Consecutive stalls after which gross motion gives up (stuck) and recovery begins."""
     dock_attempts: int = 6
     """Docking attempts of a single robot before the run fails."""
-    route_wide_clearance_um: float = 50.0
-    """um. A blocked gross motion asks the roadmap for a route at this clearance first, then at narrower ones: a route at
-    20 um led a robot down a corridor between two waiting orbits and the arena edge; the orbits drift, its heading
-    drifts, and it was boxed in there. A wide route is longer but stays passable."""
     skip_blocked_waypoints: bool = True
     """A waypoint of the nominal route whose path is blocked is dropped and the gross motion heads for the next target
     (:meth:`~stressbots.control.single.SingleDocking._steer_through`): the waypoint was planned for the nominal poses."""
