@@ -500,12 +500,11 @@ class GrossMotion:
         (4 um over 250 um) and drift into the structure or the arena edge, and pinned the robot for good."""
         lp = self.loop
         c = lp.tune.viable_clearance_um if clearance is None else clearance
-        turn_s, straight_s = move_
-        while True:
-            a = min(turn_s, lp.tx)
-            b = min(straight_s, lp.tx - a)
-            lp.drive([(k, d) for k, d in ((turn_k, a), (straight_k, b)) if d > 0.0])
-            turn_s, straight_s = turn_s - a, straight_s - b
+        done = (0.0, 0.0)
+        for stop in move_stops(move_, lp.tx):  # the stops free_move checked
+            lp.drive([(k, d) for k, d in ((turn_k, stop[0] - done[0]), (straight_k, stop[1] - done[1])) if d > 0.0])
+            done = stop
+            turn_s, straight_s = move_[0] - stop[0], move_[1] - stop[1]
             if turn_s + straight_s <= 1e-9:
                 return
             v, r, p = float(lp.v_hat[i]), float(lp.r_hat[i]), lp.est[i].copy()

@@ -316,12 +316,10 @@ class SingleDocking:
         cost as many trials as the loops saved."""
         lp = self.loop
         extra, r = lp.tune.aim_behind_extra_um, float(lp.r_hat[i])
-        for b in (back, back + 0.5 * extra, back + extra):
-            pose = line_pose(goal, b, 20.0, -math.radians(6.0))
-            loop = move(pose, np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2), 1.0 / r)  # every 10 um
-            if not lp.obstacles_hit(loop, i, orbiting, target=pose):  # as the gross motion checks its way to the aim
-                return pose
-        return line_pose(goal, back, 20.0, -math.radians(6.0))
+        poses = [line_pose(goal, b, 20.0, -math.radians(6.0)) for b in (back, back + 0.5 * extra, back + extra)]
+        s = np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2)  # a loop sampled every 10 um
+        # each loop checked as the gross motion checks its way to the aim
+        return next((p for p in poses if not lp.obstacles_hit(move(p, s, 1.0 / r), i, orbiting, target=p)), poses[0])
 
     def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None,
                        cut_in: Callable[[], tuple[str, str] | None]) -> bool:
@@ -416,13 +414,14 @@ class SingleDocking:
         p, goal, r = lp.est[i], lp.goals[i], float(lp.r_hat[i])
         if np.hypot(*(p[:2] - goal[:2])) > lp.tune.arc_in_reach * fine_motion_length(r, lp.opts.fine_distance_um):
             return False
-        aim = docking.compliant_aim(p, goal, r, float(lp.L[i]))
+        arc_in = self.slot_arc(i)
+        if arc_in is None:
+            return False
+        rho, length, aim = arc_in
         if aim is not None and np.hypot(*(aim - goal[:2])) > lp.tune.arc_in_aim_um:
             return False  # an arc that must end that far along the face is not one into the slot
-        fr = turn_fraction(p, goal if aim is None else aim, r)
-        if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(lp.tune.fine_arc_arrival_deg) or not self.loop_blocked(i, k):
+        if not self.loop_blocked(i, k):
             return False
-        rho, length, _ = fr
         arc = move(p, np.linspace(0.0, length, 40), rho / r)
         far = np.hypot(*(arc[:, :2] - goal[:2]).T) > lp.L[i]
         return not (lp.obstacles_hit(arc[far], i, lp.orbiting_below(k), clearance=lp.tune.escape_clearance_um)
@@ -479,21 +478,32 @@ class SingleDocking:
         loop = move(lp.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
         return lp.obstacles_hit(loop, i, lp.orbiting_below(k), clearance=0.0)
 
+    def slot_arc(self, i: int) -> tuple[float, float, np.ndarray | None] | None:
+        """``(rho, length_um, aim)``: the one interpolated clockwise arc (:func:`~stressbots.control.queries.turn_fraction`)
+        that takes robot ``i`` from its measured pose to where docking compliance ends it in its slot (``aim``,
+        :func:`~stressbots.control.docking.compliant_aim`; None: the slot itself); None when no such arc arrives within
+        ``Tuning.fine_arc_arrival_deg`` of the slot's heading. What :meth:`fine_dock` steers and :meth:`can_arc_in` checks."""
+        lp = self.loop
+        goal, r = lp.goals[i], float(lp.r_hat[i])
+        aim = docking.compliant_aim(lp.est[i], goal, r, float(lp.L[i]))
+        fr = turn_fraction(lp.est[i], goal if aim is None else aim, r)
+        if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(lp.tune.fine_arc_arrival_deg):
+            return None
+        return fr[0], fr[1], aim
+
     def fine_dock(self, i: int, k: int) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""
         lp = self.loop
         for _ in range(60):
-            v, r = lp.v_hat[i], lp.r_hat[i]
-            goal = lp.goals[i]
+            v = lp.v_hat[i]
             if self.near_slot(i):
                 # already at the structure (e.g. it met it while turning): push, and let compliance act
                 lp.drive([(k - 1, lp.opts.push_s)])
                 return self.check_docked(i, k)
-            aim = docking.compliant_aim(lp.est[i], goal, r, float(lp.L[i]))  # arrive where compliance ends it in the slot
-            fr = turn_fraction(lp.est[i], goal if aim is None else aim, r)
-            if fr is None or abs(angle_difference(fr[2], goal[2])) > math.radians(lp.tune.fine_arc_arrival_deg):
+            arc_in = self.slot_arc(i)
+            if arc_in is None:
                 return False  # not reachable on one interpolated arc: gross motion again
-            rho, length, _ = fr
+            rho, length, _ = arc_in
             t_arc = length / v
             if t_arc <= lp.tx:
                 lp.drive(lp.interpolated_steps(rho, t_arc, k, k - 1) + [(k - 1, lp.opts.push_s)])
