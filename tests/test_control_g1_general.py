@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -194,3 +195,42 @@ def test_tracks_apart_is_the_least_distance_of_the_two_tracks(ax, ay, ath, alen,
     brute = float(cKDTree(pb).query(pa)[0].min())
     if abs(brute - gap) > 1.0:
         assert tracks_apart(a, b, gap) == (brute >= gap)
+
+
+@pytest.mark.parametrize("beyond_s", [0.1, 0.2, 0.4, 0.8])
+def test_d_n_minus_1s_station_leg_is_checked_clear_leg_overrun_s_past_its_end(beyond_s):
+    """LegChoice.transfer_option on a hand-built snapshot: D_(n-1) (robot 1) orbits in the open and its leg runs
+    ``d`` um straight; an obstacle lies across its track ``beyond_s`` seconds (at its speed) past the leg's end. The leg
+    is refused (Replan) exactly when that is within ``Tuning.leg_overrun_s``: its straight is driven closed loop and
+    stops at the leg's end, so only the last frame's overrun needs room (held-out 19:0 at 2x: a whole second past a via
+    orbit reached into a waiting orbit and every pair frame failed in zero time)."""
+    from types import SimpleNamespace
+
+    from stressbots.control.pairloop import Replan
+    from stressbots.control.queries import pose_on_orbit
+    from stressbots.control.transfer_legs import LegChoice
+    from stressbots.control.tuning import ControllerOptions, Tuning
+
+    tune = Tuning()
+    vM, rM, d = 100.0, 200.0, 400.0
+    centre_M = np.array([1500.0, 1000.0])
+    th_dep = 0.0  # departs heading +y
+    mdep = pose_on_orbit(centre_M, rM, th_dep)
+    wall_y = mdep[1] + d + vM * beyond_s  # the obstacle: everything of D_(n-1)'s centre line beyond this y
+
+    def obstacles_hit(samples, i, orbiting, *, extra_discs=(), clearance=None, target=None):
+        return bool(i == 1 and (np.asarray(samples)[:, 1] > wall_y).any())
+
+    est = np.array([[600.0, 2400.0, math.pi / 2.0], [*mdep[:2], th_dep]])
+    loop = SimpleNamespace(est=est, r_hat=np.array([R_N, rM]), v_hat=np.array([V_N, vM]), L=np.array([L_N, 250.0]),
+                           W=np.array([W_N, 50.0]), rstar=np.array([RSTAR_N, float(orbit_radii(250.0, 50.0, rM))]),
+                           scn=SimpleNamespace(arena_um=ARENA, names=("R0", "R1")), tune=tune, opts=ControllerOptions(),
+                           obstacles_hit=obstacles_hit)
+    pair = SimpleNamespace(loop=loop, centre=lambda i: centre_M if i == 1 else turning_centres(est[i], R_N))
+    legs = LegChoice(pair)  # type: ignore[arg-type]  # duck-typed: transfer_option reads only these
+    q_next = np.array([2000.0, 2000.0, 0.0])
+    if beyond_s < tune.leg_overrun_s:
+        with pytest.raises(Replan):
+            legs.transfer_option(0, 1, 1.0, d, th_dep, [], centre_M + [0.0, d], q_next)
+    else:
+        legs.transfer_option(0, 1, 1.0, d, th_dep, [], centre_M + [0.0, d], q_next)  # no Replan: D_n's options follow

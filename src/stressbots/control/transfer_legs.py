@@ -133,7 +133,8 @@ class LegChoice:
         mdep = pose_on_orbit(self.pair.centre(M), self.loop.r_hat[M], th_dep)
         s_m = np.linspace(0.0, vM * t_straight, 60)
         m_track = move(mdep, s_m, 0.0)
-        if self.blocked(m_track, M, lower, c):
+        own = move(mdep, np.linspace(0.0, d + vM * self.loop.tune.leg_overrun_s, 60), 0.0)
+        if self.blocked(own, M, lower, c):
             raise Replan(f"{self.loop.scn.names[M]}'s straight move to its station orbit is blocked")
         m_disc = [(self.pair.centre(M), self.loop.rstar[M] + c)]
         new_disc = [(np.asarray(c_star, float), self.loop.rstar[M] + 40.0)]

@@ -77,6 +77,12 @@ class PairTuning:
     track_overshoot: float = 0.15
     """D_n's straight runs during a transfer may end this fraction (plus 40 um) further than planned (3 sigma of the
     literature's 5 % speed error, and the bearing fixes): it must have room to orbit there."""
+    leg_overrun_s: float = 0.3
+    """s. How far past a station-transfer leg's end D_{n-1}'s straight track must be clear (at its identified speed):
+    the leg is driven closed loop and its last frame (at most 1.6 t_x) runs long by the speed error, 3 sigma of 10 %
+    at 2x the literature's noise. It was a whole second: past a via orbit of the station route (whose own check is the
+    orbit disc at the leg's end) that reached into a waiting orbit, and every pair frame failed in zero time (held-out
+    19:0 at 2x)."""
     rendezvous_attempts: int = 4
     """Rendezvous tries at one station before G_1 is re-planned."""
     departure_cost_max: float = 0.6
