@@ -8,6 +8,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -158,15 +159,16 @@ def test_a_park_refused_after_its_wait_is_tried_again_once_its_orbit_drifted_clo
     calls = _scripted_drive(run, i, held=True, record_waits=True)
     run.park_orbits(2)
     refused = [e for e in run.events if e["kind"] == "park" and "after the wait its straight is not clear" in e["detail"]]
-    assert len(refused) == 1 and len(calls) == 1  # one wait, no straight
+    waits = 1 + run.tune.park_replans_after_wait  # the wait, and one per re-plan from where it stopped
+    assert len(refused) == 1 and len(calls) == waits  # waits, no straight
     run.park_orbits(2)
-    assert len(calls) == 1  # same poses: not again
+    assert len(calls) == waits  # same poses: not again
     run.estimator.pose[i, 0] -= 0.5 * run.tune.park_retry_drift_um
     run.park_orbits(2)
-    assert len(calls) == 1  # drifted, but less than park_retry_drift_um
+    assert len(calls) == waits  # drifted, but less than park_retry_drift_um
     run.estimator.pose[i, 0] -= run.tune.park_retry_drift_um
     run.park_orbits(2)
-    assert len(calls) == 2  # drifted on: a new wait
+    assert len(calls) == 2 * waits  # drifted on: new waits
 
 
 def test_by_default_a_park_refused_after_its_wait_is_not_tried_again_in_its_phase():
@@ -175,7 +177,44 @@ def test_by_default_a_park_refused_after_its_wait_is_not_tried_again_in_its_phas
     run.park_orbits(2)
     run.estimator.pose[i, 0] -= 100.0  # however far it drifts
     run.park_orbits(2)
-    assert len(calls) == 1
+    assert len(calls) == 1 + run.tune.park_replans_after_wait
+
+
+@pytest.mark.parametrize("replans", [0, 1, 2])
+def test_a_park_whose_straight_is_not_clear_after_its_wait_is_planned_again_from_there(replans):
+    """Held through its wait (its heading after the wait is the one it had), the robot's straight is not clear; each
+    re-plan from there is another wait, up to ``park_replans_after_wait``; then it is refused."""
+    run, i = _runner_with_orbit_near_the_wall()
+    run.tune = replace(run.tune, park_replans_after_wait=replans)
+    calls = _scripted_drive(run, i, held=True, record_waits=True)
+    run.park_orbits(2)
+    again = [e for e in run.events if e["kind"] == "park" and "planned again from here" in e["detail"]]
+    assert len(calls) == 1 + replans and len(again) == replans
+    assert not _moves(run)
+
+
+def test_a_park_released_after_its_first_wait_moves_on_its_re_planned_wait():
+    """Held through its first wait only (then it turns freely): the re-planned wait turns it to a clear straight, and
+    the orbit moves away from the wall (measured on the estimates the scripted kinematics drove)."""
+    run, i = _runner_with_orbit_near_the_wall()
+    gap0 = wall_gap_of(run, i)
+    first = [True]
+    calls = _scripted_drive(run, i, held=False, record_waits=True)
+    drive = run.drive
+
+    def held_once(steps):
+        if first[0]:  # the first wait: robot i stays where it is (the others orbit)
+            first[0] = False
+            pose = run.estimator.pose[i].copy()
+            drive(steps)
+            run.estimator.pose[i] = pose
+            return
+        drive(steps)
+
+    run.drive = held_once
+    run.park_orbits(2)
+    assert len(_moves(run)) == 1 and len(calls) >= 3  # two waits, then the straight
+    assert wall_gap_of(run, i) >= gap0 + 0.5 * run.tune.park_shift_um - 1.0
 
 
 def wall_gap_of(run, i: int) -> float:
@@ -261,3 +300,61 @@ def test_a_timed_arrival_that_stops_on_tending_returns_as_soon_as_an_orbit_moved
     run.drive = driven.append
     assert run.pair.meeting.arrive_timed(N, M, lambda: run.est[N].copy(), 0.0, [], tend=Tending.STOP) is False
     assert run.pair.meeting.tend_moves == 1 and calls == [(n, n - 2, (M,))] and driven == []
+
+
+@settings(max_examples=12, deadline=None)
+@given(st.floats(110.0, 320.0), st.floats(-0.6, 0.6))
+def test_a_park_move_leaves_no_other_mover_within_keep_of_trouble(gap_k, turn_k):
+    """D_j 10 um from the left wall; the other mover D_k, heading down about when D_j heads away from the wall, orbits
+    ``gap_k`` um above the bottom wall. With ``keep_um`` the move (replayed independently) leaves D_k at least
+    min(its gap, keep_um) from every wall and disc, or there is none; without it a move may leave D_k closer."""
+    keep = 100.0
+    poses = np.array([
+        [RSTAR + 10.0 - R, 1500.0, 0.0],   # D_j: heading +y, turning centre r to its right
+        [1500.0 - R * math.cos(math.pi / 2 + turn_k), RSTAR + gap_k + R * math.sin(math.pi / 2 + turn_k), math.pi / 2 + turn_k],
+    ])
+    n = 2
+    args: tuple = (np.full(n, R), np.full(n, V / R), np.full(n, V), np.full(n, RSTAR), ARENA, np.zeros((0, 3)), [], [])
+    gaps0 = orbit_gaps(turning_centres(poses, R), np.full(n, RSTAR), ARENA, np.zeros((0, 3)), [], [])
+    move = park_move(0, [0, 1], [], poses, *args, shift_um=150.0, clearance_um=25.0, keep_um=keep)
+    if move is not None:
+        end = turning_centres(replay(poses, move, [])[-1], R)
+        assert wall_gap(end[0]) >= 10.0 + 75.0 - 1.0
+        assert min(wall_gap(end[1]), float(np.hypot(*(end[0] - end[1]))) - 2 * RSTAR) >= min(gaps0[1], keep) - 1.0
+
+
+def test_without_keep_the_cheapest_park_move_pushes_the_other_mover_near_the_wall():
+    """The case the keep rule is for (the same layout, D_k 160 um above the bottom wall): the cheapest move leaves it
+    45 um from the wall (it would need parking next); with ``keep_um`` 100 no move is offered."""
+    poses = np.array([[RSTAR + 10.0 - R, 1500.0, 0.0], [1500.0 - R * math.cos(math.pi / 2), RSTAR + 160.0 + R, math.pi / 2]])
+    args: tuple = (np.full(2, R), np.full(2, V / R), np.full(2, V), np.full(2, RSTAR), ARENA, np.zeros((0, 3)), [], [])
+    move = park_move(0, [0, 1], [], poses, *args, shift_um=150.0, clearance_um=25.0)
+    assert move is not None
+    assert wall_gap(turning_centres(replay(poses, move, [])[-1], R)[1]) < 100.0
+    assert park_move(0, [0, 1], [], poses, *args, shift_um=150.0, clearance_um=25.0, keep_um=100.0) is None
+
+
+@pytest.mark.parametrize("short", [(100.0, 60.0), ()])
+def test_a_shorter_park_move_is_taken_when_no_full_one_is_clear(short):
+    """D_1 10 um from the left wall; D_2 (the robot of the phase, a mover too) orbits 110 um from the right wall with the
+    same heading, so every full 150 um shift ends D_2's orbit within ``park_margin_um`` of the right wall; a shorter one
+    (``park_short_shifts_um``) does not. Without shorter shifts there is no move."""
+    run, i = _runner_with_orbit_near_the_wall()
+    run.tune = replace(run.tune, park_short_shifts_um=short)
+    k = run.by_rank[2]
+    for a in (run.r_hat, run.v_hat, run.omega_hat, run.rstar):  # D_2 turns as D_1 does: same heading throughout
+        a[k] = a[i]
+    assert run.scn.arena_um is not None
+    w, h = run.scn.arena_um
+    run.estimator.pose[k] = (w - float(run.rstar[k]) - 110.0 - float(run.r_hat[k]), h / 2.0 + 700.0, 0.0)
+    gap0 = wall_gap_of(run, i)
+    _scripted_drive(run, i, held=False)
+    run.park_orbits(2)
+    moves = _moves(run)
+    if not short:
+        assert not moves
+        return
+    shift = float(moves[0]["detail"].split("moves ")[1].split(" um")[0]) if len(moves) == 1 else math.nan
+    assert shift in short
+    assert wall_gap_of(run, i) >= gap0 + 0.5 * shift - 1.0
+    assert wall_gap_of(run, k) >= run.tune.park_margin_um - 1.0

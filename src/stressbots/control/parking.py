@@ -115,7 +115,8 @@ def _tracks_clear(tracks, centres, rstar, gap0, arena_um, docked_poses, docked_L
 
 
 def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
-              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False) -> ParkMove | None:
+              docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False,
+              keep_um: float = 0.0) -> ParkMove | None:
     """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
 
     ``movers``: the undocked robots that drive straight with ``j`` under P_{j-1} (``j`` included);
@@ -126,6 +127,9 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     when D_j's gap grows and every mover keeps ``clearance_um`` (or, if it starts closer, does not get
     closer). The shortest wait wins. ``held``: D_j's disc already overlaps the obstacle, so it may be unable
     to turn (a turning robot pushing into anything stops): only a straight along the heading it has, no wait.
+    ``keep_um``: every other mover's orbit ends at least this far from trouble (or, if closer already, no closer): a
+    park move must not make another (one pushed a waiting orbit from 167 to 27 um off the arena edge, where it drifted
+    into it within 50 s: tuning 68:0 at 1x).
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -138,7 +142,12 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
 
     def accept(ends: np.ndarray) -> bool:
         end = orbit_gaps(ends[movers.index(j)][None, :], rstar[[j]], arena_um, docked_poses, docked_L, docked_W)[0]
-        return bool(end > gap0[j] + 0.5 * shift_um)
+        if not end > gap0[j] + 0.5 * shift_um:
+            return False
+        if keep_um <= 0.0 or len(movers) == 1:
+            return True
+        after = orbit_gaps(np.vstack([ends, centres[still]]), rstar[everyone], arena_um, docked_poses, docked_L, docked_W)
+        return all(after[a] >= min(gap0[m], keep_um) - 1e-6 for a, m in enumerate(movers) if m != j)
 
     cands = [(float(poses[j, 2]), straight_s)] if held else None
     return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,

@@ -410,6 +410,9 @@ class ParkingTuning:
     obstacle traps its robot."""
     park_shift_um: float = 150.0
     """How far such an orbit is moved."""
+    park_short_shifts_um: tuple[float, ...] = (100.0, 60.0)
+    """um. Shorter park moves tried, in turn, when no clear move shifts an orbit ``park_shift_um``: the other movers'
+    straights are as short, and a shorter move that gains half its length still buys the orbit time to drift."""
     park_moves_per_phase: int = 3
     """Park moves of one waiting orbit per docking phase. Orbits keep drifting after a move: at twice the literature's
     noise, orbits moved once 150 um away drifted back into the arena edge within the same (200-300 s) phase and
@@ -417,6 +420,11 @@ class ParkingTuning:
     park_progress_um: float = 20.0
     """um. A park move that widened its orbit's gap by less than this did not help (the robot is held): it is the
     last of its phase."""
+    park_replans_after_wait: int = 1
+    """Times a park move whose straight, checked again after its wait from the measured poses, is not clear is planned
+    again from there (another wait, another heading) before it is refused. At 2x the literature's noise the start-up
+    parks were refused this way (the other movers' headings predicted from little motion) and those orbits drifted
+    into the arena edge during G_1 (held-out 10:0, 10:3, 32:0 at 2x)."""
     park_retry_drift_um: float = math.inf
     """um. A park move refused after its wait (the straight, checked again from the measured poses, was not clear) is
     tried again in the same phase once its orbit's gap shrank this much more: the poses then differ (inf: never again in
