@@ -25,6 +25,7 @@ from stressbots.control.docking import (
 from stressbots.control.queries import turn_fraction
 from stressbots.control.tuning import ControllerOptions
 from stressbots.kinematics import move
+from stressbots.robots import angle_difference
 
 
 def flush_by_rotation(e: float, psi: float, L: float, W: float) -> float:
@@ -252,3 +253,77 @@ def test_a_robot_right_of_its_aim_within_the_walk_lead_drives_on():
     steps = _frame(fix, view, 2, opts, 1.0, lambda: False, no_log, 0, 12.0)
     assert steps is not None and all(k == 1 for k, _ in steps)  # straight on (P_(k-1)), no burst
     assert _frame(fix, view, 2, opts, 1.0, lambda: False, no_log, 0, 0.0) is None  # judged a miss: loops back
+
+
+@pytest.mark.parametrize("rear_um", [180.0, 220.0, 260.0])
+def test_a_slot_whose_clear_corridor_no_path_joins_gets_no_approach_line_unless_asked(rear_um):
+    """A slot heading +x whose rear lies ``rear_um`` from the left arena edge: a corridor of 150 um (or more) fits
+    (checked here on the body's rear edge), but a clockwise loop from any pose on the line behind it comes within the
+    15 um wall clearance of the edge, so no one-way robot joins it. ``approach_length`` gives the longest clear
+    corridor as before, None (the arc from a_i) with ``unreachable_ok=False``; in the open both give the same
+    reachable corridor."""
+    from stressbots.control.single import approach_length
+
+    L_, W_, r = 250.0, 50.0, 200.0
+    lengths = (450.0, 350.0, 250.0, 150.0)
+    arena = (3000.0, 3000.0)
+    none: tuple = (np.zeros((0, 3)), [], [])
+    by_wall = np.array([rear_um + L_ / 2.0, 1500.0, math.pi / 2.0])
+    fits = [b for b in lengths if rear_um - b >= 0.0]  # the body's rear edge, b um further back, still inside
+    # a loop from the line b um behind the slot reaches x = (slot centre - b) - r, the body half a width beyond
+    assert fits and rear_um + L_ / 2.0 - min(fits) - r - W_ / 2.0 < 15.0
+    old = approach_length(by_wall, L_, W_, lengths, none, arena, lead_in_um=r, r=r, wall_um=15.0)
+    assert old == max(fits)
+    assert approach_length(by_wall, L_, W_, lengths, none, arena, lead_in_um=r, r=r, wall_um=15.0, unreachable_ok=False) is None
+    open_ = np.array([1500.0, 1500.0, math.pi / 2.0])
+    assert approach_length(open_, L_, W_, lengths, none, arena, lead_in_um=r, r=r, wall_um=15.0, unreachable_ok=False) == 450.0
+
+
+def _on_an_arc_into(a_pose, goal, s_f) -> bool:
+    """Independent: driving ``s_f`` um from ``a_pose`` along one of fine_start's arcs (25, 15, 8, 4 deg) ends in ``goal``."""
+    for phi in (25.0, 15.0, 8.0, 4.0):
+        end = move(np.asarray(a_pose, float), np.array([s_f]), math.radians(phi) / s_f)[-1]
+        if np.hypot(*(end[:2] - goal[:2])) < 1e-6 and abs(float(angle_difference(end[2], goal[2]))) < 1e-9:
+            return True
+    return False
+
+
+def test_a_later_attempts_intermediate_pose_is_not_moved_by_the_structures_motion_twice():
+    """The slots follow G_1 (PairPhase.retarget moves them into the measured frame); a_i computed from such a slot is
+    in that frame already. It was moved by the structure's motion again (here 2 deg and 120 um: a_i 120 um off the
+    arc into its slot); now it lies on an S_2f arc that ends in the slot."""
+    from stressbots.control import structure_targets
+    from stressbots.control.queries import fine_motion_length
+    from stressbots.control.runner import _Runner
+    from stressbots.generate import random_scenario
+    from stressbots.scenario import Noise
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(3, 0, shape="tee", noise=Noise())
+    run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
+    i = run.by_rank[1]
+    c = run.goals[i, :2] + [300.0, 0.0]
+    run.motion = (math.radians(2.0), c, c + [120.0, 0.0])
+    run.single.approach_length = lambda _i: None  # type: ignore[method-assign]  # the S_2f arc, not a line
+    goal, back, a_pose, _ = run.single._aim(i, 1, None, [])
+    assert back is None and np.allclose(goal, run.goals[i])
+    assert _on_an_arc_into(a_pose, goal, fine_motion_length(run.r[i], run.opts.fine_distance_um))
+
+
+def test_fine_start_by_the_arena_edge_has_no_arc_and_says_so_when_asked():
+    """A slot heading +x 100 um from the left edge: no S_2f arc (the shortest, 4 deg, runs s_f back) fits inside the
+    arena; the default falls back to the pose straight behind the slot (outside the arena: checked here), None with
+    ``straight_if_none=False``."""
+    from stressbots.control.queries import fine_motion_length
+    from stressbots.control.single import fine_start
+
+    L_, W_, r, fd = 250.0, 50.0, 200.0, 150.0
+    goal = np.array([100.0 + L_ / 2.0, 1500.0, math.pi / 2.0])
+    s_f = fine_motion_length(r, fd)
+    assert s_f > 100.0  # any arc of that length ends behind the edge
+    none: tuple = (np.zeros((0, 3)), [], [])
+    straight = fine_start(goal, r, L_, W_, fd, none, (3000.0, 3000.0))
+    assert straight is not None and straight[0] - L_ / 2.0 < 0.0
+    assert fine_start(goal, r, L_, W_, fd, none, (3000.0, 3000.0), straight_if_none=False) is None
+    assert _on_an_arc_into(fine_start(np.array([1500.0, 1500.0, 0.5]), r, L_, W_, fd, none, (3000.0, 3000.0)),
+                           np.array([1500.0, 1500.0, 0.5]), s_f)

@@ -66,7 +66,7 @@ class SingleLoop(DockingLoop, Protocol):
 # -- pure geometry ------------------------------------------------------------------------------------
 
 def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_distance_um: float, bodies: Bodies,
-               arena_um: tuple[float, float] | None) -> np.ndarray:
+               arena_um: tuple[float, float] | None, *, straight_if_none: bool = True) -> np.ndarray | None:
     """The intermediate pose a_i: back along a clockwise arc that ends exactly in the slot ``goal``.
 
     Only positions to a robot's right are reachable by one clockwise arc (seed Fig. 4), so a_i lies
@@ -74,7 +74,8 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
     way are then absorbed by a larger or smaller r'. ``s_f = min(2.5 r, 3 fine_distance_um)`` (um);
     ``phi`` is the largest of 25, 15, 8, 4 deg whose swept bodies (``length`` x ``width`` um) clear the
     docked ``bodies`` by 0.5 um and stay inside the arena (tight gaps need an almost straight entry);
-    when none does, a_i is ``s_f`` straight behind the slot.
+    when none does, a_i is ``s_f`` straight behind the slot (None without ``straight_if_none``: that pose may lie
+    outside the arena).
     """
     s_f = fine_motion_length(r, fine_distance_um)
     for phi_deg in (25.0, 15.0, 8.0, 4.0):
@@ -88,6 +89,8 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
                 break
         if ok and not (arena_um is not None and (outside_arena(back, length, width, arena_um) > 0).any()):
             return back[-1]
+    if not straight_if_none:
+        return None
     h = np.array([math.sin(goal[2]), math.cos(goal[2])])
     return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
 
@@ -109,7 +112,8 @@ def approach_start_on_route(ph, r: float, fine_distance_um: float) -> np.ndarray
 
 
 def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: Sequence[float], bodies: Bodies,
-                    arena_um: tuple[float, float] | None, lead_in_um: float = 0.0, r: float = 0.0, wall_um: float = 0.0) -> float | None:
+                    arena_um: tuple[float, float] | None, lead_in_um: float = 0.0, r: float = 0.0, wall_um: float = 0.0,
+                    *, unreachable_ok: bool = True) -> float | None:
     """How far behind the slot ``goal`` its approach line is clear, or None.
 
     The first of ``lengths_um`` (longest first, e.g. 450 down to 150 um) for which a ``length`` x
@@ -118,7 +122,8 @@ def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: S
     straight run need. With ``lead_in_um`` (and the robot's turn radius ``r``, um) the longest corridor
     whose funnel a one-way robot can reach (:func:`lead_in_clear`) is preferred: it enters the funnel
     from behind, so a corridor that ends at the arena edge has a funnel no path reaches. When no clear
-    corridor is reachable so, the longest clear one (as without ``lead_in_um``).
+    corridor is reachable so, the longest clear one (as without ``lead_in_um``), or None without
+    ``unreachable_ok``: the robot then arcs into its slot from a_i (:func:`fine_start`, or the nominal route's).
     """
     first = None
     for back in lengths_um:
@@ -134,7 +139,7 @@ def approach_length(goal: np.ndarray, length: float, width: float, lengths_um: S
             first = back if first is None else first
             if lead_in_clear(goal, back, lead_in_um, r, length, width, bodies, arena_um, wall_um):
                 return back
-    return first
+    return first if unreachable_ok or lead_in_um <= 0.0 else None
 
 
 def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, length: float, width: float, bodies: Bodies,
@@ -295,8 +300,9 @@ class SingleDocking:
         goal = lp.goals[i]
         back = self.approach_length(i)
         if back is None:
-            a_pose = self.fine_start_on(route_phase, i) if route_phase is not None and attempt == 0 else self.fine_start(i, goal)
-            a_pose = retarget(a_pose, lp.motion)
+            # both in the measured frame (the slots follow G_1: PairPhase.retarget); only the nominal route's a_i is moved
+            first = route_phase is not None and attempt == 0
+            a_pose = self.fine_start_on(route_phase, i) if first else self.fine_start(i, goal, route_phase)
             ready = None
         else:
             a_pose = self._aim_behind(i, goal, back, orbiting)
@@ -355,22 +361,35 @@ class SingleDocking:
 
     # -- where to aim ---------------------------------------------------------------------------------
 
-    def fine_start(self, i: int, goal: np.ndarray) -> np.ndarray:
-        """The intermediate pose a_i of robot ``i`` for slot ``goal`` (:func:`fine_start`, docked bodies as measured)."""
+    def fine_start(self, i: int, goal: np.ndarray, route_phase=None) -> np.ndarray:
+        """The intermediate pose a_i of robot ``i`` for slot ``goal`` (:func:`fine_start`, docked bodies as measured).
+        Where no S_2f arc into the slot fits and the nominal route ``route_phase`` is given, its a_i (the planner's own
+        final arc) rather than the pose straight behind the slot: by the arena edge that pose lay outside the arena, and
+        every later attempt aimed there (tuning 118:0 at 1x)."""
         lp = self.loop
-        return fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um)
+        pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um,
+                          straight_if_none=route_phase is None)
+        if pose is None:
+            pose = approach_start_on_route(route_phase, lp.r[i], lp.opts.fine_distance_um)
+            pose = retarget(pose, lp.motion) if pose is not None else None
+        if pose is None:
+            pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um)
+        assert pose is not None
+        return pose
 
     def fine_start_on(self, ph, i: int) -> np.ndarray:
-        """a_i on the nominal route phase ``ph`` (:func:`approach_start_on_route`), else :meth:`fine_start`."""
+        """a_i on the nominal route phase ``ph`` (:func:`approach_start_on_route`) moved with the structure
+        (:func:`retarget`), else :meth:`fine_start`."""
         lp = self.loop
         pose = approach_start_on_route(ph, lp.r[i], lp.opts.fine_distance_um)
-        return self.fine_start(i, lp.goals[i]) if pose is None else pose
+        return self.fine_start(i, lp.goals[i]) if pose is None else retarget(pose, lp.motion)
 
     def approach_length(self, i: int) -> float | None:
         """How far behind robot ``i``'s slot the approach line is clear of the structure (:func:`approach_length`)."""
         lp = self.loop
         return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self._bodies(), lp.scn.arena_um,
-                               lp.tune.approach_lead_in_radii * float(lp.r_hat[i]), float(lp.r_hat[i]), lp.opts.clearance_um)
+                               lp.tune.approach_lead_in_radii * float(lp.r_hat[i]), float(lp.r_hat[i]), lp.opts.clearance_um,
+                               unreachable_ok=not lp.tune.arc_when_line_unreachable)
 
     def line_coords(self, i: int) -> tuple[float, float, float]:
         """``(behind_um, right_um, psi_rad)`` of robot ``i`` relative to its slot's approach line."""

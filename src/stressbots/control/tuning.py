@@ -279,6 +279,12 @@ class GrossTuning:
     clear of the structure and the arena edge: a one-way robot enters the funnel from behind, so a funnel backed
     against the edge is a target no path reaches (those robots drove on along blocked paths into the edge, where
     turning and driving both push into it: trapped)."""
+    arc_when_line_unreachable: bool = True
+    """When no clear approach corridor behind a slot is reachable (``approach_lead_in_radii``), the robot arcs into the
+    slot from its intermediate pose a_i (the nominal route's first, where the planner's own final arc begins) instead
+    of aiming at the clear but unreachable line: by the arena edge a slot whose rear lies 250 um from it has a
+    150 um corridor that only a path from outside the arena joins, and the robot toured the arena for hundreds of
+    seconds until it was trapped at the edge (the tee-by-wall layouts: tuning 4:0, 89:0, 89:1, held-out 6:3 at 1x)."""
     escape_clearance_um: float = 10.0
     """Clearance of the last roadmap search, after the full one found nothing: a robot in a tight spot (its loop 12 um
     from the edge, say) has no route at 15-20 um from where it is, and the clear part of a route at a few um is
