@@ -286,3 +286,66 @@ def test_a_robot_whose_line_approach_missed_and_cannot_loop_back_is_backed_off_n
     with pytest.raises(Exception, match="did not dock"):
         single.dock(1, None)
     assert calls["back_off"] >= 2 and calls["line"] <= run.tune.dock_attempts - 2
+
+
+def _scripted_single(in_funnel: bool, outcome):
+    """A 3-robot run whose D_1 docking is scripted: the gross motion (``_steer_through``) records the funnel test it is
+    handed and returns at once, not stuck, with no time passing; the robot is (or is not) in its funnel, never in its
+    corridor; line approaches end in ``outcome`` with no time passing; backing off lets 1 s pass."""
+    from stressbots.control import structure_targets
+    from stressbots.control.runner import _Runner
+    from stressbots.control.tuning import ControllerOptions
+    from stressbots.generate import random_scenario
+    from stressbots.scenario import Noise
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(3, 0, shape="tee", noise=Noise())
+    run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
+    single = run.single
+    seen: dict = {"ready": [], "back_off": 0, "line": 0}
+
+    def steer_through(i, k, orbiting, targets, ready, cut_in):
+        seen["ready"].append(ready)
+        return False
+
+    def line_approach(i, k, attempt=0):
+        seen["line"] += 1
+        return outcome
+
+    def back_off(i, k):
+        seen["back_off"] += 1
+        run.t += 1.0
+
+    for name, fake in (("_steer_through", steer_through), ("in_funnel", lambda *_a: in_funnel), ("in_corridor", lambda *_a: False),
+                       ("approach_length", lambda *_a: 300.0), ("line_approach", line_approach), ("back_off", back_off)):
+        setattr(single, name, fake)
+    return run, single, seen
+
+
+def test_after_a_line_approach_that_missed_in_place_the_gross_motion_drives_to_the_aim():
+    """The line approach predicted its miss and drove nothing: the next attempt's gross motion is not handed the funnel
+    test (which would end it at once, in the same pose, for the same miss: six attempts at one instant), so it drives
+    to the aim itself, a loop back."""
+    import pytest
+
+    from stressbots.control.docking import DockOutcome
+
+    run, single, seen = _scripted_single(True, DockOutcome.MISSED)
+    with pytest.raises(Exception, match="did not dock"):
+        single.dock(1, None)
+    assert seen["ready"][0] is not None                 # the first attempt may end in the funnel
+    assert all(r is None for r in seen["ready"][1:])     # after each in-place miss: to the aim itself
+    assert len(seen["ready"]) == run.tune.dock_attempts
+
+
+def test_an_attempt_that_moved_nothing_and_ended_outside_the_funnel_backs_off_before_the_next():
+    """The gross motion returned at once (at its aim already) outside the funnel: the same attempt from the same pose
+    would again; the robot backs off (time passes, it is somewhere new) before the next one."""
+    import pytest
+
+    from stressbots.control.docking import DockOutcome
+
+    run, single, seen = _scripted_single(False, DockOutcome.MISSED)
+    with pytest.raises(Exception, match="did not dock"):
+        single.dock(1, None)
+    assert seen["line"] == 0 and seen["back_off"] == run.tune.dock_attempts

@@ -304,7 +304,7 @@ def test_a_later_attempts_intermediate_pose_is_not_moved_by_the_structures_motio
     i = run.by_rank[1]
     c = run.goals[i, :2] + [300.0, 0.0]
     run.motion = (math.radians(2.0), c, c + [120.0, 0.0])
-    run.single.approach_length = lambda _i: None  # type: ignore[method-assign]  # the S_2f arc, not a line
+    run.single.approach_length = lambda _i: None  # type: ignore[method-assign, assignment]  # the S_2f arc, not a line
     goal, back, a_pose, _ = run.single._aim(i, 1, None, [])
     assert back is None and np.allclose(goal, run.goals[i])
     assert _on_an_arc_into(a_pose, goal, fine_motion_length(run.r[i], run.opts.fine_distance_um))
