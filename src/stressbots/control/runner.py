@@ -231,7 +231,8 @@ class _Runner(PlantLoop):
         orbit, 65 um from the edge, drifted into it within 51 s (tuning 69:0 at 1x)."""
         park: dict = {}
         for shift in (self.tune.park_shift_um, *self.tune.park_short_shifts_um):
-            park = {"shift_um": shift, "clearance_um": self.tune.park_clearance_um, "keep_um": margin}
+            park = {"shift_um": shift, "clearance_um": self.tune.park_clearance_um,
+                    "keep_um": margin if self.tune.park_keeps_others else 0.0}
             move_ = None
             if gap < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
                 move_ = self._group_move(park_move, i, k, held=True, **park)

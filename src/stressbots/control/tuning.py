@@ -416,6 +416,10 @@ class ParkingTuning:
     obstacle traps its robot."""
     park_shift_um: float = 150.0
     """How far such an orbit is moved."""
+    park_keeps_others: bool = True
+    """Whether a park move must leave every other mover's orbit at least the margin that called for it from trouble (or
+    no closer, if closer already: :func:`~stressbots.control.parking.park_move`'s ``keep_um``); off: only the transit
+    clearance ``park_clearance_um``."""
     park_short_shifts_um: tuple[float, ...] = (100.0, 60.0)
     """um. Shorter park moves tried, in turn, when no clear move shifts an orbit ``park_shift_um``: the other movers'
     straights are as short, and a shorter move that gains half its length still buys the orbit time to drift."""
