@@ -256,11 +256,12 @@ class SingleDocking:
             goal, back, a_pose, ready = self._aim(i, attempt, route_phase, orbiting)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
-            # after a line approach that missed without moving (it predicted the miss), the funnel's early end would
-            # hand the same pose to the same approach: six attempts ran out at one instant (held-out 16:0 at 2x); the
-            # gross motion drives to the aim itself then (a loop back)
+            # a line approach that missed without moving (it predicted the miss) from inside the funnel: the funnel's
+            # early end would hand the same pose to the same approach, and six attempts ran out at one instant
+            # (held-out 16:0 at 2x); the gross motion drives to the aim itself then (a loop back)
             t_attempt = lp.t
-            stuck = self._steer_through(i, k, orbiting, targets, ready if lp.t > missed_at else None, partial(self.cut_in, i, k, back))
+            in_place = ready is not None and lp.t == missed_at and ready()
+            stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.cut_in, i, k, back))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
             # left the robot there) it would miss again, and six attempts ran out at the same instant
