@@ -122,6 +122,10 @@ def tuning_options(spec: str):
 
     >>> tuning_options("transfer_tracks_apart=true,arrive_um=30").tuning.arrive_um
     30.0
+    >>> tuning_options("park_short_shifts_um=100;60").tuning.park_short_shifts_um
+    (100.0, 60.0)
+    >>> tuning_options("park_short_shifts_um=").tuning.park_short_shifts_um
+    ()
     """
     from dataclasses import fields, replace
 
@@ -143,6 +147,8 @@ def tuning_options(spec: str):
                 changes[name] = value.strip().lower() in ("1", "true", "yes", "on")
             elif kind in ("int", "float"):
                 changes[name] = int(value) if kind == "int" else float(value)
+            elif kind == "tuple[float, ...]":  # values separated by ';', none for an empty tuple
+                changes[name] = tuple(float(x) for x in value.split(";") if x.strip())
             else:
                 raise ValueError(f"a field of type {kind} cannot be set here")
         except ValueError as exc:
