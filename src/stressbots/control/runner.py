@@ -60,7 +60,8 @@ from ..robots import angle_difference, turning_centres
 from .gross import GrossMotion, SteerOutcome
 from .loop import PlantLoop
 from .pair import PairPhase, Replan
-from .parking import blocking_orbits, orbit_gaps, park_move, straights_clear, unblock_move
+from .park_tries import ParkTries
+from .parking import blocking_orbits, orbit_gaps, straights_clear, unblock_move
 from .queries import interpolated_steps
 from .result import AssemblyResult, judge_run
 from .single import SingleDocking
@@ -125,6 +126,7 @@ class _Runner(PlantLoop):
         self.gross = GrossMotion(self)
         self.pair = PairPhase(self)
         self.single = SingleDocking(self)
+        self.park_tries = ParkTries(self, self._group_move)
 
     # -- plant I/O ------------------------------------------------------------------------------------
 
@@ -199,7 +201,7 @@ class _Runner(PlantLoop):
             refused = self._park_refused.get((i, k))
             if refused is not None and gaps[idx] > refused - self.tune.park_retry_drift_um:
                 continue  # refused at about this gap: the same poses would be refused again
-            move_, park = self._find_park(i, k, float(gaps[idx]), margin)
+            move_, park = self.park_tries.find(i, k, float(gaps[idx]), margin)
             if move_ is None:
                 if (i, "park") not in self._warned:  # once: tend_orbits asks every t_x
                     self._warned.add((i, "park"))
@@ -209,7 +211,7 @@ class _Runner(PlantLoop):
             self._warned.discard((i, "park"))
             self.replans += 1
             self._parked[(i, k)] = self._parked.get((i, k), 0) + 1
-            move_ = self._park_wait(i, k, move_, park)
+            move_ = self.park_tries.drive_wait(i, k, move_, park)
             if move_ is None:
                 self.log("park", i, f"the orbit of {self.scn.names[i]} is {gaps[idx]:.0f} um from trouble, but after the wait "
                                     "its straight is not clear: it stays")
@@ -221,47 +223,6 @@ class _Runner(PlantLoop):
             self._drive_group_straight(i, k, move_.straight_s)
             if self._waiting_gaps(waiting, among)[idx] < gaps[idx] + self.tune.park_progress_um:
                 self._parked[(i, k)] = self.tune.park_moves_per_phase  # it did not help: not repeated this phase
-
-    def _find_park(self, i: int, k: int, gap: float, margin: float):
-        """``(move, settings)``: the park move of waiting robot ``i`` (D_k's phase, its orbit ``gap`` um from trouble) and
-        the ``park_move`` settings it was found with; ``(None, settings)`` when none is clear. No other mover's orbit may
-        end within ``margin`` um of trouble (the margin that called for this move) unless it was closer already. The full
-        ``Tuning.park_shift_um`` first, then each of ``Tuning.park_short_shifts_um``: the straight of a low-ranked robot
-        drives every higher-ranked one too, and at t = 0 no full shift of D_1 was clear for all eight movers while its
-        orbit, 65 um from the edge, drifted into it within 51 s (tuning 69:0 at 1x)."""
-        park: dict = {}
-        for shift in (self.tune.park_shift_um, *self.tune.park_short_shifts_um):
-            park = {"shift_um": shift, "clearance_um": self.tune.park_clearance_um,
-                    "keep_um": margin if self.tune.park_keeps_others else 0.0}
-            move_ = None
-            if gap < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
-                move_ = self._group_move(park_move, i, k, held=True, **park)
-            if move_ is None:
-                move_ = self._group_move(park_move, i, k, **park)
-            if move_ is not None:
-                return move_, park
-        return None, park
-
-    def _park_wait(self, i: int, k: int, move_, park: dict):
-        """Drive the wait of park move ``move_`` of waiting robot ``i`` (D_k's phase); the move to drive then, or None.
-
-        The straight is checked again from the measured poses: the other movers' headings after the wait were
-        predicted with rates identified from little motion (one start-up park ran D_(n-1)'s orbit into the edge).
-        When it is not clear, the move is planned again from there, wait and all, up to
-        ``Tuning.park_replans_after_wait`` times. A move without a wait (a held robot's straight as it heads) has
-        nothing predicted to check."""
-        for replan in range(self.tune.park_replans_after_wait + 1):
-            if move_ is None or move_.wait_s <= 0.0:
-                return move_
-            self.drive([(k, move_.wait_s)])
-            held = self._group_move(park_move, i, k, held=True, **park)
-            if held is not None or replan == self.tune.park_replans_after_wait:
-                return held
-            move_ = self._group_move(park_move, i, k, **park)
-            if move_ is not None:
-                self.log("park", i, f"after the wait the straight of {self.scn.names[i]}'s orbit move is not clear: "
-                                    "planned again from here")
-        return None
 
     def _waiting_gaps(self, waiting: Sequence[int], among: Sequence[int] = ()) -> np.ndarray:
         """Measured gaps (um) of the ``waiting`` robots' orbit discs to the arena edge, the docked bodies, each other

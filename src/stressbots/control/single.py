@@ -256,11 +256,9 @@ class SingleDocking:
             goal, back, a_pose, ready = self._aim(i, attempt, route_phase, orbiting)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
-            # a line approach that missed without moving (it predicted the miss) from inside the funnel: the funnel's
-            # early end would hand the same pose to the same approach, and six attempts ran out at one instant
-            # (held-out 16:0 at 2x); the gross motion drives to the aim itself then (a loop back)
-            t_attempt = lp.t
-            in_place = ready is not None and lp.t == missed_at and ready()
+            # missed in place (predicted) inside the funnel: the funnel test would end the gross motion at once for the
+            # same miss (held-out 16:0 at 2x), so it drives to the aim itself (a loop back)
+            t_attempt, in_place = lp.t, ready is not None and lp.t == missed_at and ready()
             stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.cut_in, i, k, back))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
@@ -276,7 +274,7 @@ class SingleDocking:
                 continue
             elif back is not None and not self.in_funnel(i, back):
                 lp.log("retry", i, f"attempt {attempt + 1}: the gross motion ended outside the approach funnel; steering again")
-                if lp.t == t_attempt:  # it did not move (at its aim already): the same attempt again would not either
+                if lp.t == t_attempt:  # it did not move (at its aim already): nor would the same attempt again
                     self.back_off(i, k)
                 continue
             if back is not None:
