@@ -89,8 +89,17 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
                 break
         if ok and not (arena_um is not None and (outside_arena(back, length, width, arena_um) > 0).any()):
             return back[-1]
-    if not straight_if_none:
-        return None
+    return straight_behind(goal, r, fine_distance_um) if straight_if_none else None
+
+
+def straight_behind(goal: np.ndarray, r: float, fine_distance_um: float) -> np.ndarray:
+    """The pose ``s_f`` um (:func:`~stressbots.control.queries.fine_motion_length`) straight behind the slot ``goal``:
+    :func:`fine_start`'s a_i when no S_2f arc fits.
+
+    >>> straight_behind(np.array([500.0, 500.0, 0.0]), 100.0, 200.0).tolist()   # heading +y: s_f = 250 um back
+    [500.0, 250.0, 0.0]
+    """
+    s_f = fine_motion_length(r, fine_distance_um)
     h = np.array([math.sin(goal[2]), math.cos(goal[2])])
     return np.array([goal[0] - s_f * h[0], goal[1] - s_f * h[1], goal[2]])
 
@@ -373,21 +382,22 @@ class SingleDocking:
         every later attempt aimed there (tuning 118:0 at 1x)."""
         lp = self.loop
         pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um,
-                          straight_if_none=route_phase is None)
-        if pose is None:
-            pose = approach_start_on_route(route_phase, lp.r[i], lp.opts.fine_distance_um)
-            pose = retarget(pose, lp.motion) if pose is not None else None
-        if pose is None:
-            pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um)
-        assert pose is not None
-        return pose
+                          straight_if_none=False)
+        if pose is None and route_phase is not None:
+            pose = self._route_start(route_phase, i)
+        return pose if pose is not None else straight_behind(goal, lp.r[i], lp.opts.fine_distance_um)
 
     def fine_start_on(self, ph, i: int) -> np.ndarray:
+        """a_i on the nominal route phase ``ph`` (:meth:`_route_start`), else :meth:`fine_start`."""
+        pose = self._route_start(ph, i)
+        return self.fine_start(i, self.loop.goals[i]) if pose is None else pose
+
+    def _route_start(self, ph, i: int) -> np.ndarray | None:
         """a_i on the nominal route phase ``ph`` (:func:`approach_start_on_route`) moved with the structure
-        (:func:`retarget`), else :meth:`fine_start`."""
+        (:func:`retarget`: the route is nominal, the slots follow G_1); None when the route has no final arc."""
         lp = self.loop
         pose = approach_start_on_route(ph, lp.r[i], lp.opts.fine_distance_um)
-        return self.fine_start(i, lp.goals[i]) if pose is None else retarget(pose, lp.motion)
+        return None if pose is None else retarget(pose, lp.motion)
 
     def approach_length(self, i: int) -> float | None:
         """How far behind robot ``i``'s slot the approach line is clear of the structure (:func:`approach_length`)."""
