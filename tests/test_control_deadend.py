@@ -279,8 +279,9 @@ def test_a_robot_whose_line_approach_missed_and_cannot_loop_back_is_backed_off_n
     def clear_the_way(i, k, *_args):
         back_off(i, k)
 
-    for obj, name, fake in ((run, "steer", stuck_at_once), (single, "in_corridor", always(True)), (single, "in_funnel", always(False)),
-                            (single, "approach_length", always(300.0)), (single, "line_approach", line_approach),
+    for obj, name, fake in ((run, "steer", stuck_at_once), (single.approach, "in_corridor", always(True)),
+                            (single.approach, "in_funnel", always(False)), (single.approach, "approach_length", always(300.0)),
+                            (single, "line_approach", line_approach),
                             (single, "back_off", back_off), (single, "_clear_the_way", clear_the_way)):
         setattr(obj, name, fake)
     with pytest.raises(Exception, match="did not dock"):
@@ -316,9 +317,10 @@ def _scripted_single(in_funnel: bool, outcome):
         seen["back_off"] += 1
         run.t += 1.0
 
-    for name, fake in (("_steer_through", steer_through), ("in_funnel", lambda *_a: in_funnel), ("in_corridor", lambda *_a: False),
-                       ("approach_length", lambda *_a: 300.0), ("line_approach", line_approach), ("back_off", back_off)):
-        setattr(single, name, fake)
+    for obj, name, fake in ((single, "_steer_through", steer_through), (single.approach, "in_funnel", lambda *_a: in_funnel),
+                            (single.approach, "in_corridor", lambda *_a: False), (single.approach, "approach_length", lambda *_a: 300.0),
+                            (single, "line_approach", line_approach), (single, "back_off", back_off)):
+        setattr(obj, name, fake)
     return run, single, seen
 
 

@@ -262,7 +262,7 @@ def test_a_slot_whose_clear_corridor_no_path_joins_gets_no_approach_line_unless_
     15 um wall clearance of the edge, so no one-way robot joins it. ``approach_length`` gives the longest clear
     corridor as before, None (the arc from a_i) with ``unreachable_ok=False``; in the open both give the same
     reachable corridor."""
-    from stressbots.control.single import approach_length
+    from stressbots.control.slot_approach import approach_length
 
     L_, W_, r = 250.0, 50.0, 200.0
     lengths = (450.0, 350.0, 250.0, 150.0)
@@ -304,8 +304,8 @@ def test_a_later_attempts_intermediate_pose_is_not_moved_by_the_structures_motio
     i = run.by_rank[1]
     c = run.goals[i, :2] + [300.0, 0.0]
     run.motion = (math.radians(2.0), c, c + [120.0, 0.0])
-    run.single.approach_length = lambda _i: None  # type: ignore[method-assign, assignment]  # the S_2f arc, not a line
-    goal, back, a_pose, _ = run.single._aim(i, 1, None, [])
+    run.single.approach.approach_length = lambda _i: None  # type: ignore[method-assign, assignment]  # the S_2f arc, not a line
+    goal, back, a_pose, _ = run.single.approach.aim(i, 1, None, [])
     assert back is None and np.allclose(goal, run.goals[i])
     assert _on_an_arc_into(a_pose, goal, fine_motion_length(run.r[i], run.opts.fine_distance_um))
 
@@ -315,7 +315,7 @@ def test_fine_start_by_the_arena_edge_has_no_arc_and_says_so_when_asked():
     arena; the default falls back to the pose straight behind the slot (outside the arena: checked here), None with
     ``straight_if_none=False``."""
     from stressbots.control.queries import fine_motion_length
-    from stressbots.control.single import fine_start
+    from stressbots.control.slot_approach import fine_start
 
     L_, W_, r, fd = 250.0, 50.0, 200.0, 150.0
     goal = np.array([100.0 + L_ / 2.0, 1500.0, math.pi / 2.0])

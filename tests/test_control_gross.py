@@ -1,4 +1,4 @@
-"""Gross motion sigma_1 (stressbots.control.gross) and the approach corridor's reachability (control.single):
+"""Gross motion sigma_1 (stressbots.control.gross) and the approach corridor's reachability (control.slot_approach):
 pure queries on hand-built poses, and the gross motion driven through a loop written here whose ``drive``
 moves the robot by the exact kinematics (independent of the controller's own geometry).
 
@@ -29,7 +29,8 @@ from stressbots.control.gross import (
     escape_moves,
     escape_sweep,
 )
-from stressbots.control.single import SingleDocking, approach_length, lead_in_clear
+from stressbots.control.single import SingleDocking
+from stressbots.control.slot_approach import approach_length, lead_in_clear
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 

@@ -5,7 +5,7 @@ checked against kinematics and closed-form geometry.
 - ``GrossMotion.drive_move``: an open-loop move is checked again from each measured pose and stops before the rest
   of it meets the arena edge;
 - ``GrossMotion.free_move``: a move on whose first t_x would already box the robot in is not taken;
-- ``SingleDocking.can_arc_in`` / ``cut_in``: without an approach line, a robot short of a_i starts its S_2f arc from
+- ``SlotApproach.can_arc_in`` / ``cut_in``: without an approach line, a robot short of a_i starts its S_2f arc from
   there only where a loop is blocked and the arc keeps off the structure;
 - ``Rendezvous._drive_rest_open_loop``: D_n's open-loop final seconds only where they keep off the arena edge.
 """
@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control.gross import GrossMotion, escape_sweep, move_stops
 from stressbots.control.queries import in_funnel, line_coords, line_pose
-from stressbots.control.single import SingleDocking
+from stressbots.control.slot_approach import SlotApproach
 from stressbots.control.tuning import ControllerOptions, Tuning
 from stressbots.kinematics import move
 from stressbots.robots import orbit_radii
@@ -114,7 +114,7 @@ def test_a_move_on_whose_first_stop_boxes_the_robot_in_is_not_taken():
 # -- arcs in where a loop is blocked ---------------------------------------------------------------------
 
 def docking_loop(pose, goal, blocked: bool, bodies=()):
-    """The least of a closed loop SingleDocking.cut_in / can_arc_in read; ``loop_blocked`` as told."""
+    """The least of a closed loop SlotApproach.cut_in / can_arc_in read; ``loop_blocked`` as told."""
     est = np.array([pose, *[b[0] for b in bodies]], float)
     n = len(est)
     lp = SimpleNamespace(
@@ -123,9 +123,9 @@ def docking_loop(pose, goal, blocked: bool, bodies=()):
         scn=SimpleNamespace(arena_um=(2000.0, 2000.0)), orbiting_below=lambda _k: [],
     )
     lp.obstacles_hit = GrossMotion(lp).obstacles_hit
-    sd = SingleDocking(lp)
-    sd.loop_blocked = lambda *_: blocked  # type: ignore[method-assign]
-    return sd
+    sa = SlotApproach(lp)
+    sa.loop_blocked = lambda *_: blocked  # type: ignore[method-assign]
+    return sa
 
 
 def test_a_robot_short_of_a_i_arcs_in_from_there_only_where_a_loop_is_blocked_and_the_arc_is_clear():
@@ -134,11 +134,11 @@ def test_a_robot_short_of_a_i_arcs_in_from_there_only_where_a_loop_is_blocked_an
     pose = move(goal, -300.0, 1.0 / (2.0 * R))
     assert docking_loop(pose, goal, blocked=True).can_arc_in(0, 2)
     assert not docking_loop(pose, goal, blocked=False).can_arc_in(0, 2)
-    sd = docking_loop(pose, goal, blocked=True)
-    sd.loop.scn.names = ("R0", "R1")
-    event, reason = sd.cut_in(0, 2, None) or ("", "")
+    sa = docking_loop(pose, goal, blocked=True)
+    sa.loop.scn.names = ("R0", "R1")
+    event, reason = sa.cut_in(0, 2, None) or ("", "")
     assert event == "cut-in" and "arcs into its slot" in reason
-    assert sd.cut_in(0, 2, 450.0) is None  # a robot with an approach line merges from its funnel only
+    assert sa.cut_in(0, 2, 450.0) is None  # a robot with an approach line merges from its funnel only
     # pointing away from the slot: no clockwise arc reaches it
     assert not docking_loop(np.array([pose[0], pose[1], pose[2] + math.pi]), goal, blocked=True).can_arc_in(0, 2)
     # a docked body across the arc's middle: not from here
@@ -173,10 +173,10 @@ def test_an_arc_whose_compliant_aim_lies_far_along_the_face_is_not_an_arc_in():
     # would turn it flush, so the arc must aim ~(L/2) sin 35 deg = 72 um along the face
     off = np.array([goal[0], goal[1], -math.radians(35.0)])
     pose = move(off, -300.0, 1.0 / (2.0 * R))
-    sd = docking_loop(pose, goal, blocked=True)
-    assert not sd.can_arc_in(0, 2)
-    sd.loop.tune = Tuning(arc_in_aim_um=1000.0)  # the same arc, the aim allowed anywhere: taken
-    assert sd.can_arc_in(0, 2)
+    sa = docking_loop(pose, goal, blocked=True)
+    assert not sa.can_arc_in(0, 2)
+    sa.loop.tune = Tuning(arc_in_aim_um=1000.0)  # the same arc, the aim allowed anywhere: taken
+    assert sa.can_arc_in(0, 2)
 
 
 # -- where the gross motion aims in the approach funnel ---------------------------------------------------
@@ -193,8 +193,8 @@ def test_the_funnel_aim_moves_back_from_the_corridors_end_only_as_far_as_a_loop_
     seen = set()
     for ahead in np.linspace(-300.0, 400.0, 36):
         body = np.array([1000.0, goal[1] + ahead, 0.5 * math.pi])  # across the line
-        sd = docking_loop(np.array([1000.0, 1900.0, 0.0]), goal, blocked=False, bodies=[(body,)])
-        b, right, psi = line_coords(goal, sd._aim_behind(0, goal, back, []))
+        sa = docking_loop(np.array([1000.0, 1900.0, 0.0]), goal, blocked=False, bodies=[(body,)])
+        b, right, psi = line_coords(goal, sa._aim_behind(0, goal, back, []))
         assert abs(right - 20.0) < 1e-6 and abs(psi + math.radians(6.0)) < 1e-9
         assert in_funnel(b, right, psi, back, R, tune)
 

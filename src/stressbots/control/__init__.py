@@ -5,7 +5,8 @@ Modules: :mod:`~stressbots.control.runner` (the closed loop, :func:`assemble`), 
 :mod:`~stressbots.control.transfer_legs`, :mod:`~stressbots.control.rendezvous`, :mod:`~stressbots.control.departure`,
 :mod:`~stressbots.control.holding`, :mod:`~stressbots.control.pair_recovery`),
 :mod:`~stressbots.control.gross` (gross motion sigma_1, handed the loop),
-:mod:`~stressbots.control.single` (docking of the single robots D_k, k < n-1, handed the loop),
+:mod:`~stressbots.control.single` (docking of the single robots D_k, k < n-1, handed the loop; where they aim and
+what they can reach, :mod:`~stressbots.control.slot_approach`),
 :mod:`~stressbots.control.loopview` (the protocols naming what each phase may use of the loop),
 :mod:`~stressbots.control.queries` (pure geometric queries), :mod:`~stressbots.control.tuning`
 (:class:`ControllerOptions` and the named thresholds :class:`Tuning`), :mod:`~stressbots.control.targets`

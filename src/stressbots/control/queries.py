@@ -19,7 +19,7 @@ __all__ = ["fine_motion_length", "turn_fraction", "trim_steps", "pose_on_orbit",
 
 def fine_motion_length(r, fine_distance_um: float):
     """How far behind its slot (um) a robot of turning radius ``r`` (um, scalar or array) starts its fine motion:
-    ``s_f = min(2.5 r, 3 fine_distance_um)`` (:func:`~stressbots.control.single.fine_start`).
+    ``s_f = min(2.5 r, 3 fine_distance_um)`` (:func:`~stressbots.control.slot_approach.fine_start`).
 
     >>> float(fine_motion_length(200.0, 200.0)), fine_motion_length(np.array([200.0, 300.0]), 200.0).tolist()
     (500.0, [500.0, 600.0])

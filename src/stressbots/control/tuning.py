@@ -252,7 +252,7 @@ class GrossTuning:
     aim_behind_extra_um: float = 150.0
     """um. How far behind the corridor's end the gross motion to a slot with an approach line may aim (half of it, then
     all), where a clockwise loop through the corridor's end would meet something
-    (:meth:`~stressbots.control.single.SingleDocking._aim_behind`); within the funnel (``funnel_extra_um``)."""
+    (:meth:`~stressbots.control.slot_approach.SlotApproach._aim_behind`); within the funnel (``funnel_extra_um``)."""
     funnel_psi_deg: float = 12.0
     """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
     merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
@@ -263,7 +263,7 @@ class GrossTuning:
     arc_in_reach: float = 2.0
     """Lengths of the S_2f arc (:func:`~stressbots.control.queries.fine_motion_length`). Where a loop is blocked, a robot
     within this of its slot that one interpolated arc takes in starts its fine motion from there
-    (:meth:`~stressbots.control.single.SingleDocking.can_arc_in`): a_i lies one such length out, and a robot short of it
+    (:meth:`~stressbots.control.slot_approach.SlotApproach.can_arc_in`): a_i lies one such length out, and a robot short of it
     by 100 um and 30 deg had only the loop back."""
     arc_in_aim_um: float = 40.0
     """um. That arc aims where docking compliance ends the robot in the slot (:func:`~stressbots.control.docking.compliant_aim`),
