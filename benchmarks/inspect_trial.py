@@ -12,7 +12,7 @@ is the benchmark's run, event for event) and shows one of:
 - ``shape``: each robot's share of the final shape error (RMS of its body-corner residuals after the best rigid
   alignment, um), the RMS without each robot, and the docking and G_1 events: which robot spoiled the shape.
 - ``pins``: every applied step list that took ``--robot`` (default: the robot the failure names) from a pose where it
-  can move on to one where it is *boxed in* (:meth:`stressbots.control.gross.GrossMotion.boxed_in`: no turn of
+  can move on to one where it is *boxed in* (:meth:`stressbots.control.escapes.Escapes.boxed_in`: no turn of
   ``Tuning.escape_turns`` then one body length straight keeps ``Tuning.viable_clearance_um`` clear), with the
   controller calls that applied it: which manoeuvre pinned a robot that then gave up its target.
 
@@ -247,7 +247,7 @@ class _PinWatch:
     def _boxed(self, loop) -> bool | None:
         if loop.docked[self.i] or not hasattr(loop, "gross"):
             return None
-        return bool(loop.gross.boxed_in(self.i, loop.est[self.i], loop.orbiting_below(int(loop.rank[self.i]))))
+        return bool(loop.gross.escapes.boxed_in(self.i, loop.est[self.i], loop.orbiting_below(int(loop.rank[self.i]))))
 
     def __enter__(self):
         import traceback

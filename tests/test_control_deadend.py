@@ -1,10 +1,10 @@
 """One-way robots are never driven into a dead end (branch route7): pure queries on hand-built snapshots,
 checked against independent truth (brute force, straight-line kinematics, replayed group moves).
 
-- ``gross.viable_prefix``: the longest clear beginning of a path whose end is not boxed in;
+- ``escapes.viable_prefix``: the longest clear beginning of a path whose end is not boxed in;
 - ``queries.in_corridor``: a robot already on its approach line, heading along it, with a small lateral miss;
 - ``parking.unblock_move``: the other waiting robots driven straight with the moved one do not end on the way;
-- ``GrossMotion.boxed_in`` on a hand-built loop: a robot heading into a wall a few um ahead is boxed in, one
+- ``Escapes.boxed_in`` on a hand-built loop: a robot heading into a wall a few um ahead is boxed in, one
   driving along it is not.
 """
 
@@ -18,7 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots import paths as pathlib
-from stressbots.control.gross import GrossMotion, SteerOutcome, viable_prefix
+from stressbots.control.escapes import viable_prefix
+from stressbots.control.gross import GrossMotion, SteerOutcome
 from stressbots.control.parking import unblock_move
 from stressbots.control.queries import in_corridor, line_coords, line_pose
 from stressbots.control.tuning import ControllerOptions, Tuning
@@ -125,7 +126,7 @@ def test_unblock_move_keeps_the_other_waiting_movers_off_the_way():
 # -- boxed_in on a hand-built loop ---------------------------------------------------------------------
 
 def hand_loop(pose: np.ndarray, arena=(2000.0, 2000.0)):
-    """The least of a closed loop GrossMotion.boxed_in reads: one robot, nothing docked, nobody orbiting."""
+    """The least of a closed loop Escapes.boxed_in reads: one robot, nothing docked, nobody orbiting."""
     return SimpleNamespace(
         est=np.array([pose], float), v_hat=np.array([V]), r_hat=np.array([R]), L=np.array([L]), W=np.array([W]),
         docked=np.zeros(1, bool), rstar=np.array([RSTAR]), scn=SimpleNamespace(arena_um=arena),
@@ -136,13 +137,13 @@ def hand_loop(pose: np.ndarray, arena=(2000.0, 2000.0)):
 def test_a_robot_heading_into_the_arena_edge_a_few_um_ahead_is_boxed_in_one_along_it_is_not():
     # heading +y (north), its front 20 um from the top edge: it can neither turn (the front swings forward) nor go on
     into = np.array([1000.0, 2000.0 - 0.5 * L - 20.0, 0.0])
-    gm = GrossMotion(hand_loop(into))
-    assert gm.boxed_in(0, into, [])
+    esc = GrossMotion(hand_loop(into)).escapes
+    assert esc.boxed_in(0, into, [])
     # the same distance from the edge, driving along it (heading west: the edge on its right) - straight on is free
     along = np.array([1000.0, 2000.0 - 0.5 * W - 20.0, 1.5 * math.pi])
-    assert not gm.boxed_in(0, along, [])
+    assert not esc.boxed_in(0, along, [])
     # in the open: free
-    assert not gm.boxed_in(0, np.array([1000.0, 1000.0, 0.3]), [])
+    assert not esc.boxed_in(0, np.array([1000.0, 1000.0, 0.3]), [])
 
 
 def test_a_g1_failure_names_a_d_n_boxed_in_against_the_arena_edge():

@@ -20,15 +20,8 @@ from stressbots import paths as pathlib
 from stressbots import planning
 from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control import ControllerOptions, Tuning
-from stressbots.control.gross import (
-    GrossMotion,
-    SteerOutcome,
-    arrived,
-    clear_prefix,
-    contact_clearance,
-    escape_moves,
-    escape_sweep,
-)
+from stressbots.control.escapes import contact_clearance, escape_moves, escape_sweep
+from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_prefix
 from stressbots.control.single import SingleDocking
 from stressbots.control.slot_approach import approach_length, lead_in_clear
 from stressbots.kinematics import move
@@ -235,7 +228,7 @@ def test_a_robot_pressed_against_the_wall_turns_off_it_without_touching_it():
     start = _against_left_wall(-0.2)
     assert math.sin(start[2]) < 0.0 < _corner_drift_x(start[2])
     loop = KinematicLoop(start)
-    assert GrossMotion(loop).escape(0, 1, 0, [])
+    assert GrossMotion(loop).escapes.escape(0, 1, 0, [])
     trail = np.array(loop.trail)
     assert float(arena_gap(trail, L, W, ARENA).min()) > 0.0  # never into the wall
     assert float(arena_gap(trail[-1:], L, W, ARENA)[0]) >= loop.tune.escape_clearance_um  # and clear of it
@@ -247,7 +240,7 @@ def test_a_robot_trapped_against_the_wall_does_not_try_an_escape():
     start = _against_left_wall(-0.6)
     assert math.sin(start[2]) < 0.0 and _corner_drift_x(start[2]) < 0.0
     loop = KinematicLoop(start)
-    assert not GrossMotion(loop).escape(0, 1, 0, [])
+    assert not GrossMotion(loop).escapes.escape(0, 1, 0, [])
     assert len(loop.trail) == 1  # it did not move
 
 

@@ -1,10 +1,10 @@
 """A robot near its slot or the arena edge is not driven into a pin (session 15): pure queries and hand-built loops,
 checked against kinematics and closed-form geometry.
 
-- ``gross.move_stops``: the t_x stops of a turn-then-straight move;
-- ``GrossMotion.drive_move``: an open-loop move is checked again from each measured pose and stops before the rest
+- ``escapes.move_stops``: the t_x stops of a turn-then-straight move;
+- ``Escapes.drive_move``: an open-loop move is checked again from each measured pose and stops before the rest
   of it meets the arena edge;
-- ``GrossMotion.free_move``: a move on whose first t_x would already box the robot in is not taken;
+- ``Escapes.free_move``: a move on whose first t_x would already box the robot in is not taken;
 - ``SlotApproach.can_arc_in`` / ``cut_in``: without an approach line, a robot short of a_i starts its S_2f arc from
   there only where a loop is blocked and the arc keeps off the structure;
 - ``Rendezvous._drive_rest_open_loop``: D_n's open-loop final seconds only where they keep off the arena edge.
@@ -20,7 +20,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots.collision import arena_gap, penetration_depth
-from stressbots.control.gross import GrossMotion, escape_sweep, move_stops
+from stressbots.control.escapes import escape_sweep, move_stops
+from stressbots.control.gross import GrossMotion
 from stressbots.control.queries import in_funnel, line_coords, line_pose
 from stressbots.control.slot_approach import SlotApproach
 from stressbots.control.tuning import ControllerOptions, Tuning
@@ -76,13 +77,13 @@ def test_an_open_loop_move_stops_before_its_rest_meets_the_arena_edge():
     # heading east, 900 um from the east edge: a 6 s straight (600 um) is clear as planned
     start = np.array([1000.0, 1000.0, 0.5 * math.pi])
     calm = DriftLoop(start)
-    GrossMotion(calm).drive_move(0, 1, 0, (0.0, 6.0), [])  # type: ignore[arg-type]
+    GrossMotion(calm).escapes.drive_move(0, 1, 0, (0.0, 6.0), [])  # type: ignore[arg-type]
     assert sum(d for steps in calm.driven for _, d in steps) == 6.0 and "move-cut" not in calm.logged
     assert all(sum(d for _, d in steps) <= TX + 1e-12 for steps in calm.driven)
     # the same move near the edge, its heading kicked 60 deg toward the north edge after the first t_x: the rest
     # would run into that edge, so it stops there
     near = DriftLoop(np.array([1000.0, 1500.0, 0.5 * math.pi]), kick=-math.radians(60.0))
-    GrossMotion(near).drive_move(0, 1, 0, (0.0, 6.0), [])  # type: ignore[arg-type]
+    GrossMotion(near).escapes.drive_move(0, 1, 0, (0.0, 6.0), [])  # type: ignore[arg-type]
     rest = escape_sweep(near.est[0], (0.0, 5.0), V, R)
     assert near.logged == ["move-cut"] and len(near.driven) == 1
     assert (rest[:, 1] + 0.5 * L > 2000.0).any()  # what it did not drive would have left the arena
@@ -98,15 +99,15 @@ def test_a_move_on_whose_first_stop_boxes_the_robot_in_is_not_taken():
     lp.est = np.array([pose, *notch])
     lp.v_hat, lp.r_hat, lp.L, lp.W = np.full(3, V), np.full(3, R), np.full(3, L), np.full(3, W)
     lp.docked, lp.rstar = np.array([False, True, True]), np.full(3, RSTAR)
-    gm = GrossMotion(lp)  # type: ignore[arg-type]
+    esc = GrossMotion(lp).escapes  # type: ignore[arg-type]
 
     def boxed_after(m):
-        return gm.boxed_in(0, escape_sweep(pose, m, V, R)[-1], [])
+        return esc.boxed_in(0, escape_sweep(pose, m, V, R)[-1], [])
 
     # the cheapest move on that ends free (straight ahead, one body length) leaves it boxed in at its first t_x stop
-    cheapest = next(m for m in gm.free_moves(0, pose, []) if not boxed_after(m))
+    cheapest = next(m for m in esc.free_moves(0, pose, []) if not boxed_after(m))
     assert cheapest == (0.0, L / V) and any(boxed_after(s) for s in move_stops(cheapest, TX)[:-1])
-    m = gm.free_move(0, [])
+    m = esc.free_move(0, [])
     assert m is not None and m != cheapest and not boxed_after(m)
     assert not any(boxed_after(s) for s in move_stops(m, TX)[:-1])
 

@@ -4,7 +4,8 @@ Modules: :mod:`~stressbots.control.runner` (the closed loop, :func:`assemble`), 
 (G_1, handed the loop; its stages :mod:`~stressbots.control.transfer` with its leg choice
 :mod:`~stressbots.control.transfer_legs`, :mod:`~stressbots.control.rendezvous`, :mod:`~stressbots.control.departure`,
 :mod:`~stressbots.control.holding`, :mod:`~stressbots.control.pair_recovery`),
-:mod:`~stressbots.control.gross` (gross motion sigma_1, handed the loop),
+:mod:`~stressbots.control.gross` (gross motion sigma_1, handed the loop; its ways off an obstacle and on,
+:mod:`~stressbots.control.escapes`),
 :mod:`~stressbots.control.single` (docking of the single robots D_k, k < n-1, handed the loop; where they aim and
 what they can reach, :mod:`~stressbots.control.slot_approach`),
 :mod:`~stressbots.control.loopview` (the protocols naming what each phase may use of the loop),

@@ -7,30 +7,31 @@ robot does not take a new random route every t_x. A turn into a long straight is
 degrees (left bias): a one-way robot corrects to the right cheaply, to the left only by a full loop.
 
 :class:`GrossMotion` is handed the closed loop (:class:`GrossLoop`: ``drive``, estimates, event log,
-the routes' random stream) and drives through it; :func:`path_steps` and :func:`arrived` are pure.
+the routes' random stream) and drives through it; :func:`path_steps` and :func:`arrived` are pure. Its ways off
+an obstacle and on (escapes from contacts, checked moves on, whether a robot is boxed in, how much of a clear
+path is viable) are :class:`~stressbots.control.escapes.Escapes`, which it holds as ``escapes``.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from enum import Enum
 from typing import NamedTuple, Protocol
 
 import numpy as np
 
-from .. import kinematics
 from .. import paths as pathlib
 from ..collision import arena_gap, bodies_hit_discs, penetration_depth
 from ..kinematics import sample_arclengths
 from ..robots import angle_difference, turning_centres
+from .escapes import Escapes
 from .loopview import LoopView, Steps
 from .prefixed import describe_prefix, first_clear, remaining_prefix
 from .queries import trim_steps
 from .tuning import Tuning
 
-__all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "clear_prefix", "contact_clearance", "escape_moves",
-           "escape_sweep", "move_stops", "path_steps", "viable_prefix"]
+__all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "clear_prefix", "path_steps"]
 
 
 
@@ -125,68 +126,6 @@ def clear_prefix(path: pathlib.Path, hits: Callable[[np.ndarray], bool], step_um
     return float(s[lo - 1]) if lo > 0 else 0.0
 
 
-def viable_prefix(path: pathlib.Path, clear_um: float, boxed_in: Callable[[np.ndarray], bool], step_um: float = 25.0,
-                  checks: int = 40) -> float:
-    """The longest beginning of ``path``, at most ``clear_um`` (um) long, whose end pose is not ``boxed_in`` (pose
-    (3,) -> bool: can the robot not move on from there?).
-
-    A one-way robot can neither reverse nor turn left: one that stops short of an obstacle while heading into
-    it (the clear part of a blocked path usually ends so) is trapped for good once anything nudges it. Ends
-    are tried back from ``clear_um`` every ``step_um``, at most ``checks`` of them; 0 when none will do (the
-    robot stays where it is).
-    """
-    for s in np.arange(clear_um, 0.0, -step_um)[:checks]:
-        if not boxed_in(np.asarray(path.pose_at(float(s)), float)):
-            return float(s)
-    return 0.0
-
-
-def escape_moves(v: float, r: float, length: float, turn_fractions: Sequence[float],
-                 straight_lengths: Sequence[float]) -> list[tuple[float, float]]:
-    """Candidate escapes of a one-way robot from a contact, cheapest first: ``(turn_s, straight_s)``, turn
-    clockwise for a fraction of a loop (radius ``r`` um at ``v`` um/s), then drive straight so many body
-    lengths (``length`` um). A robot cannot reverse, so every way off an obstacle is one of these."""
-    moves = {(2.0 * math.pi * r * f / v, length * b / v) for f in turn_fractions for b in straight_lengths}
-    return sorted(moves, key=lambda m: (m[0] + m[1], m[0]))
-
-
-def escape_sweep(pose: np.ndarray, move_: tuple[float, float], v: float, r: float, step_um: float = 10.0) -> np.ndarray:
-    """The poses (M, 3) a robot at ``pose`` passes on the escape ``move_`` (:func:`escape_moves`), ``step_um`` apart."""
-    turn = v * move_[0]
-    a = kinematics.move(pose, np.linspace(0.0, turn, max(2, int(turn / step_um) + 1)), 1.0 / r)
-    b = kinematics.move(a[-1], np.linspace(0.0, v * move_[1], max(2, int(v * move_[1] / step_um) + 1)), 0.0)
-    return np.vstack([a, b[1:]])
-
-
-def move_stops(move_: tuple[float, float], tx: float) -> list[tuple[float, float]]:
-    """The parts ``(turn_s, straight_s)`` of the turn-then-straight ``move_`` driven at each of its t_x stops
-    (``tx`` s apart; the whole move last): where :meth:`GrossMotion.drive_move` looks again.
-
-    >>> move_stops((0.5, 2.0), 1.0)
-    [(0.5, 0.5), (0.5, 1.5), (0.5, 2.0)]
-    """
-    total = move_[0] + move_[1]
-    out = []
-    for j in range(1, max(1, math.ceil(total / tx - 1e-9)) + 1):
-        t = min(j * tx, total)
-        out.append((min(move_[0], t), max(0.0, t - move_[0])))
-    return out
-
-
-def contact_clearance(hits: Callable[[float], bool], low: float = -80.0, high: float = 0.0, tol: float = 0.5) -> float:
-    """The largest clearance ``c`` (um, in ``[low, high]``) at which ``hits(c)`` is still False: how far a body
-    is from its nearest obstacle (negative: overlapping, as measured). ``hits`` must be monotone in ``c``."""
-    if not hits(low):
-        lo, hi = low, high
-        if not hits(hi):
-            return high
-        while hi - lo > tol:
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if not hits(mid) else (lo, mid)
-        return lo
-    return low
-
-
 def _cut(segments, length_um: float) -> tuple[tuple[str, float], ...]:
     """The first ``length_um`` (um) of a path's ``segments``."""
     out, left = [], length_um
@@ -205,6 +144,26 @@ def arrived(pose: np.ndarray, target: np.ndarray, tune: Tuning) -> bool:
                 and abs(angle_difference(pose[2], target[2])) <= math.radians(tune.arrive_deg))
 
 
+def _roadmap_obstacles(loop: GrossLoop, i: int, orbiting, extra_discs, box_margin: float = 0.0):
+    """The planner's obstacles for robot ``i``'s roadmap route (:meth:`GrossMotion.roadmap_route`), as measured: the
+    orbits but its own and ``extra_discs`` (``(centre, radius)``), the docked bodies ``box_margin`` um wider all round,
+    the arena edge."""
+    from ..planning import Obstacles
+
+    orbiting = [j for j in orbiting if j != i]
+    centres = list(turning_centres(loop.est[orbiting], loop.r_hat[orbiting])) if orbiting else []
+    radii = list(loop.rstar[orbiting]) if orbiting else []
+    for c, rr in extra_discs:
+        centres.append(c)
+        radii.append(rr)
+    docked = np.flatnonzero(loop.docked)
+    return Obstacles(
+        np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
+        loop.est[docked], loop.L[docked] + 2.0 * box_margin, loop.W[docked] + 2.0 * box_margin,
+        tuple("a docked robot" for _ in docked), loop.scn.arena_um,
+    )
+
+
 class GrossMotion:
     """Gross motion for a closed loop ``loop``: drives a robot to a target region around the obstacles.
 
@@ -213,6 +172,7 @@ class GrossMotion:
 
     def __init__(self, loop: GrossLoop):
         self.loop = loop
+        self.escapes = Escapes(self)  # ways off an obstacle and on, checked by obstacles_hit
         # failed roadmap searches per (robot, target, structure, orbits) (:meth:`_search_key`): each costs a full
         # roadmap build, and failing runs spent most of their wall time asking again and again
         self._failed: dict[tuple, int] = {}
@@ -220,12 +180,15 @@ class GrossMotion:
         self._prefixed: dict[int, tuple[np.ndarray, pathlib.Path]] = {}
 
     def obstacles_hit(self, samples: np.ndarray, i: int, orbiting: Sequence[int], *, extra_discs=(), clearance: float | None = None,
-                      target=None) -> bool:
+                      target=None, start=None) -> bool:
         """Whether robot ``i``'s body along ``samples`` hits an orbit, a docked body or the arena edge.
 
         With ``target`` (a gross-motion goal pose), docked bodies are kept ``Tuning.gross_docked_clearance_um``
         away except within one body length of the target: a robot that touches the structure on the way
-        is turned flush against the wrong edge by docking compliance and cannot pivot off again.
+        is turned flush against the wrong edge by docking compliance and cannot pivot off again. With ``start``
+        (the pose the path leaves from) and ``Tuning.gross_start_relief``, also not within its first loop's reach
+        (two turning radii and one body length) of the start: a robot that missed its approach line near the
+        structure has only that loop back, which its line approach checked at ``Tuning.loop_back_clearance_um``.
         """
         c = self.loop.opts.clearance_um if clearance is None else clearance
         samples = np.asarray(samples, dtype=np.float64)
@@ -243,6 +206,9 @@ class GrossMotion:
             need = np.full(len(samples), c)
             if target is not None:
                 far = np.hypot(*(samples[:, :2] - np.asarray(target, float)[:2]).T) > self.loop.L[i]
+                if start is not None and self.loop.tune.gross_start_relief:
+                    reach = 2.0 * self.loop.r_hat[i] + self.loop.L[i]
+                    far &= np.hypot(*(samples[:, :2] - np.asarray(start, float)[:2]).T) > reach
                 need[far] = max(c, self.loop.tune.gross_docked_clearance_um)
             hd = 0.5 * math.hypot(self.loop.L[i], self.loop.W[i])
             for j in docked:
@@ -272,9 +238,9 @@ class GrossMotion:
 
         Its ``outcome`` is ARRIVED (``ready()`` became true on a roadmap route), None (a route's waypoints were
         driven: re-plan), a path to drive this t_x, or STUCK: no route and nothing clear to drive (give up
-        this target; failure region H) after an :meth:`escape` was tried. With no route, only the clear beginning of ``path``
-        (:func:`clear_prefix`, at the full clearance, else at ``Tuning.escape_clearance_um``, else short of contact) is driven,
-        never the blocked part: robots that drove on along blocked paths
+        this target; failure region H) after an :meth:`~stressbots.control.escapes.Escapes.escape` was tried. With no
+        route, only the clear beginning of ``path`` (:func:`clear_prefix`, at the full clearance, else at
+        ``Tuning.escape_clearance_um``, else short of contact) is driven, never the blocked part: robots that drove on along blocked paths
         ran into the arena edge or the structure and were trapped there (a one-way robot against an
         obstacle can neither turn nor drive off it).
         """
@@ -309,14 +275,14 @@ class GrossMotion:
         # full clearance, else the escape one, else (a robot already that close) no contact
         for c, tgt in ((clearance, target), (self.loop.tune.escape_clearance_um, None), (0.0, None)):
             def hit(s: np.ndarray, c=c, tgt=tgt) -> bool:
-                return self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=c, target=tgt)
+                return self.obstacles_hit(s, i, orbiting, extra_discs=extra_discs, clearance=c, target=tgt, start=path.start)
 
             ahead = clear_prefix(path, hit, 10.0)
             if ahead >= self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
                 break
-        ahead = self._viable(i, path, ahead, orbiting, extra_discs)
+        ahead = self.escapes.viable(i, path, ahead, orbiting, extra_discs)
         if ahead < self.loop.tune.min_clear_run_s * self.loop.v_hat[i]:
-            if escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs):
+            if escapes > 0 and self.escapes.escape(i, turn_k, straight_k, orbiting, extra_discs):
                 return Detour(None, quiet, escapes - 1, stalled)  # off the obstacle: re-plan from there
             self.loop.log("blocked", i, f"no route to its target and only {ahead:.0f} um of its path clear: gives up this target")
             # failure region H: the caller's recovery (backing off) takes over
@@ -337,7 +303,8 @@ class GrossMotion:
             s = sample_arclengths(cand.lengths, 10.0)
             samples = cand.pose_at(s)
             tail = s >= cand.length - float(self.loop.L[i])
-            return (self.obstacles_hit(samples[~tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=_NOWHERE)
+            return (self.obstacles_hit(samples[~tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=_NOWHERE,
+                                       start=self.loop.est[i])
                     or self.obstacles_hit(samples[tail], i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target))
 
         found = first_clear(self.loop.est[i], target, float(self.loop.r_hat[i]), hits, checks=self.loop.tune.prefixed_checks_max,
@@ -351,52 +318,6 @@ class GrossMotion:
             self.loop.log("detour", i, f"its shortest path is blocked: it takes a {cand.length:.0f} um path that first "
                                        f"{describe_prefix(cand)} (checked {k + 1})")
         return cand
-
-    def free_moves(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> Iterator[tuple[float, float]]:
-        """The escapes of the kind :meth:`escape` drives (turn clockwise ``Tuning.escape_turns`` of a loop, none
-        included, then one body length straight; ``(turn_s, straight_s)``, in that order) that keep
-        ``Tuning.viable_clearance_um`` from every orbit, docked body and the arena edge from ``pose``; lazily."""
-        v, r, length = float(self.loop.v_hat[i]), float(self.loop.r_hat[i]), float(self.loop.L[i])
-        for f in self.loop.tune.escape_turns:
-            m = (2.0 * math.pi * r * f / v, length / v)
-            sweep = escape_sweep(np.asarray(pose, float), m, v, r, step_um=15.0)
-            if not self.obstacles_hit(sweep[1:], i, orbiting, extra_discs=extra_discs, clearance=self.loop.tune.viable_clearance_um):
-                yield m
-
-    def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None:
-        """A checked move on for robot ``i`` from where it is, ``(turn_s, straight_s)``: of its :meth:`free_moves`, the
-        cheapest that boxes it in at none of the t_x stops :meth:`drive_move` makes (its end included), else the cheapest
-        that does not at its end, else the cheapest; None when it is boxed in. Checked at the end only, a robot beside
-        the structure took a body-length straight whose first t_x already left it no way on."""
-        lp = self.loop
-        p = lp.est[i]
-        moves = list(self.free_moves(i, p, orbiting))
-        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
-
-        def boxed_at(m: tuple[float, float]) -> bool:
-            return self.boxed_in(i, escape_sweep(p, m, v, r)[-1], orbiting)
-
-        free_ends = [m for m in moves if not boxed_at(m)]
-        for m in free_ends:
-            if not any(boxed_at(s) for s in move_stops(m, lp.tx)[:-1]):
-                return m
-        return free_ends[0] if free_ends else (moves[0] if moves else None)
-
-    def boxed_in(self, i: int, pose: np.ndarray, orbiting: Sequence[int], extra_discs=()) -> bool:
-        """Whether robot ``i`` at ``pose`` cannot move on: it has no :meth:`free_moves`. A robot heading into an
-        obstacle a few tens of um ahead is boxed in (it can neither turn nor drive off); one driving along the
-        structure is not."""
-        return next(self.free_moves(i, pose, orbiting, extra_discs), None) is None
-
-    def _viable(self, i: int, path, ahead: float, orbiting: Sequence[int], extra_discs) -> float:
-        """How much of the ``ahead`` um clear beginning of ``path`` robot ``i`` may drive: all of it when it is
-        :meth:`boxed_in` where it is now (it needs the way out), else the longest beginning whose end does not box
-        it in (:func:`viable_prefix`): the clear part of a blocked path drove robots to a stop 10-50 um short of
-        the structure, the arena edge or a waiting robot, heading into it, and the next nudge pinned them for good."""
-        if ahead <= 0.0 or self.boxed_in(i, self.loop.est[i], orbiting, extra_discs):
-            return ahead
-        return viable_prefix(path, ahead, lambda pose: self.boxed_in(i, pose, orbiting, extra_discs), self.loop.tune.viable_step_um,
-                             self.loop.tune.viable_checks_max)
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
@@ -427,8 +348,9 @@ class GrossMotion:
                 return _ended(True, stalled)
             path = pathlib.shortest_path(p, target, self.loop.r_hat[i])
             # a route's waypoint legs at the route's own clearance (the docked one blocked them: a new route every t_x)
-            if self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
-                                  target=target if via else None):
+            if (self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
+                                   target=target if via else None, start=p)
+                    or self.escapes.dead_end_ahead(i, path, target, orbiting, extra_discs)):
                 if not via:
                     return _ended(False, stalled)  # a waypoint of a committed route is out of reach: the caller re-plans
                 why = ready_if_blocked() if ready_if_blocked is not None else None
@@ -442,20 +364,12 @@ class GrossMotion:
                 if isinstance(outcome, SteerOutcome):
                     return outcome
                 path = outcome
-            self.loop.replans += 1
-            # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
-            whole = path.length / v <= self.loop.tune.whole_leg_factor * self.loop.tx
-            limit = None if whole else self.loop.tx
-            steps = path_steps(path, v, turn_k, straight_k, limit)
-            if not whole:
-                steps = self._left_biased(i, path, steps, straight_k, orbiting, extra_discs, clearance, target)
-            before = self.loop.est[i].copy()
-            self.loop.drive(steps)
-            if float(np.hypot(*(self.loop.est[i, :2] - before[:2]))) < self.loop.tune.stall_fraction * v * sum(d for _, d in steps):
+            whole, slow = self._drive_leg(i, path, v, turn_k, straight_k, orbiting, extra_discs, clearance, target)
+            if slow:
                 stalls += 1
                 if stalls >= self.loop.tune.stall_count:
                     self.loop.log("stuck", i, "stopped during gross motion (failure region H)")
-                    if not (escapes > 0 and self.escape(i, turn_k, straight_k, orbiting, extra_discs)):
+                    if not (escapes > 0 and self.escapes.escape(i, turn_k, straight_k, orbiting, extra_discs)):
                         return SteerOutcome.STUCK
                     stalls, escapes = 0, escapes - 1
             else:
@@ -465,55 +379,20 @@ class GrossMotion:
             self.loop.tend_orbits(turn_k)  # waiting orbits drift meanwhile: move one away before it is trapped
         return _ended(False, stalled)
 
-    def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs=()) -> bool:
-        """Recovery from a contact (or a pose that close): drive robot ``i`` off what blocks it; True if it moved.
-
-        How close it is to its nearest obstacle is measured (:func:`contact_clearance`, the orbits, the
-        structure and the arena edge as obstacles); the cheapest escape (:func:`escape_moves`) that never
-        goes deeper than that and ends ``Tuning.escape_clearance_um`` clear is driven. Backing off blindly
-        (a quarter turn, then straight) turned into the obstacle as often as away from it.
-        """
-        lp = self.loop
-        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
-        p = lp.est[i].copy()
-
-        def hit(samples: np.ndarray, c: float) -> bool:
-            return self.obstacles_hit(samples, i, orbiting, extra_discs=extra_discs, clearance=c)
-
-        now = contact_clearance(lambda c: hit(p[None, :], c), high=lp.tune.escape_clearance_um)
-        free = not self.boxed_in(i, p, orbiting, extra_discs)  # a robot that can move on escapes only to where it still can
-        for m in escape_moves(v, r, float(lp.L[i]), lp.tune.escape_turns, lp.tune.escape_straights):
-            sweep = escape_sweep(p, m, v, r)
-            if not hit(sweep[1:], now - 0.5) and not hit(sweep[-1:], lp.tune.escape_clearance_um) and \
-                    not (free and self.boxed_in(i, sweep[-1], orbiting, extra_discs)):
-                lp.log("escape", i, f"{now:.0f} um from an obstacle: turns {m[0]:.1f} s, then {m[1]:.1f} s straight off it")
-                self.drive_move(i, turn_k, straight_k, m, orbiting, extra_discs, clearance=min(now - 0.5, lp.tune.viable_clearance_um))
-                return True
-        return False
-
-    def drive_move(self, i: int, turn_k: int, straight_k: int, move_: tuple[float, float], orbiting: Sequence[int],
-                   extra_discs=(), clearance: float | None = None) -> None:
-        """Drive robot ``i``'s turn-then-straight ``move_`` (``(turn_s, straight_s)``, an escape or a move on) one t_x
-        at a time, checked again from each measured pose: the rest must keep ``clearance`` (um; default
-        ``Tuning.viable_clearance_um``) and, for a robot that can move on now, end where it still can; else it stops
-        where it is. Driven whole on one frame, a body-length straight checked 5 um clear ran a 1 deg heading error
-        (4 um over 250 um) and drift into the structure or the arena edge, and pinned the robot for good."""
-        lp = self.loop
-        c = lp.tune.viable_clearance_um if clearance is None else clearance
-        done = (0.0, 0.0)
-        for stop in move_stops(move_, lp.tx):  # the stops free_move checked
-            lp.drive([(k, d) for k, d in ((turn_k, stop[0] - done[0]), (straight_k, stop[1] - done[1])) if d > 0.0])
-            done = stop
-            turn_s, straight_s = move_[0] - stop[0], move_[1] - stop[1]
-            if turn_s + straight_s <= 1e-9:
-                return
-            v, r, p = float(lp.v_hat[i]), float(lp.r_hat[i]), lp.est[i].copy()
-            sweep = escape_sweep(p, (turn_s, straight_s), v, r)
-            if self.obstacles_hit(sweep[1:], i, orbiting, extra_discs=extra_discs, clearance=c) or (
-                    self.boxed_in(i, sweep[-1], orbiting, extra_discs) and not self.boxed_in(i, p, orbiting, extra_discs)):
-                lp.log("move-cut", i, f"stops {turn_s + straight_s:.1f} s short: the rest of its move, checked from where it "
-                                      "is now, would meet an obstacle or leave it no way on")
-                return
+    def _drive_leg(self, i: int, path: pathlib.Path, v: float, turn_k: int, straight_k: int, orbiting, extra_discs, clearance,
+                   target) -> tuple[bool, bool]:
+        """Drive robot ``i`` one t_x along ``path`` at ``v`` (um/s; all of it when little more is left): ``(whole, slow)``,
+        whether that was all of it, and whether it moved less than ``Tuning.stall_fraction`` of that (see :meth:`steer`)."""
+        self.loop.replans += 1
+        # the last leg runs whole: a one-way robot that stops short and overshoots needs a loop
+        whole = path.length / v <= self.loop.tune.whole_leg_factor * self.loop.tx
+        limit = None if whole else self.loop.tx
+        steps = path_steps(path, v, turn_k, straight_k, limit)
+        if not whole:
+            steps = self._left_biased(i, path, steps, straight_k, orbiting, extra_discs, clearance, target)
+        before = self.loop.est[i].copy()
+        self.loop.drive(steps)
+        return whole, float(np.hypot(*(self.loop.est[i, :2] - before[:2]))) < self.loop.tune.stall_fraction * v * sum(d for _, d in steps)
 
     def _left_biased(self, i: int, path, steps, straight_k: int, orbiting, extra_discs, clearance, target):
         """``steps`` with the turn into a long straight cut short by ``Tuning.left_bias_deg`` when that path is clear
@@ -533,22 +412,6 @@ class GrossMotion:
             steps = trim_steps(steps, self.loop.tx)
         return steps
 
-    def _obstacles(self, i: int, orbiting, extra_discs, box_margin: float = 0.0):
-        from ..planning import Obstacles
-
-        orbiting = [j for j in orbiting if j != i]
-        centres = list(turning_centres(self.loop.est[orbiting], self.loop.r_hat[orbiting])) if orbiting else []
-        radii = list(self.loop.rstar[orbiting]) if orbiting else []
-        for c, rr in extra_discs:
-            centres.append(c)
-            radii.append(rr)
-        docked = np.flatnonzero(self.loop.docked)
-        return Obstacles(
-            np.array(centres).reshape(-1, 2), np.array(radii, float), tuple("an orbit" for _ in radii),
-            self.loop.est[docked], self.loop.L[docked] + 2.0 * box_margin, self.loop.W[docked] + 2.0 * box_margin,
-            tuple("a docked robot" for _ in docked), self.loop.scn.arena_um,
-        )
-
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
         """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
         structure and the arena edge to ``target`` (waypoints end with it), at ``clearance``; ``([], None)``
@@ -560,7 +423,7 @@ class GrossMotion:
         # around the structure with the gross-motion clearance first (see obstacles_hit), else the plain one
         margins = (max(self.loop.tune.gross_docked_clearance_um - clearance, 0.0), 0.0) if self.loop.docked.any() else (0.0,)
         for margin in margins:
-            obst = self._obstacles(i, orbiting, extra_discs, margin)
+            obst = _roadmap_obstacles(self.loop, i, orbiting, extra_discs, margin)
             try:
                 _, routed, points = route(self.loop.est[i][None, :], np.zeros(1), np.asarray(target, float), self.loop.r_hat[i],
                                           self.loop.L[i], self.loop.W[i], obst, opts, rng, "")

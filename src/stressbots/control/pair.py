@@ -126,11 +126,11 @@ class PairPhase:
 
     def boxed_note(self, N: int) -> str:
         """'R5 is boxed in against the arena edge ...; ' when D_n can neither turn nor drive on for the arena edge (and
-        the docked bodies) alone (:meth:`~stressbots.control.gross.GrossMotion.boxed_in` with no orbits), else ''.
+        the docked bodies) alone (:meth:`~stressbots.control.escapes.Escapes.boxed_in` with no orbits), else ''.
         Nothing G_1 re-plans frees a one-way robot there, and the last stage's reason ("found no timed path") would
         name a symptom (tuning 116:0 at 1x: D_n pinned against the bottom edge at 21 s, G_1 gave up at 185 s)."""
         lp = self.loop
-        if not lp.gross.boxed_in(N, lp.est[N], []):
+        if not lp.gross.escapes.boxed_in(N, lp.est[N], []):
             return ""
         return (f"{lp.scn.names[N]} is boxed in against the arena edge (no clockwise turn and straight of it keeps "
                 f"{lp.tune.viable_clearance_um:.0f} um from it); ")

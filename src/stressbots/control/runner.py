@@ -328,20 +328,20 @@ class _Runner(PlantLoop):
         return self.obstacles_hit(arc, i, waiting, clearance=0.0)
 
     def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int]) -> bool:
-        """A checked escape of robot ``i`` (:meth:`stressbots.control.gross.GrossMotion.escape`); True if it moved."""
-        return self.gross.escape(i, turn_k, straight_k, orbiting)
+        """A checked escape of robot ``i`` (:meth:`stressbots.control.escapes.Escapes.escape`); True if it moved."""
+        return self.gross.escapes.escape(i, turn_k, straight_k, orbiting)
 
     def free_move(self, i: int, orbiting: Sequence[int]) -> tuple[float, float] | None:
-        """A checked move on for robot ``i`` from where it is (:meth:`~stressbots.control.gross.GrossMotion.free_move`)."""
-        return self.gross.free_move(i, orbiting)
+        """A checked move on for robot ``i`` from where it is (:meth:`~stressbots.control.escapes.Escapes.free_move`)."""
+        return self.gross.escapes.free_move(i, orbiting)
 
     def drive_move(self, i: int, turn_k: int, straight_k: int, move_: tuple[float, float], orbiting: Sequence[int]) -> None:
-        """Drive robot ``i``'s move ``move_`` checked again every t_x (:meth:`~stressbots.control.gross.GrossMotion.drive_move`)."""
-        self.gross.drive_move(i, turn_k, straight_k, move_, orbiting)
+        """Drive robot ``i``'s move ``move_`` checked again every t_x (:meth:`~stressbots.control.escapes.Escapes.drive_move`)."""
+        self.gross.escapes.drive_move(i, turn_k, straight_k, move_, orbiting)
 
     def boxed_in(self, i: int, orbiting: Sequence[int]) -> bool:
-        """Whether robot ``i`` cannot move on from where it is (:meth:`~stressbots.control.gross.GrossMotion.boxed_in`)."""
-        return self.gross.boxed_in(i, self.est[i], orbiting)
+        """Whether robot ``i`` cannot move on from where it is (:meth:`~stressbots.control.escapes.Escapes.boxed_in`)."""
+        return self.gross.escapes.boxed_in(i, self.est[i], orbiting)
 
     def orbiting_below(self, k: int) -> list[int]:
         return [self.by_rank[j] for j in range(1, k)]

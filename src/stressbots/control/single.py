@@ -224,7 +224,7 @@ class SingleDocking:
         """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
         lp = self.loop
         outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, lp.opts, lp.tx,
-                                                  loop_blocked=lambda: self.approach.loop_blocked(i, k),
+                                                  loop_blocked=lambda: self.approach.loop_blocked(i, k, lp.tune.loop_back_clearance_um),
                                                   log=lambda kind, detail: lp.log(kind, i, f"{lp.scn.names[i]} {detail}"),
                                                   attempt=attempt))
         return self.dock_verdict(i, outcome)
@@ -280,7 +280,7 @@ class SingleDocking:
     def back_off(self, i: int, k: int) -> None:
         """Recovery from H: a robot cannot reverse, so it turns away (arm down) and drives clear.
 
-        The way off is checked (:meth:`stressbots.control.gross.GrossMotion.escape`: the cheapest turn-then-straight
+        The way off is checked (:meth:`stressbots.control.escapes.Escapes.escape`: the cheapest turn-then-straight
         that goes no deeper and ends clear, and keeps a robot that can move on where it can). With none, a robot
         that can still move on from where it is takes the cheapest such move (a turn, then one body length; the
         next attempt plans from there: staying put, every later attempt failed at the same instant); only one

@@ -323,10 +323,11 @@ class SlotApproach:
             return None
         return fr[0], fr[1], aim
 
-    def loop_blocked(self, i: int, k: int) -> bool:
-        """Whether a full clockwise loop of robot ``i`` from where it is would meet the structure, a lower
-        orbit or the arena edge (measured; no clearance: contact is what traps a turning robot)."""
+    def loop_blocked(self, i: int, k: int, clearance_um: float = 0.0) -> bool:
+        """Whether a full clockwise loop of robot ``i`` from where it is would come within ``clearance_um`` of the
+        structure, a lower orbit or the arena edge (measured; by default no clearance: contact is what traps a turning
+        robot)."""
         lp = self.loop
         r = float(lp.r_hat[i])
         loop = move(lp.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
-        return lp.obstacles_hit(loop, i, lp.orbiting_below(k), clearance=0.0)
+        return lp.obstacles_hit(loop, i, lp.orbiting_below(k), clearance=clearance_um)

@@ -226,6 +226,14 @@ class GrossTuning:
     gross_docked_clearance_um: float = 40.0
     """Clearance of gross motion from the docked structure away from its target: a robot grazing the structure is
     turned flush against the wrong edge by docking compliance and is trapped there."""
+    dead_end_guard: bool = False
+    """Whether a gross-motion path whose next t_x would leave the robot without a clear loop counts as blocked
+    (:meth:`~stressbots.control.escapes.Escapes.dead_end_ahead`)."""
+    gross_start_relief: bool = False
+    """Whether that clearance is also waived within the first loop's reach of where a gross motion starts
+    (:meth:`~stressbots.control.gross.GrossMotion.obstacles_hit`): after a missed approach line the loop back runs
+    close to the structure, and with 40 um everywhere no path, detour or route left the robot there ("no route ... 0 um
+    of its path clear")."""
     arrive_um: float = 25.0
     arrive_deg: float = 6.0
     """(arrive_um, arrive_deg) A gross-motion target region (the seed's regions instead of points)."""
@@ -297,7 +305,7 @@ class GrossTuning:
     """With no route, a robot drives the clear beginning of its blocked path only if it is at least this many seconds
     of travel; otherwise it gives up the target (the caller re-plans) instead of driving into what blocks it."""
     escapes_per_steer: int = 2
-    """Escapes (:meth:`~stressbots.control.gross.GrossMotion.escape`) one gross motion may make from a contact or a
+    """Escapes (:meth:`~stressbots.control.escapes.Escapes.escape`) one gross motion may make from a contact or a
     stall before it reports the robot stuck (each is a turn and a straight: a few seconds)."""
     escape_turns: tuple[float, ...] = (0.0, 0.03125, 0.0625, 0.125, 0.25, 0.375, 0.5, 0.625, 0.75, 0.875)
     """Fractions of a loop an escape may turn before its straight (a one-way robot cannot reverse). Fine steps first
@@ -350,6 +358,9 @@ class DockingTuning:
 
     small_miss_um: float = 12.0
     """A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS)."""
+    loop_back_clearance_um: float = 0.0
+    """um. On the approach line, a loop back counts as blocked (the robot drives on, ``late_miss_um``) when the loop
+    from where it is comes this close to the structure, a lower orbit or the arena edge."""
     late_miss_um: float = 25.0
     """A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would meet the
     structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um)."""
