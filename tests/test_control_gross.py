@@ -336,3 +336,56 @@ def test_a_nominal_waypoint_whose_way_is_blocked_is_dropped_and_the_aim_reached_
     # a reachable waypoint is driven to, not skipped
     ok, _ = _through(np.array([1000.0, 1300.0, 0.0]), target, skip=True)
     assert "skip" not in [kind for kind, _ in ok.events] and arrived(ok.est[0], target, ok.tune)
+
+
+# -- the dead-end guard ----------------------------------------------------------------------------------
+
+def _loop_meets(pose, body) -> bool:
+    """Independent truth: whether a full clockwise loop from ``pose`` (exact kinematics, every 2 um) touches ``body``."""
+    s = np.linspace(0.0, 2.0 * math.pi * R, int(2.0 * math.pi * R / 2.0) + 2)
+    return bool((penetration_depth(move(pose, s, 1.0 / R), L, W, np.asarray(body)[None], L, W) > 0.0).any())
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(-80.0, 120.0), st.floats(200.0, 1200.0))
+def test_the_dead_end_guard_fires_exactly_when_one_t_x_ahead_the_loop_is_lost(gap_offset, target_far):
+    """A robot heading north, a docked body lying across the top of its loop: the loop from where it is clears the
+    body by about ``50 + gap_offset`` um (or meets it already), the loop one t_x (100 um) further on meets it when that
+    was under 100 um.
+    ``dead_end_ahead`` agrees with the brute-force loops, only with ``Tuning.dead_end_guard`` on, and never when the
+    target lies within two radii and a body length of that point (the robot is meant to come close there)."""
+    start = np.array([1000.0, 500.0, 0.0])
+    rstar = float(orbit_radii(L, W, R))
+    body = np.array([1000.0 + R, 500.0 + rstar + 50.0 + gap_offset + W / 2.0, math.pi / 2.0])
+    truth_now, truth_ahead = _loop_meets(start, body), _loop_meets(start + [0.0, V * 1.0, 0.0], body)
+    for guard in (False, True):
+        loop = BesideTheStructure(start, body)
+        loop.tune = Tuning(dead_end_guard=guard)
+        target = np.array([1000.0, 500.0 + V + 2.0 * R + L + target_far, 0.0])
+        path = pathlib.shortest_path(start, target, R)
+        got = GrossMotion(loop).escapes.dead_end_ahead(0, path, target, [])
+        assert got == (guard and truth_ahead and not truth_now)
+        near = np.array([1000.0, 500.0 + V + 2.0 * R, 0.0])
+        assert not GrossMotion(loop).escapes.dead_end_ahead(0, pathlib.shortest_path(start, near, R), near, [])
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(16.0, 39.0), st.floats(0.0, 2.0 * math.pi))
+def test_start_relief_waives_the_docked_clearance_only_within_the_first_loops_reach(gap, theta):
+    """A pose ``gap`` um (between the route clearance, 15 um, and ``Tuning.gross_docked_clearance_um``, 40 um) from a
+    docked body, far from the target: blocked for gross motion, unless ``Tuning.gross_start_relief`` is on and the
+    path starts within two turning radii and a body length of it. Independent truth: the separating gap measured
+    directly."""
+    body = np.array([1000.0, 1000.0, theta])
+    h = np.array([math.sin(theta), math.cos(theta)])
+    pose = np.array([*(body[:2] + (W + gap) * np.array([h[1], -h[0]])), theta])  # beside it, parallel
+    assert abs(-float(penetration_depth(pose[None], L, W, body[None], L, W)[0]) - gap) < 1e-6
+    far_target = np.array([100.0, 100.0, 0.0])
+    for relief in (False, True):
+        loop = BesideTheStructure(pose, body)
+        loop.tune = Tuning(gross_start_relief=relief)
+        gross = GrossMotion(loop)
+        remote_start = pose + [2.0 * R + L + 10.0, 0.0, 0.0]
+        assert gross.obstacles_hit(pose[None], 0, [], target=far_target, start=pose) is (not relief)
+        assert gross.obstacles_hit(pose[None], 0, [], target=far_target, start=remote_start)
+        assert gross.obstacles_hit(pose[None], 0, [], target=far_target)
