@@ -226,14 +226,16 @@ class GrossTuning:
     gross_docked_clearance_um: float = 40.0
     """Clearance of gross motion from the docked structure away from its target: a robot grazing the structure is
     turned flush against the wrong edge by docking compliance and is trapped there."""
-    dead_end_guard: bool = False
-    """Whether a gross-motion path whose next t_x would leave the robot without a clear loop counts as blocked
-    (:meth:`~stressbots.control.escapes.Escapes.dead_end_ahead`)."""
     gross_start_relief: bool = False
     """Whether that clearance is also waived within the first loop's reach of where a gross motion starts
     (:meth:`~stressbots.control.gross.GrossMotion.obstacles_hit`): after a missed approach line the loop back runs
     close to the structure, and with 40 um everywhere no path, detour or route left the robot there ("no route ... 0 um
-    of its path clear")."""
+    of its path clear"). Off: with ``DockingTuning.loop_back_clearance_um`` 15 it fixed the traced trials but held-out
+    2x seeds 0, 1 scored 93/120 against 94 (session 18; design.md 3.9)."""
+    dead_end_guard: bool = False
+    """Whether a gross-motion path whose next t_x would leave the robot without a clear loop counts as blocked
+    (:meth:`~stressbots.control.escapes.Escapes.dead_end_ahead`). Off: it fixed the trial traced (held-out 53:0 at 2x)
+    but held-out 2x seeds 0, 1 scored 90/120 against 94 (session 18)."""
     arrive_um: float = 25.0
     arrive_deg: float = 6.0
     """(arrive_um, arrive_deg) A gross-motion target region (the seed's regions instead of points)."""
@@ -360,7 +362,9 @@ class DockingTuning:
     """A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS)."""
     loop_back_clearance_um: float = 0.0
     """um. On the approach line, a loop back counts as blocked (the robot drives on, ``late_miss_um``) when the loop
-    from where it is comes this close to the structure, a lower orbit or the arena edge."""
+    from where it is comes this close to the structure, a lower orbit or the arena edge. 0: contact only, though the
+    gross motion that then drives the loop back keeps 40 um from the structure (``gross_start_relief`` closes that
+    gap; measured with it in session 18, no gain)."""
     late_miss_um: float = 25.0
     """A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would meet the
     structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um)."""
