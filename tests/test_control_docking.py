@@ -23,7 +23,7 @@ from stressbots.control.docking import (
     stopped_verdict,
 )
 from stressbots.control.queries import turn_fraction
-from stressbots.control.tuning import ControllerOptions
+from stressbots.control.tuning import ControllerOptions, Tuning
 from stressbots.kinematics import move
 from stressbots.robots import angle_difference
 
@@ -327,3 +327,22 @@ def test_fine_start_by_the_arena_edge_has_no_arc_and_says_so_when_asked():
     assert fine_start(goal, r, L_, W_, fd, none, (3000.0, 3000.0), straight_if_none=False) is None
     assert _on_an_arc_into(fine_start(np.array([1500.0, 1500.0, 0.5]), r, L_, W_, fd, none, (3000.0, 3000.0)),
                            np.array([1500.0, 1500.0, 0.5]), s_f)
+
+
+@settings(max_examples=20, deadline=None)
+@given(behind=st.floats(0.0, 600.0), w=st.floats(1e-6, 3e-5), extra=st.floats(0.5, 3.0))
+def test_the_aim_leads_further_left_by_the_extra_walk_sigmas_only_while_a_loop_back_is_blocked(behind, w, extra):
+    """``aim_lead``: with ``Tuning.blocked_walk_sigmas`` the walk part grows from ``aim_walk_sigmas`` to
+    ``aim_walk_sigmas + blocked_walk_sigmas`` standard deviations (independent truth: :func:`walk_lead_um`, itself
+    checked against Monte Carlo walks above) exactly while the loop back is blocked; the rest of the lead is unchanged."""
+    from stressbots.control.docking import aim_lead, walk_lead_um
+
+    view = DockView(np.zeros(3), 100.0, 150.0, 0.6, np.array([0.0, 200.0, 0.0]), 250.0, 100.0, 0.0, w)
+    base = Tuning()
+    tune = Tuning(blocked_walk_sigmas=extra)
+    lead0, walk0 = aim_lead(view, behind, base, lambda: True)
+    assert aim_lead(view, behind, tune, lambda: False) == (lead0, walk0)
+    lead1, walk1 = aim_lead(view, behind, tune, lambda: True)
+    assert walk1 == pytest.approx(walk_lead_um(behind, 250.0, w, base.aim_walk_sigmas + extra))
+    assert lead1 - walk1 == pytest.approx(lead0 - walk0)
+    assert lead1 - lead0 == pytest.approx(extra / base.aim_walk_sigmas * walk0)

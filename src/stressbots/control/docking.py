@@ -36,7 +36,7 @@ import numpy as np
 from ..robots import angle_difference
 from .loopview import Steps
 from .queries import interpolated_steps, line_coords, merge, turn_fraction
-from .tuning import ControllerOptions
+from .tuning import ControllerOptions, Tuning
 
 __all__ = ["DockOutcome", "DockView", "LineFix", "compliant_aim", "contact_offset", "lead_um", "reaim_turn_rad",
            "stopped_verdict", "line_approach", "settle", "walk_lead_um"]
@@ -236,6 +236,22 @@ def walk_lead_um(behind_um: float, length_um: float, walk_var_rad2_per_um: float
     return float(sigmas * math.sqrt(max(walk_var_rad2_per_um, 0.0) * (s**3 / 3.0 + h * s * s + h * h * s)))
 
 
+def aim_lead(view: DockView, behind_um: float, tune: Tuning, loop_blocked: Callable[[], bool]) -> tuple[float, float]:
+    """``(lead_um, walk_um)``: how far left of its slot a robot ``behind_um`` out on its approach line aims, and the
+    part of that which is room for the drift's random walk (:func:`walk_lead_um`; ``_frame`` judges misses to the
+    right after it). The lead adds up what the identified drift plus ``Tuning.lead_drift_deg_per_mm`` would add
+    (:func:`lead_um`), the docking offset of a heading estimate off by ``Tuning.aim_heading_sigma_deg`` (a burst
+    planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left), and
+    ``Tuning.aim_walk_sigmas`` of the walk, ``Tuning.blocked_walk_sigmas`` more while ``loop_blocked()`` (a miss to
+    the right is then for good: driven in or trapped)."""
+    kappa = math.degrees(view.drift_rad_per_um) * 1000.0 + tune.lead_drift_deg_per_mm
+    lead = lead_um(behind_um, view.length_um, kappa, tune.aim_left_um)
+    lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind_um, 0.0) + 0.5 * view.length_um)
+    sigmas = tune.aim_walk_sigmas + (tune.blocked_walk_sigmas if tune.blocked_walk_sigmas > 0.0 and loop_blocked() else 0.0)
+    walk = walk_lead_um(behind_um, view.length_um, view.walk_var_rad2_per_um, sigmas)
+    return lead + walk, walk
+
+
 def line_approach(
     see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: float, *, loop_blocked: Callable[[], bool],
     log: Callable[[str, str], None], attempt: int = 0,
@@ -259,15 +275,7 @@ def line_approach(
         if (float(np.hypot(*(view.pose[:2] - view.goal[:2]))) <= opts.dock_tol_um
                 and abs(float(angle_difference(view.pose[2], view.goal[2]))) <= math.radians(opts.dock_tol_deg)):
             break  # at the structure already: push and judge
-        # aim left by what the identified drift plus a margin (its random part) adds before the robot docks
-        kappa = math.degrees(view.drift_rad_per_um) * 1000.0 + tune.lead_drift_deg_per_mm
-        lead = lead_um(behind, view.length_um, kappa, tune.aim_left_um)
-        # ... and by the docking offset a heading estimate off by ``aim_heading_sigma_deg`` would cause: a burst
-        # planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left
-        lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind, 0.0) + 0.5 * view.length_um)
-        # ... and by what the drift's random walk may still carry it right (the larger the declared noise, the more)
-        walk = walk_lead_um(behind, view.length_um, view.walk_var_rad2_per_um, tune.aim_walk_sigmas)
-        lead += walk
+        lead, walk = aim_lead(view, behind, tune, loop_blocked)
         # line coordinates about the aim point, ``lead`` left of the slot
         fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
         steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt, walk)

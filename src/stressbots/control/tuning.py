@@ -416,6 +416,12 @@ class DockingTuning:
     ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
     grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
     robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
+    blocked_walk_sigmas: float = 0.0
+    """Standard deviations added to ``aim_walk_sigmas`` while a loop back from where the robot is would meet the
+    structure, a lower orbit or the arena edge: a miss to the right is then driven in (``late_miss_um``) or traps the
+    robot, while a miss to the left still costs only a clockwise burst. 0: at 1 the three 2x shape-error trials traced
+    (held-out 46:0, 47:0, 47:1) assembled, but held-out 2x seeds 0, 1 scored 92/120 against 94 with 5 shape errors
+    against 3, and tuning 1x 239/240 (session 18)."""
 
 
 @dataclass(frozen=True)
