@@ -226,16 +226,18 @@ class GrossTuning:
     gross_docked_clearance_um: float = 40.0
     """Clearance of gross motion from the docked structure away from its target: a robot grazing the structure is
     turned flush against the wrong edge by docking compliance and is trapped there."""
-    gross_start_relief: bool = False
+    gross_start_relief: bool = True
     """Whether that clearance is also waived within the first loop's reach of where a gross motion starts
     (:meth:`~stressbots.control.gross.GrossMotion.obstacles_hit`): after a missed approach line the loop back runs
     close to the structure, and with 40 um everywhere no path, detour or route left the robot there ("no route ... 0 um
-    of its path clear"). Off: with ``DockingTuning.loop_back_clearance_um`` 15 it fixed the traced trials but held-out
-    2x seeds 0, 1 scored 93/120 against 94 (session 18; design.md 3.9)."""
-    dead_end_guard: bool = False
+    of its path clear"). On with ``DockingTuning.loop_back_clearance_um`` 15, ``late_miss_um`` inf and
+    ``dead_end_guard`` (session 18, all four together against all off: independent plant 114/120 against 111,
+    held-out 1x 296/300 against 295, held-out 2x 180/240 the same, tuning 1x 239/240 against 240; design.md 3.9)."""
+    dead_end_guard: bool = True
     """Whether a gross-motion path whose next t_x would leave the robot without a clear loop counts as blocked
-    (:meth:`~stressbots.control.escapes.Escapes.dead_end_ahead`). Off: it fixed the trial traced (held-out 53:0 at 2x)
-    but held-out 2x seeds 0, 1 scored 90/120 against 94 (session 18)."""
+    (:meth:`~stressbots.control.escapes.Escapes.dead_end_ahead`): a 2x drift bent a long straight past the structure
+    until neither its loop nor its straight was free (held-out 53:0 at 2x). Alone: held-out 2x seeds 0, 1 90/120
+    against 94; with the loop-back switches see ``gross_start_relief``."""
     arrive_um: float = 25.0
     arrive_deg: float = 6.0
     """(arrive_um, arrive_deg) A gross-motion target region (the seed's regions instead of points)."""
@@ -360,14 +362,16 @@ class DockingTuning:
 
     small_miss_um: float = 12.0
     """A straight-in whose lateral miss and offset are below this is driven rather than looped (~6 um RMS)."""
-    loop_back_clearance_um: float = 0.0
+    loop_back_clearance_um: float = 15.0
     """um. On the approach line, a loop back counts as blocked (the robot drives on, ``late_miss_um``) when the loop
-    from where it is comes this close to the structure, a lower orbit or the arena edge. 0: contact only, though the
-    gross motion that then drives the loop back keeps 40 um from the structure (``gross_start_relief`` closes that
-    gap; measured with it in session 18, no gain)."""
-    late_miss_um: float = 25.0
+    from where it is comes this close to the structure, a lower orbit or the arena edge: the gross motion that drives
+    a loop back keeps the route clearance (15 um) near its start (``GrossTuning.gross_start_relief``). At contact
+    clearance (0) loops were approved that no gross motion then drove: "no route ... 0 um clear" (held-out 12:0,
+    46:1, 26:1 at 2x)."""
+    late_miss_um: float = math.inf
     """A straight-in with a larger miss, up to this, is driven when a loop from where the robot is would meet the
-    structure (a turning robot cannot pivot off it; the slot's docking tolerance is 30 um)."""
+    structure (a turning robot cannot pivot off it, and a loop back that meets the structure traps the robot: no
+    route, held-out 20:2 at 1x). Driven in, it docks within the slot's 30 um tolerance or off it; 25 until session 18."""
     approach_frames: int = 80
     """Frames the fine motion along an approach line may take before it gives up."""
     aligned_um: float = 3.0
