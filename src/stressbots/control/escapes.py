@@ -31,7 +31,7 @@ from .loopview import LoopView
 if TYPE_CHECKING:
     from .gross import GrossMotion
 
-__all__ = ["Escapes", "contact_clearance", "escape_moves", "escape_sweep", "move_stops", "viable_prefix"]
+__all__ = ["Escapes", "contact_clearance", "escape_moves", "escape_sweep", "loop_poses", "move_stops", "viable_prefix"]
 
 
 def viable_prefix(path: pathlib.Path, clear_um: float, boxed_in: Callable[[np.ndarray], bool], step_um: float = 25.0,
@@ -65,6 +65,12 @@ def escape_sweep(pose: np.ndarray, move_: tuple[float, float], v: float, r: floa
     a = kinematics.move(pose, np.linspace(0.0, turn, max(2, int(turn / step_um) + 1)), 1.0 / r)
     b = kinematics.move(a[-1], np.linspace(0.0, v * move_[1], max(2, int(v * move_[1] / step_um) + 1)), 0.0)
     return np.vstack([a, b[1:]])
+
+
+def loop_poses(pose, r: float, samples: int = 72) -> np.ndarray:
+    """The poses (``samples``, 3) of one full clockwise loop of radius ``r`` (um) from ``pose``: what a loop back or a
+    loop kept in reserve sweeps (5 deg apart by default)."""
+    return kinematics.move(np.asarray(pose, float), np.linspace(0.0, TWO_PI * r, samples), 1.0 / r)
 
 
 def move_stops(move_: tuple[float, float], tx: float) -> list[tuple[float, float]]:
@@ -165,10 +171,10 @@ class Escapes:
         q = np.asarray(path.pose_at(min(v * lp.tx, path.length)), float)
         if np.hypot(*(q[:2] - np.asarray(target, float)[:2])) < 2.0 * r + lp.L[i]:
             return False
-        s = np.linspace(0.0, TWO_PI * r, 72)
-        if self.gross.obstacles_hit(kinematics.move(lp.est[i], s, 1.0 / r), i, orbiting, extra_discs=extra_discs, clearance=0.0):
-            return False  # no loop now either: the guard keeps nothing
-        return self.gross.obstacles_hit(kinematics.move(q, s, 1.0 / r), i, orbiting, extra_discs=extra_discs, clearance=0.0)
+        if not self.gross.obstacles_hit(loop_poses(q, r), i, orbiting, extra_discs=extra_discs, clearance=0.0):
+            return False  # the loop is kept (the usual case: one check per t_x)
+        # lost unless it is lost already: with no loop now either, the guard keeps nothing
+        return not self.gross.obstacles_hit(loop_poses(lp.est[i], r), i, orbiting, extra_discs=extra_discs, clearance=0.0)
 
     def escape(self, i: int, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs=()) -> bool:
         """Recovery from a contact (or a pose that close): drive robot ``i`` off what blocks it; True if it moved.

@@ -22,6 +22,7 @@ from ..collision import arena_gap, outside_arena, penetration_depth
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
 from . import docking
+from .escapes import loop_poses
 from .loopview import DockingLoop
 from .queries import fine_motion_length, in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
@@ -329,5 +330,4 @@ class SlotApproach:
         robot)."""
         lp = self.loop
         r = float(lp.r_hat[i])
-        loop = move(lp.est[i], np.linspace(0.0, TWO_PI * r, 72), 1.0 / r)
-        return lp.obstacles_hit(loop, i, lp.orbiting_below(k), clearance=clearance_um)
+        return lp.obstacles_hit(loop_poses(lp.est[i], r), i, lp.orbiting_below(k), clearance=clearance_um)
