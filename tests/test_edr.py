@@ -85,19 +85,21 @@ def test_same_seed_same_run(example):
 
 class Jammed(ProtocolOnly):
     """A plant written here, protocol only, with a sticky patch: one robot is held in place (as if stuck
-    in the failure region H) for its first ``frames`` Drives while it steers toward its slot."""
+    in the failure region H) through the waveforms it is sent during ``jam_s`` s from ``after_s`` on, while it
+    steers toward its slot (the controller cuts a t_x into several waveforms: a fault lasts a time, not a count)."""
 
-    def __init__(self, inner, robot: int, after_s: float, frames: int):
+    def __init__(self, inner, robot: int, after_s: float, jam_s: float):
         super().__init__(inner)
-        self.robot, self.after_s, self.frames = robot, after_s, frames
-        self.jammed = 0
+        self.robot, self.after_s, self.jam_s = robot, after_s, jam_s
+        self.jammed_s = 0.0
 
     def apply(self, waveform):
         before = self._inner.true_poses()[self.robot].copy()
+        t0 = self._inner.time_s
         self._inner.apply(waveform)
-        if self._inner.time_s >= self.after_s and self.jammed < self.frames:
+        if t0 >= self.after_s and self.jammed_s < self.jam_s:
             self._inner._bodies.pose[self.robot] = before  # fault injection: the robot did not move
-            self.jammed += 1
+            self.jammed_s += self._inner.time_s - t0
 
 
 def test_recovers_from_a_stuck_robot(example):
@@ -105,9 +107,9 @@ def test_recovers_from_a_stuck_robot(example):
     scn = scn.with_noise(Noise())
     sim = SimulatedPlant(scn, seed=0)
     d = scn.names.index("D")  # D_2: steers to its slot after G_1 forms (about 45 s)
-    plant = Jammed(sim, d, after_s=50.0, frames=4)
+    plant = Jammed(sim, d, after_s=50.0, jam_s=4.0)
     result = assemble(scn, plant, seed=0, plan=plan)
-    assert plant.jammed == 4
+    assert 4.0 <= plant.jammed_s < 6.0
     stuck = [e for e in result.events if e["kind"] == "stuck" and e["robot"] == "D"]
     assert stuck, result.events
     assert result.success, (result.failure, result.events[-6:])

@@ -24,7 +24,43 @@ from ..robots import orbit_radii
 from ..waveform import synthesize
 from .straight_drift import StraightDrift
 
-__all__ = ["PlantLoop"]
+__all__ = ["PlantLoop", "frame_pieces"]
+
+
+def frame_pieces(steps: Sequence[tuple[int, float]], interval_s: float | None, frames: int = 1) -> list[list[tuple[int, float]]]:
+    """``steps`` ``(k, duration_s)`` cut into consecutive pieces, a frame to be read after each: the last ``frames``
+    frames ``interval_s`` s of driving apart, the first piece all the driving before them (a step may be split; a
+    remainder under 1 us stays with its piece). One piece when ``interval_s`` is None or 0 or ``frames`` is 1; fewer
+    frames when the steps are shorter than ``(frames - 1) interval_s``.
+
+    >>> [[(k, round(d, 9)) for k, d in p] for p in frame_pieces([(2, 0.7), (1, 0.3)], 0.1, 3)]
+    [[(2, 0.7), (1, 0.1)], [(1, 0.1)], [(1, 0.1)]]
+    >>> [[(k, round(d, 9)) for k, d in p] for p in frame_pieces([(2, 0.15)], 0.1, 5)]
+    [[(2, 0.05)], [(2, 0.1)]]
+    >>> frame_pieces([(2, 0.25)], None)
+    [[(2, 0.25)]]
+    """
+    total = math.fsum(d for _, d in steps)
+    if not interval_s or frames <= 1 or total <= 1e-9:
+        return [list(steps)]
+    cuts = [total - j * interval_s for j in range(frames - 1, 0, -1)]
+    cuts = [c for c in cuts if c > 1e-6] + [total]
+    out: list[list[tuple[int, float]]] = []
+    piece: list[tuple[int, float]] = []
+    t = 0.0
+    for k, d in steps:
+        while d > 1e-9:
+            take = min(d, cuts[len(out)] - t)
+            if d - take < 1e-6:
+                take = d
+            piece.append((k, take))
+            t += take
+            d -= take
+            if t >= cuts[len(out)] - 1e-6 and len(out) < len(cuts) - 1:
+                out.append(piece)
+                piece = []
+    out.append(piece)
+    return [p for p in out if p]
 
 
 class PlantLoop:
@@ -38,10 +74,17 @@ class PlantLoop:
         Simulated time budget (s): :meth:`drive` refuses steps that would pass it.
     who:
         How the strategy is named in the error for a design that is not STRING.
+    frame_interval_s, frames_per_step:
+        :meth:`drive` reads the last ``frames_per_step`` frames of a step list ``frame_interval_s`` s of driving apart
+        (plays it in pieces, :func:`frame_pieces`, a frame after each; the pose filter takes them all in). None or 1:
+        one frame per step list.
     """
 
-    def __init__(self, scenario, plant, *, budget_s: float, who: str):
+    def __init__(self, scenario, plant, *, budget_s: float, who: str, frame_interval_s: float | None = None,
+                 frames_per_step: int = 1):
         self.scn = scenario
+        self.frame_interval_s = frame_interval_s
+        self.frames_per_step = int(frames_per_step)
         self.plant = plant
         self.budget_s = float(budget_s)
         self.analysis = analyse_scenario(scenario)
@@ -115,14 +158,19 @@ class PlantLoop:
         total = math.fsum(d for _, d in steps)
         if self.t + total > self.budget_s + 1e-9:
             raise self.over_budget()
-        self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in steps], initial=self.state))
-        frame = self.plant.observe()
-        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame)
+        pieces = frame_pieces(steps, self.frame_interval_s, self.frames_per_step)
+        for m, piece in enumerate(pieces):
+            self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in piece], initial=self.state))
+            self.state = np.asarray(self.analysis.primitive_at(piece[-1][0]).state, dtype=np.uint8)
+            frame = self.plant.observe()
+            if m < len(pieces) - 1:
+                self.estimator.blend([(self.rank <= k, d) for k, d in piece], self.docked.copy(), frame)
+        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame,
+                              tail=[(self.rank <= k, d) for k, d in pieces[-1]])
         straight = (self.rank > max(k for k, _ in steps)) & ~self.docked
         self.straight_drift.frame(frame, straight, self.v_hat * total)
         self.estimator.straight_curvature = self.straight_drift.kappa  # predictions follow the identified drift
         self.t += total
-        self.state = np.asarray(self.analysis.primitive_at(steps[-1][0]).state, dtype=np.uint8)
         self.after_drive(steps)
         self.trace_t.append(self.t)
         self.trace_p.append(self.est.copy())

@@ -101,7 +101,8 @@ class _Budget(_Abort):
 
 class _Runner(PlantLoop):
     def __init__(self, scenario, plant, plan_result, opts: ControllerOptions, seed):
-        super().__init__(scenario, plant, budget_s=opts.time_budget_s, who="closed-loop assembly")
+        super().__init__(scenario, plant, budget_s=opts.time_budget_s, who="closed-loop assembly",
+                         frame_interval_s=opts.frame_interval_s, frames_per_step=opts.frames_per_step)
         self.opts = opts
         self.tune = opts.tuning
         self.seed = seed
