@@ -532,10 +532,10 @@ class ControllerOptions:
         reads rests on the last few frames (the filter's heading gain 0.35 forgets a frame's weight in ~4 frames), so
         five frames 0.05 s apart at its end give what ten through it would, at half the plant calls. At twice the
         literature's noise one frame per t_x left headings 3-5 deg off on final runs (one camera frame reads 2 deg off,
-        the drift's walk turns a robot several deg in 200 um) and robots docked 28 um off their slots. Heading error
-        at decision time (2x noise, orbit-and-straight robots against the simulator's truth): 1.78 deg with one frame,
-        1.02 with five. None or 1: one frame per step list. A real camera streams frames; this sets how many the
-        controller uses (and how often a lab plant's waveform is cut).
+        the drift's walk turns a robot several deg in 200 um) and robots docked 28 um off their slots. Heading error at
+        decision time (orbit-and-straight robots against the simulator's truth): 2x 1.75 deg with one frame, 1.10 with
+        five; 1x 1.10 and 0.44. Held-out 2x: 196/240 against 180. None or 1: one frame per step list. A real camera
+        streams frames; this sets how many the controller uses (and how often a lab plant's waveform is cut).
     tuning:
         The closed loop's thresholds (:class:`Tuning`).
     """
