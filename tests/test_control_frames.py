@@ -99,13 +99,13 @@ def _heading_errors(interval, frames, seed):
 
 
 def test_more_frames_give_better_headings_against_the_truth():
-    """Five frames at the end of each t_x (the controller's default) average the camera's 2 deg heading noise down:
-    the estimates the decisions read are closer to the simulator's true headings than with one frame per t_x (same
-    plants, same steps; measured 1.10 against 1.75 deg mean over ten plants)."""
+    """A few frames at the end of each t_x (the controller's default: three) average the camera's 2 deg heading noise
+    down: the estimates the decisions read are closer to the simulator's true headings than with one frame per t_x
+    (same plants, same steps; measured 1.27 against 1.75 deg mean on these six plants, 1.10 with five frames)."""
     opts = ControllerOptions()
     one = np.concatenate([_heading_errors(None, 1, s) for s in range(6)])
-    five = np.concatenate([_heading_errors(opts.frame_interval_s, opts.frames_per_step, s) for s in range(6)])
-    assert np.mean(five) < 0.75 * np.mean(one), (np.mean(five), np.mean(one))
+    few = np.concatenate([_heading_errors(opts.frame_interval_s, opts.frames_per_step, s) for s in range(6)])
+    assert np.mean(few) < 0.8 * np.mean(one), (np.mean(few), np.mean(one))
 
 
 def test_a_robot_stopped_by_a_contact_is_where_the_last_frame_says():

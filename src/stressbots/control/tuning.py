@@ -530,12 +530,14 @@ class ControllerOptions:
         frames ``frame_interval_s`` s of driving apart, all taken in by the pose filter (it is played in pieces,
         :func:`~stressbots.control.loop.frame_pieces`); decisions stay once per step list. The estimate a decision
         reads rests on the last few frames (the filter's heading gain 0.35 forgets a frame's weight in ~4 frames), so
-        five frames 0.05 s apart at its end give what ten through it would, at half the plant calls. At twice the
+        a few frames 0.05 s apart at its end give what ten through it would: on held-out 2x seeds 0-3 three scored
+        197/240 and five 196/240, at 1.7 s and 3.5 s per example assembly (one frame: 1.2 s). At twice the
         literature's noise one frame per t_x left headings 3-5 deg off on final runs (one camera frame reads 2 deg off,
         the drift's walk turns a robot several deg in 200 um) and robots docked 28 um off their slots. Heading error at
-        decision time (orbit-and-straight robots against the simulator's truth): 2x 1.75 deg with one frame, 1.10 with
-        five; 1x 1.10 and 0.44. Held-out 2x: 196/240 against 180. None or 1: one frame per step list. A real camera
-        streams frames; this sets how many the controller uses (and how often a lab plant's waveform is cut).
+        decision time (orbit-and-straight robots against the simulator's truth): 2x 1.75 deg with one frame, 1.28 with
+        three, 1.10 with five; 1x 1.10, 0.52, 0.44. Held-out 2x: 197/240 against 180. None or 1: one frame per step
+        list. A real camera streams frames; this sets how many the controller uses (and how often a lab plant's
+        waveform is cut).
     tuning:
         The closed loop's thresholds (:class:`Tuning`).
     """
@@ -550,5 +552,5 @@ class ControllerOptions:
     clearance_um: float = 15.0
     shape_tol_um: float = SHAPE_TOL_UM
     frame_interval_s: float | None = 0.05
-    frames_per_step: int = 5
+    frames_per_step: int = 3
     tuning: Tuning = field(default_factory=Tuning)
