@@ -163,10 +163,10 @@ class PlantLoop:
             self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in piece], initial=self.state))
             self.state = np.asarray(self.analysis.primitive_at(piece[-1][0]).state, dtype=np.uint8)
             frame = self.plant.observe()
+            turning = [(self.rank <= k, d) for k, d in piece]
             if m < len(pieces) - 1:
-                self.estimator.blend([(self.rank <= k, d) for k, d in piece], self.docked.copy(), frame)
-        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame,
-                              tail=[(self.rank <= k, d) for k, d in pieces[-1]])
+                self.estimator.blend(turning, self.docked.copy(), frame)
+        self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame, tail=turning)
         straight = (self.rank > max(k for k, _ in steps)) & ~self.docked
         self.straight_drift.frame(frame, straight, self.v_hat * total)
         self.estimator.straight_curvature = self.straight_drift.kappa  # predictions follow the identified drift
