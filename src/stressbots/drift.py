@@ -184,7 +184,15 @@ class HeadingDrift:
         if not self.active:
             return 0.0
         k0, k1, _ = self._knots(o0, length_um)  # the curvatures of :meth:`segments`, without the lengths
-        return float(np.max(np.abs(self.bias[i] + self._walk(i, k1)[k0 : k1 + 1])))
+        bias = float(self.bias[i])
+        return max(abs(bias + k) for k in self._walk(i, k1)[k0 : k1 + 1].tolist())  # plain floats: ~10x faster for a few knots
+
+    def max_abs_all(self, odometer, lengths_um) -> np.ndarray:
+        """:meth:`max_abs` of every robot ``(n,)`` (1/um): odometer readings and lengths (um) ``(n,)``."""
+        if not self.active:
+            return np.zeros(self.n)
+        return np.array([self.max_abs(i, o, s) for i, (o, s) in enumerate(zip(np.asarray(odometer, float).tolist(),
+                                                                            np.asarray(lengths_um, float).tolist(), strict=True))])
 
     def heading_change(self, i: int, o0: float, length_um: float) -> float:
         """Heading drift (rad, clockwise positive) accumulated over odometer ``[o0, o0 + length_um]``."""

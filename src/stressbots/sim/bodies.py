@@ -171,6 +171,8 @@ class Bodies:
         self.hl = 0.5 * scenario.lengths_um
         self.hw = 0.5 * scenario.widths_um
         self.hd = np.hypot(self.hl, self.hw)  # half diagonal: bounding-circle radius (um)
+        # reach[i, k]: centre distance (um) within which a compliance move of i could touch k (ContactRules.rule_key)
+        self.reach = 2.0 * self.hd[:, None] + self.hd[None, :] + 1.0
         self.pose = np.array(poses, dtype=np.float64)
         self.pose[:, 2] = wrap(self.pose[:, 2])
         self.odo = np.zeros(n)

@@ -254,9 +254,8 @@ class ContactRules:
         of every robot a compliance move of i or j could reach (itself included)."""
         b = self.b
         P = b.pose
-        reach = 2.0 * b.hd[[i, j]][:, None] + b.hd[None, :] + 1.0
-        d = np.hypot(P[None, :, 0] - P[[i, j], 0][:, None], P[None, :, 1] - P[[i, j], 1][:, None])
-        near = np.flatnonzero((d < reach).any(axis=0))
+        x, y = P[:, 0], P[:, 1]
+        near = np.flatnonzero((np.hypot(x - x[i], y - y[i]) < b.reach[i]) | (np.hypot(x - x[j], y - y[j]) < b.reach[j]))
         return bytes([bool(straight[i]), bool(straight[j])]) + near.tobytes() + P[near].tobytes()
 
     def flush_cached(self, i: int, j: int, straight) -> bool:

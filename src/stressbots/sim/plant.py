@@ -234,7 +234,7 @@ class SimulatedPlant:
         straight = ~turning & ~chatter
         reach = speed * duration_s
         odo = self._bodies.odo
-        kmax = np.abs(kappa) + np.array([self._drift.max_abs(i, odo[i], reach[i]) for i in range(self.n)])
+        kmax = np.abs(kappa) + self._drift.max_abs_all(odo, reach)
         bound = speed * (1.0 + kmax * self._bodies.hd)  # fastest point of each body (um/s)
         return DriveRates(speed, kappa, straight, bound)
 
