@@ -312,7 +312,8 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
                 log("miss", f"would dock {-fix.offset_um:.0f} um left of its aim ({fix.right_um:.0f} um, "
                             f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
                 return None
-            turn = burst_max
+            # no loop: the whole turn (not a capped burst) is the least it can miss by
+            turn = max(burst_max, reaim_turn_rad(fix, view.length_um, tune.blocked_reaim_max_deg))
         burst = [(k, turn / view.turn_rate_rad_s)]
     elif fix.offset_um - walk_um > (tune.final_right_um + relax_um if final else tune.aligned_um):
         m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)

@@ -398,6 +398,11 @@ class DockingTuning:
     only what ends up left is fixed later."""
     reaim_max_deg: float = 4.0
     """Largest single clockwise re-aim burst (a larger one means the robot is not on its line)."""
+    blocked_reaim_max_deg: float = 20.0
+    """Largest re-aim burst of a robot too far left for ``reaim_max_deg`` that can neither merge nor loop back (a
+    loop would meet the structure): the whole turn its predicted offset needs, up to this (well inside the 45 deg
+    sticking cone). Capped at ``reaim_max_deg``, a robot 13 deg left of its line whose heading drifted 2 deg left
+    per frame gained 2 deg a frame and docked 99 um left of its slot, pinned (held-out 19:0 at 2x)."""
     final_right_um: float = 6.0
     """In the final run, a predicted offset further right than this loops back when a loop is clear (a one-way robot
     cannot turn left; a robot that docks off its slot cannot leave it)."""
