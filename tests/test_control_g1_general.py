@@ -234,3 +234,54 @@ def test_d_n_minus_1s_station_leg_is_checked_clear_leg_overrun_s_past_its_end(be
             legs.transfer_option(0, 1, 1.0, d, th_dep, [], centre_M + [0.0, d], q_next)
     else:
         legs.transfer_option(0, 1, 1.0, d, th_dep, [], centre_M + [0.0, d], q_next)  # no Replan: D_n's options follow
+
+
+def test_a_held_d_n_minus_1_ends_its_transfer_turn_instead_of_turning_forever():
+    """D_{n-1} (robot 1) held against something does not turn: its measured heading stays put while the turn is
+    commanded a t_x at a time. After ``Tuning.turn_stall_frames`` such t_x the leg ends with a Replan (it turned
+    nothing for 3900 s of simulated time before, until the time budget ran out); a robot that turns is not stopped."""
+    from types import SimpleNamespace
+
+    from stressbots.control.pairloop import Replan
+    from stressbots.control.transfer import StationTransfer
+    from stressbots.control.tuning import Tuning
+
+    def run(turns: bool) -> int:
+        drives = []
+        est = np.array([[1500.0, 1500.0, 0.0], [800.0, 800.0, 0.0]])
+        omega = np.array([0.4, 0.4])
+
+        def drive(steps):
+            drives.append(steps)
+            if turns:  # both turn the commanded amount (D_n only in its part of the t_x)
+                est[1, 2] += omega[1] * sum(d for _, d in steps)
+                est[0, 2] += omega[0] * steps[0][1]
+
+        loop = SimpleNamespace(n=2, est=est, omega_hat=omega, v_hat=np.array([80.0, 80.0]), tx=1.0, tune=Tuning(), drive=drive,
+                               orbiting_below=lambda _k: [], scn=SimpleNamespace(names=("R0", "R1")))
+        tr = StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed
+        tr.keeps_room = lambda *_a: True  # type: ignore[method-assign]
+        tr._turn_together(0, 1, 12.0, 0.5)
+        return len(drives)
+
+    with pytest.raises(Replan, match="does not turn"):
+        run(turns=False)
+    assert run(turns=True) == 12
+
+
+def test_a_station_routes_via_orbits_keep_the_extra_margin_from_the_arena_edge():
+    """Against the arena by hand: with ``via_wall_um`` every intermediate orbit of the route keeps r* + clearance +
+    via_wall_um from each edge (the goal is the caller's); the route still ends at the goal. Without it the shortest
+    route around this disc passes an orbit 56 um outside the clearance."""
+    start, goal = np.array([400.0, 400.0]), np.array([2600.0, 2600.0])
+    centres, radii = np.array([[1500.0, 1500.0]]), np.array([800.0])
+    w, h = ARENA
+
+    def wall(c) -> float:
+        return float(min(c[0], w - c[0], c[1], h - c[1]))
+
+    route = orbit_route(start, goal, RSTAR_N, centres, radii, ARENA, clearance=25.0, via_wall_um=60.0)
+    assert route is not None and len(route) >= 2 and np.allclose(route[-1], goal)
+    assert all(wall(c) >= RSTAR_N + 25.0 + 60.0 - 1e-9 for c in route[:-1])
+    near = orbit_route(start, goal, RSTAR_N, centres, radii, ARENA, clearance=25.0)
+    assert near is not None and min(wall(c) for c in near[:-1]) < RSTAR_N + 25.0 + 60.0

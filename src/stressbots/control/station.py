@@ -167,7 +167,8 @@ def swept_legs_clear(a, b, rstar: float, body: Body, centres, radii, arena_um, c
 
 
 def orbit_route(start, goal, rstar: float, centres, radii, arena_um, *, clearance: float, spacing_um: float = 150.0,
-                leg_cost_um: float = 200.0, max_legs: int = 4, body: Body | None = None) -> list[np.ndarray] | None:
+                leg_cost_um: float = 200.0, max_legs: int = 4, body: Body | None = None,
+                via_wall_um: float = 0.0) -> list[np.ndarray] | None:
     """Orbit centres (the last is ``goal``) of the shortest clear route of straight legs from ``start``.
 
     ``centres`` / ``radii``: the discs to keep clear of (other robots' orbit discs), ``rstar``: the moving
@@ -176,6 +177,8 @@ def orbit_route(start, goal, rstar: float, centres, radii, arena_um, *, clearanc
     ``leg_cost_um`` (the orbiting before it, and a chance for error). None when no route of at most
     ``max_legs`` legs exists (the goal itself not free counts as none). Needs a bounded arena. With
     ``body`` the legs are checked by what the robot sweeps (:func:`swept_legs_clear`) instead of the capsule.
+    ``via_wall_um``: the grid's orbits keep this much more than ``clearance`` from the arena edge (an orbit that lands
+    there off its plan, or drifts while it waits, meets the edge and traps its robot; another orbit can be moved).
 
     >>> route = orbit_route(np.array([500.0, 1000.0]), np.array([1500.0, 1000.0]), 100.0,
     ...                     np.array([[1000.0, 1000.0]]), np.array([150.0]), (2000.0, 2000.0), clearance=10.0)
@@ -193,7 +196,7 @@ def orbit_route(start, goal, rstar: float, centres, radii, arena_um, *, clearanc
     if clear(start[None], goal[None], True)[0]:
         return [goal]
     w, h = arena_um
-    m = rstar + clearance
+    m = rstar + clearance + via_wall_um
     xs, ys = np.arange(m, w - m + 1e-9, spacing_um), np.arange(m, h - m + 1e-9, spacing_um)
     gx, gy = np.meshgrid(xs, ys)
     grid = np.stack([gx.ravel(), gy.ravel()], axis=1)

@@ -50,6 +50,7 @@ class StationTransfer:
         turn = t_turn * self.loop.omega_hat[M]
         turned = 0.0
         n_turn, n_turned = fraction * t_turn * self.loop.omega_hat[N], 0.0
+        stalled = 0
         while True:
             left = (turn - turned) / self.loop.omega_hat[M]
             if left <= 1e-3:
@@ -61,9 +62,13 @@ class StationTransfer:
             th0, thN0 = self.loop.est[M, 2], self.loop.est[N, 2]
             self.loop.drive([(n, a), (n - 1, dt - a)])
             n_turned += float(np.mod(self.loop.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
-            turned += float(np.mod(self.loop.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+            step = float(np.mod(self.loop.est[M, 2] - th0 + 0.5, TWO_PI)) - 0.5
+            turned += step
             if dt == left:
                 break
+            stalled = stalled + 1 if step < self.loop.tune.turn_stall_fraction * dt * self.loop.omega_hat[M] else 0
+            if stalled >= self.loop.tune.turn_stall_frames:
+                raise Replan(f"{self.loop.scn.names[M]} does not turn toward its transfer leg (held against something)")
 
     def run(self, N: int, M: int, c_star: np.ndarray, D: float, lower) -> None:
         """Stage 1: move D_{n-1}'s orbit to ``c_star`` in straight legs, D_n kept clear (see :meth:`PairPhase.form`).
@@ -88,17 +93,21 @@ class StationTransfer:
         cl = self.loop.opts.clearance_um + 10.0  # LegChoice.transfer_option's check of D_{n-1}'s track
         cs = turning_centres(self.loop.est[lower], self.loop.r_hat[lower]) if lower else np.zeros((0, 2))
         rs = self.loop.rstar[lower] if lower else np.zeros(0)
-        def routed(body: Body | None) -> list[np.ndarray] | None:
+        def routed(body: Body | None, via_wall_um: float) -> list[np.ndarray] | None:
             return orbit_route(self.pair.centre(M), np.asarray(c_star, float), float(self.loop.rstar[M]), cs, rs, self.loop.scn.arena_um,
                                clearance=cl, spacing_um=self.loop.tune.station_grid_um, leg_cost_um=self.loop.tune.station_leg_cost_um,
-                               body=body)
+                               body=body, via_wall_um=via_wall_um)
 
-        route = routed(None)
-        if route is None:
-            # no capsule route: what D_{n-1}'s body sweeps passes gaps narrower than its orbit disc
-            route = routed(Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
-                                math.radians(3.0)))  # th_dep's left bias in transfer_leg
-        return route if route else [np.asarray(c_star, float)]
+        # no capsule route: what D_{n-1}'s body sweeps passes gaps narrower than its orbit disc
+        swept = Body(float(self.loop.r_hat[M]), float(self.loop.L[M]), float(self.loop.W[M]), float(self.loop.v_hat[M]),
+                     math.radians(3.0))  # th_dep's left bias in transfer_leg
+        for body in (None, swept):
+            # via orbits well off the arena edge first; only where there are none, at the transfer clearance
+            for via_wall_um in (self.loop.tune.station_via_wall_um, 0.0):
+                route = routed(body, via_wall_um)
+                if route:
+                    return route
+        return [np.asarray(c_star, float)]
 
     def transfer_leg(self, N: int, M: int, c_star: np.ndarray, q_next, lower, *, final: bool) -> None:
         """Move D_{n-1}'s orbit to ``c_star`` (one stage of :meth:`run`); an intermediate orbit of a

@@ -50,6 +50,12 @@ class PairTuning:
     station_tol_um: float = 150.0
     """After a first leg, D_{n-1} moves its orbit again only if farther than this from its station: the rendezvous
     adapts to the orbit it is on."""
+    turn_stall_fraction: float = 0.25
+    """While D_{n-1} turns toward a transfer leg (closed loop on its measured heading), a t_x in which it turned less than
+    this fraction of what it was commanded counts as stalled (it turns into something and cannot pivot off)."""
+    turn_stall_frames: int = 3
+    """... and this many such t_x in a row end the leg (G_1 is planned again): D_{n-1} held against the arena edge turned
+    nothing for 3900 s of simulated time, until the time budget ran out (held-out 25:1 at 2x)."""
     early_s: float = 1.2
     """D_n arrives on its approach line this long before D_{n-1} passes the tangent point."""
     pair_frames: int = 6
@@ -100,6 +106,10 @@ class PairTuning:
     """Spacing of the grid of free orbit centres D_{n-1}'s route to its station may pass through."""
     station_leg_cost_um: float = 300.0
     """Cost of one more leg on that route (the orbiting before it, one more chance for error), um of length."""
+    station_via_wall_um: float = 60.0
+    """um. The route's intermediate orbits keep this much more than the transfer clearance from the arena edge: a via
+    orbit placed 35 um from the left edge landed 40 um into it at 2x noise, and D_{n-1}, held there, never turned
+    again (held-out 25:1)."""
     orbit_room_um: float = 15.0
     """um. Room to orbit (gap of its orbit disc to the arena edge and the lower orbits) D_n keeps at the
     predicted end of every straight frame of a station transfer: a one-way robot that loses it while the
