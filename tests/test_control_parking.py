@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -359,27 +358,3 @@ def test_a_shorter_park_move_is_taken_when_no_full_one_is_clear(short):
     assert shift in short
     assert wall_gap_of(run, i) >= gap0 + 0.5 * shift - 1.0
     assert wall_gap_of(run, k) >= run.tune.park_margin_um - 1.0
-
-
-def test_extra_loops_find_a_park_move_when_the_other_mover_heads_elsewhere_a_loop_later():
-    """The layout of the keep test (D_k 160 um above the bottom wall, heading down when D_j heads away from its wall),
-    but D_k turns on a 30 % wider circle: within one loop of D_j no move keeps D_k 100 um from trouble; a loop or two
-    later D_k heads elsewhere. The move found then waits over a period of D_j, and replayed independently it moves
-    D_j's orbit away from its wall and leaves D_k's at least 100 um from every wall and disc. Where loops are not
-    needed they change nothing (the shortest wait wins)."""
-    poses = np.array([[RSTAR + 10.0 - R, 1500.0, 0.0], [1500.0 - R * math.cos(math.pi / 2), RSTAR + 160.0 + R, math.pi / 2]])
-    radii = np.array([R, 1.3 * R])
-    rstar = np.array([RSTAR, float(orbit_radii(L, W, 1.3 * R))])
-    args: tuple = (radii, V / radii, np.full(2, V), rstar, ARENA, np.zeros((0, 3)), [], [])
-    keep: dict[str, Any] = {"shift_um": 150.0, "clearance_um": 25.0, "keep_um": 100.0}
-    assert park_move(0, [0, 1], [], poses, *args, **keep) is None
-    move = park_move(0, [0, 1], [], poses, *args, **keep, loops=2)
-    assert move is not None and move.wait_s > 2 * math.pi * R / V
-    end = turning_centres(replay_orbit_move(poses, move, [], V, radii)[-1], radii)
-    assert wall_gap(end[0]) >= 10.0 + 75.0 - 1.0
-    gap_k = float(min(end[1][0], ARENA[0] - end[1][0], end[1][1], ARENA[1] - end[1][1])) - rstar[1]
-    assert min(gap_k, float(np.hypot(*(end[0] - end[1]))) - RSTAR - rstar[1]) >= 100.0 - 1.0
-    same: tuple = (np.full(2, R), np.full(2, V / R), np.full(2, V), np.full(2, RSTAR), ARENA, np.zeros((0, 3)), [], [])
-    free: dict[str, Any] = {"shift_um": 150.0, "clearance_um": 25.0}
-    one = park_move(0, [0, 1], [], poses, *same, **free)
-    assert one is not None and park_move(0, [0, 1], [], poses, *same, **free, loops=2) == one

@@ -35,8 +35,7 @@ class ParkTries:
         tune = self.loop.tune
         park: dict = {}
         for shift in (tune.park_shift_um, *tune.park_short_shifts_um):
-            park = {"shift_um": shift, "clearance_um": tune.park_clearance_um, "keep_um": margin if tune.park_keeps_others else 0.0,
-                    "loops": tune.park_extra_loops}
+            park = {"shift_um": shift, "clearance_um": tune.park_clearance_um, "keep_um": margin if tune.park_keeps_others else 0.0}
             move_ = None
             if gap < 0.0:  # it may be held where its disc meets the obstacle: a straight as it heads, if clear
                 move_ = self.group_move(park_move, i, k, held=True, **park)

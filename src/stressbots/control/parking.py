@@ -116,7 +116,7 @@ def _tracks_clear(tracks, centres, rstar, gap0, arena_um, docked_poses, docked_L
 
 def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, speeds, rstar, arena_um,
               docked_poses, docked_L, docked_W, *, shift_um: float, clearance_um: float, held: bool = False,
-              keep_um: float = 0.0, loops: int = 0) -> ParkMove | None:
+              keep_um: float = 0.0) -> ParkMove | None:
     """The manoeuvre that moves robot ``j``'s orbit ``shift_um`` away from its nearest obstacle, or None.
 
     ``movers``: the undocked robots that drive straight with ``j`` under P_{j-1} (``j`` included);
@@ -129,8 +129,7 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
     to turn (a turning robot pushing into anything stops): only a straight along the heading it has, no wait.
     ``keep_um``: every other mover's orbit ends at least this far from trouble (or, if closer already, no closer): a
     park move must not make another (one pushed a waiting orbit from 167 to 27 um off the arena edge, where it drifted
-    into it within 50 s: tuning 68:0 at 1x). ``loops``: each candidate heading also after up to this many extra loops
-    of D_j (not for ``held``: it has no wait).
+    into it within 50 s: tuning 68:0 at 1x).
     """
     poses = np.asarray(poses, float)
     centres = turning_centres(poses, radii)
@@ -152,7 +151,7 @@ def park_move(j: int, movers: list[int], still: list[int], poses, radii, rates, 
 
     cands = [(float(poses[j, 2]), straight_s)] if held else None
     return _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,
-                      straight_s, gap0, clearance_um, accept, cands, 0 if held else loops)
+                      straight_s, gap0, clearance_um, accept, cands)
 
 
 def _best_move(j, movers, still, poses, centres, rates, speeds, rstar, arena_um, docked_poses, docked_L, docked_W, away,

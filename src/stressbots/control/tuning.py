@@ -463,11 +463,6 @@ class ParkingTuning:
     park_short_shifts_um: tuple[float, ...] = (100.0, 60.0)
     """um. Shorter park moves tried, in turn, when no clear move shifts an orbit ``park_shift_um``: the other movers'
     straights are as short, and a shorter move that gains half its length still buys the orbit time to drift."""
-    park_extra_loops: int = 2
-    """Extra loops of the waiting robot a park move may wait before its straight, as ``unblock_extra_loops``: the robots
-    driving straight with it head elsewhere after each, and D_1's orbit 79 um from the arena edge at t = 0, with four
-    others driving straight with it, had no clear move within one loop and drifted into the edge (held-out 10:0 at
-    2x). The shortest clear wait still wins."""
     park_moves_per_phase: int = 3
     """Park moves of one waiting orbit per docking phase. Orbits keep drifting after a move: at twice the literature's
     noise, orbits moved once 150 um away drifted back into the arena edge within the same (200-300 s) phase and
