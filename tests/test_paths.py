@@ -22,7 +22,7 @@ import os
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize
 
@@ -875,3 +875,23 @@ def test_single_query_rejects_what_the_batch_rejects():
         start, goal, r, ell = bad
         with pytest.raises(ValueError):
             shortest_path(start, goal, r, approach_um=ell)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.integers(1, 120), st.integers(1, 70), st.integers(0, 2**32 - 1), st.sampled_from([0.0, 60.0]))
+@example(120, 70, 1, 60.0)  # 8400 pairs: chunked by rows
+def test_a_grid_of_starts_by_goals_is_the_flat_batch_bit_for_bit(w, k, seed, approach):
+    """``shortest_path_lengths(starts[:, None], goals[None, :])`` (sines and cosines of W + K headings, chunked by rows
+    when W K is over the chunk size) equals the flat batch of every pair (each pose repeated) exactly, approach included;
+    so do the segments."""
+    rng = np.random.default_rng(seed)
+    starts = np.column_stack([rng.uniform(-2000, 2000, (w, 2)), rng.uniform(-7, 7, w)])
+    goals = np.column_stack([rng.uniform(-2000, 2000, (k, 2)), rng.uniform(-7, 7, k)])
+    r = float(rng.uniform(50, 400))
+    flat_s, flat_g = np.repeat(starts, k, axis=0), np.tile(goals, (w, 1))
+    grid = shortest_path_lengths(starts[:, None, :], goals[None, :, :], r, approach_um=approach)
+    assert grid.shape == (w, k)
+    assert np.array_equal(grid, shortest_path_lengths(flat_s, flat_g, r, approach_um=approach).reshape(w, k))
+    words, seg = shortest_path_segments(starts[:, None, :], goals[None, :, :], r, approach_um=approach)
+    fw, fseg = shortest_path_segments(flat_s, flat_g, r, approach_um=approach)
+    assert np.array_equal(words, fw.reshape(w, k)) and np.array_equal(seg, fseg.reshape(seg.shape))

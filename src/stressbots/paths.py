@@ -400,41 +400,48 @@ def _solve_chunk(starts, goals, r, segments: bool):
     return use_srs, seg
 
 
+def _rows(a, i: int, j: int, ndim: int, trailing: int):
+    """Rows ``i:j`` along the first of ``ndim`` broadcast (lead) axes of ``a`` (``trailing`` axes after them); ``a``
+    itself where it broadcasts along that axis."""
+    a = np.asarray(a)
+    own = a.ndim - trailing
+    return a[i:j] if own == ndim and a.shape[0] != 1 else a
+
+
 def _solve(starts, goals, radius, segments: bool):
     """Shortest one-way paths, vectorised. Returns (use_srs, lengths) or (use_srs, seg (..., 3)).
 
-    Large batches are cut into chunks of ``_CHUNK`` pairs (a loop over chunks, not over pairs).
+    ``starts``, ``goals`` and ``radius`` broadcast against each other and are not expanded first: a grid of ``W``
+    starts ``(W, 1, 3)`` by ``K`` goals ``(1, K, 3)`` takes the sines and cosines of ``W + K`` headings, not ``2 W K``
+    (every pair's arithmetic is the same, so are its bits). Large batches are cut into chunks of about ``_CHUNK``
+    pairs along the first axis (a loop over chunks, not over pairs).
     """
-    lead = starts.shape[:-1]
+    lead = np.broadcast_shapes(starts.shape[:-1], goals.shape[:-1], np.shape(radius))
     n = int(np.prod(lead))
     if n <= _CHUNK:
         return _solve_chunk(starts, goals, radius, segments)
-    s = starts.reshape(n, 3)
-    g = goals.reshape(n, 3)
-    r = np.broadcast_to(radius, lead).reshape(n)
-    use = np.empty(n, dtype=bool)
-    out = np.empty((n, 3) if segments else n)
-    for i in range(0, n, _CHUNK):
-        j = min(i + _CHUNK, n)
-        use[i:j], out[i:j] = _solve_chunk(s[i:j], g[i:j], r[i:j], segments)
-    return use.reshape(lead), out.reshape(lead + out.shape[1:])
+    rows = max(1, _CHUNK // (n // lead[0]))
+    use = np.empty(lead, dtype=bool)
+    out = np.empty(lead + (3,) if segments else lead)
+    k = len(lead)
+    for i in range(0, lead[0], rows):
+        j = min(i + rows, lead[0])
+        use[i:j], out[i:j] = _solve_chunk(_rows(starts, i, j, k, 1), _rows(goals, i, j, k, 1), _rows(radius, i, j, k, 0), segments)
+    return use, out
 
 
 def _prepare(starts, goals, radius, approach_um):
     starts = _as_poses(starts, "starts")
     goals = _as_poses(goals, "goals")
     r = _check_radius(radius)
-    lead = np.broadcast_shapes(starts.shape[:-1], goals.shape[:-1], r.shape)
-    starts = np.broadcast_to(starts, lead + (3,))
-    goals = np.broadcast_to(goals, lead + (3,))
-    r = np.broadcast_to(r, lead)
+    np.broadcast_shapes(starts.shape[:-1], goals.shape[:-1], r.shape)  # the shapes must fit (ValueError)
     ell = np.asarray(approach_um, dtype=np.float64)
     if np.any(ell < 0) or not np.all(np.isfinite(ell)):
         raise ValueError(f"approach_um must be finite and >= 0 um, got {approach_um!r}")
     if np.any(ell > 0):
-        ell = np.broadcast_to(ell, lead)
+        # goals moved back along their headings in their own shape (broadcast against ``ell``), not expanded to ``lead``
         t = goals[..., 2]
-        goals = np.stack([goals[..., 0] - ell * np.sin(t), goals[..., 1] - ell * np.cos(t), t], -1)
+        goals = np.stack(np.broadcast_arrays(goals[..., 0] - ell * np.sin(t), goals[..., 1] - ell * np.cos(t), t), -1)
     return starts, goals, r, ell
 
 
@@ -462,7 +469,9 @@ def shortest_path_lengths(starts, goals, radius, *, approach_um=0.0) -> np.ndarr
     Notes
     -----
     A fixed number of numpy operations per call (no Python loop per pair): about 100-200 ns per pair
-    for large batches on one core.
+    for large batches on one core. The inputs are not expanded before the work: a grid of every start by
+    every goal is cheapest as ``starts[:, None]`` by ``goals[None, :]`` (same results, bit for bit, as the
+    flat batch of all pairs).
     """
     starts, goals, r, ell = _prepare(starts, goals, radius, approach_um)
     _, lengths = _solve(starts, goals, r, segments=False)

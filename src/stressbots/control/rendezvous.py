@@ -110,8 +110,8 @@ class Rendezvous:
         A, Tw = np.meshgrid(pre, tw, indexing="ij")
         A, Tw = A.ravel(), Tw.ravel()
         waits = move(move(self.loop.est[N], A, 0.0), vN * Tw, 1.0 / rN)
-        W, K = len(Tw), len(goals)
-        ell = pathlib.shortest_path_lengths(np.repeat(waits, K, axis=0), np.tile(goals, (W, 1)), rN, approach_um=60.0).reshape(W, K)
+        K = len(goals)
+        ell = pathlib.shortest_path_lengths(waits[:, None, :], goals[None, :, :], rN, approach_um=60.0)  # (W, K): a grid, not W K copies
         arr = (A / vN + Tw)[:, None] + ell / vN - offset[None, :]
         for want in arrivals:
             err = np.abs(arr - want)
