@@ -895,3 +895,14 @@ def test_a_grid_of_starts_by_goals_is_the_flat_batch_bit_for_bit(w, k, seed, app
     words, seg = shortest_path_segments(starts[:, None, :], goals[None, :, :], r, approach_um=approach)
     fw, fseg = shortest_path_segments(flat_s, flat_g, r, approach_um=approach)
     assert np.array_equal(words, fw.reshape(w, k)) and np.array_equal(seg, fseg.reshape(seg.shape))
+
+
+def test_a_batch_whose_rows_are_longer_than_a_chunk_is_the_flat_batch():
+    """One start by 5000 goals as a (1, 5000) grid (a single row longer than the chunk size) gives the flat batch's
+    lengths exactly, in the grid's shape."""
+    rng = np.random.default_rng(3)
+    goals = np.column_stack([rng.uniform(-2000, 2000, (5000, 2)), rng.uniform(-7, 7, 5000)])
+    start = np.array([10.0, -20.0, 0.3])
+    grid = shortest_path_lengths(start[None, None, :], goals[None, :, :], 120.0, approach_um=60.0)
+    assert grid.shape == (1, 5000)
+    assert np.array_equal(grid[0], shortest_path_lengths(np.tile(start, (5000, 1)), goals, 120.0, approach_um=60.0))

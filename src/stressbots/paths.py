@@ -420,7 +420,11 @@ def _solve(starts, goals, radius, segments: bool):
     n = int(np.prod(lead))
     if n <= _CHUNK:
         return _solve_chunk(starts, goals, radius, segments)
-    rows = max(1, _CHUNK // (n // lead[0]))
+    if n // lead[0] > _CHUNK:  # one row is longer than a chunk ((1, 100000), say): chunk the expanded flat batch
+        s, g, r = (np.broadcast_to(a, lead + tail).reshape((n,) + tail) for a, tail in ((starts, (3,)), (goals, (3,)), (radius, ())))
+        use, out = _solve(s, g, r, segments)
+        return use.reshape(lead), out.reshape(lead + out.shape[1:])
+    rows = _CHUNK // (n // lead[0])
     use = np.empty(lead, dtype=bool)
     out = np.empty(lead + (3,) if segments else lead)
     k = len(lead)
