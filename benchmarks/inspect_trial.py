@@ -177,8 +177,12 @@ def show_snap(scn, plan, ps: int, t_s: float, robot: str | None, out: str, repla
                                 color=colour))
         if name == robot:
             ax.add_patch(Polygon(corners[k], closed=True, fill=False, lw=2, color="red"))
+        goal = getattr(getattr(plan, "plan", plan), "goals", {}).get(name)
+        if goal is not None:  # the nominal plan's slot (before any retarget), dashed
+            slot = body_corners(np.asarray([tuple(goal)], float), lengths[k:k + 1], widths[k:k + 1])[0]
+            ax.add_patch(Polygon(slot, closed=True, fill=False, ls="--", lw=0.8, color=colour))
     ax.set_aspect("equal")
-    ax.set_title(f"t = {_plant_time(sim):.1f} s (true poses; dotted: orbit discs from here)")
+    ax.set_title(f"t = {_plant_time(sim):.1f} s (true poses; dotted: orbit discs from here; dashed: nominal slots)")
     fig.savefig(out, dpi=90)
     print(f"wrote {out} at t = {_plant_time(sim):.1f} s; docked: {', '.join(n for n, d in zip(names, docked, strict=True) if d) or 'none'}")
 
