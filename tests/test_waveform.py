@@ -89,6 +89,24 @@ def test_segments_are_frozen_values():
 # Synthesis and decoding
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.lists(st.tuples(st.integers(0, 4), st.floats(0.01, 5.0)), min_size=1, max_size=4), min_size=1, max_size=8))
+def test_a_synthesizer_gives_the_waveforms_of_synthesize_frame_after_frame(four, frames):
+    """Independent of its memory: every frame's waveform from a Synthesizer (transitions remembered from the frames
+    before) equals a fresh :func:`synthesize` from the same arm state."""
+    synth = wfm.Synthesizer(four)
+    state = None
+    for frame in frames:
+        steps = [(f"P{k}", d) for k, d in frame]
+        assert synth(steps, initial=state) == synthesize(four, steps, initial=state)
+        state = np.array(four.primitive(steps[-1][0]).state, dtype=np.uint8)
+
+
+def test_a_synthesizer_names_the_step_it_refuses(four):
+    with pytest.raises(WaveformError, match="step 1: unknown primitive"):
+        wfm.Synthesizer(four)([("P1", 1.0), ("P9", 1.0)])
+
+
 def test_primitive_from_each_state_uses_one_hold(four):
     # Raising to P3 from P1: one Hold between V_d,3 (160, A) and V_d,4 (185, C); releasing to P1 from P4:
     # one Hold between V_u,1 (15, B) and V_u,2 (30, D).

@@ -51,6 +51,7 @@ __all__ = [
     "WaveformSummary",
     "synthesize_primitive",
     "synthesize",
+    "Synthesizer",
     "check_limits",
     "check_drive_band",
     "replay",
@@ -257,6 +258,47 @@ def synthesize(analysis: ControlAnalysis, steps: Iterable[tuple[Any, float]], *,
             raise WaveformError(f"step {k}: {exc.problem}", source=exc.source, field=exc.field) from None
         s = _resolve(analysis, prim)
     return tuple(out)
+
+
+class Synthesizer:
+    """:func:`synthesize` for one design, remembering the Holds of each (arm state, primitive) transition.
+
+    A closed loop synthesizes a waveform every frame from the few transitions of its design; resolving the
+    primitive, checking its accessibility and drive band and searching the level sequence each time cost a
+    tenth of a simulated assembly's wall time. The waveforms are the same segments :func:`synthesize` gives
+    (checked by a test); a Drive is made for each step, so only its duration differs between calls.
+
+    >>> from stressbots.electrostatics import Electrodes, analyse_thresholds
+    >>> a = analyse_thresholds([160.0, 120.0], [45.0, 15.0], Electrodes(), names=["A", "B"])
+    >>> synth = Synthesizer(a)
+    >>> steps = [("P1", 2.0), ("P0", 1.0)]
+    >>> synth(steps) == synthesize(a, steps) and synth(steps) == synthesize(a, steps)   # the second from memory
+    True
+    """
+
+    def __init__(self, analysis: ControlAnalysis):
+        self.analysis = analysis
+        self._holds: dict[tuple[bytes, Any], tuple[tuple[Segment, ...], np.ndarray]] = {}
+
+    def __call__(self, steps: Iterable[tuple[Any, float]], *, initial=None) -> tuple[Segment, ...]:
+        """The waveform of ``steps`` from the arm state ``initial`` (default all up), as :func:`synthesize`."""
+        a = self.analysis
+        e = a.electrodes
+        s = np.zeros(a.n, np.uint8) if initial is None else np.asarray(initial, dtype=np.uint8).reshape(-1)
+        out: list[Segment] = []
+        for k, (prim, dur) in enumerate(steps):
+            key = (s.tobytes(), prim if isinstance(prim, str | int) else np.asarray(prim).tobytes())
+            known = self._holds.get(key)
+            if known is None:
+                try:
+                    holds = synthesize_primitive(a, prim, dur, current=s)[:-1]
+                except WaveformError as exc:
+                    raise WaveformError(f"step {k}: {exc.problem}", source=exc.source, field=exc.field) from None
+                known = self._holds[key] = (holds, _resolve(a, prim))
+            out.extend(known[0])
+            out.append(Drive(e.drive_low_V, e.drive_high_V, dur))
+            s = known[1]
+        return tuple(out)
 
 
 # ----------------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
 from ..estimation import Estimator
 from ..robots import orbit_radii
-from ..waveform import synthesize
+from ..waveform import Synthesizer
 from .straight_drift import StraightDrift
 
 __all__ = ["PlantLoop", "frame_pieces"]
@@ -88,6 +88,7 @@ class PlantLoop:
         self.plant = plant
         self.budget_s = float(budget_s)
         self.analysis = analyse_scenario(scenario)
+        self.synthesize = Synthesizer(self.analysis)  # the waveform of each frame's steps
         if not self.analysis.is_string:
             raise PlanningError(f"{who} needs a STRING design: " + "; ".join(self.analysis.reasons))
         n = scenario.n
@@ -160,7 +161,7 @@ class PlantLoop:
             raise self.over_budget()
         pieces = frame_pieces(steps, self.frame_interval_s, self.frames_per_step)
         for m, piece in enumerate(pieces):
-            self.plant.apply(synthesize(self.analysis, [(f"P{k}", d) for k, d in piece], initial=self.state))
+            self.plant.apply(self.synthesize([(f"P{k}", d) for k, d in piece], initial=self.state))
             self.state = np.asarray(self.analysis.primitive_at(piece[-1][0]).state, dtype=np.uint8)
             frame = self.plant.observe()
             turning = [(self.rank <= k, d) for k, d in piece]
