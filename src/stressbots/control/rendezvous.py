@@ -70,6 +70,14 @@ def arrival_region(target, v_um_s: float) -> tuple[np.ndarray, np.ndarray, np.nd
     return goals, offset, penalty
 
 
+def _best_finite(score: np.ndarray, m: int) -> np.ndarray:
+    """Flat indices of the ``m`` lowest finite entries of ``score``, lowest first. Only the finite ones are sorted: of
+    the 157,000 (wait, goal) pairs of a timed-path search most miss the arrival time (inf), and sorting them all was a
+    tenth of a slow G_1's wall time."""
+    finite = np.flatnonzero(np.isfinite(score))
+    return finite[np.argsort(score[finite])][:m]
+
+
 class Rendezvous:
     """Stages 2 and 3 of G_1: D_n arrives on D_{n-1}'s tangent in time, D_{n-1} departs, both meet."""
 
@@ -116,9 +124,7 @@ class Rendezvous:
         for want in arrivals:
             err = np.abs(arr - want)
             score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.002 * A[:, None] / vN, np.inf).ravel()
-            for flat in np.argsort(score)[:10]:
-                if not np.isfinite(score[flat]):
-                    break
+            for flat in _best_finite(score, 10):
                 j, kk = divmod(int(flat), K)
                 tail = pathlib.shortest_path(waits[j], goals[kk], rN, approach_um=60.0)
                 segs = tuple(tail.segments)
@@ -152,9 +158,7 @@ class Rendezvous:
                 arr = m * TWO_PI * radii[:, None] / vN + ell0[None, :] / vN - offset[None, :]
                 err = np.abs(arr - want)
                 score = np.where(err <= tol_s, err + 0.1 * penalty[None, :] + 0.01 * radii[:, None] / rN, np.inf).ravel()
-                for flat in np.argsort(score)[:6]:
-                    if not np.isfinite(score[flat]):
-                        break
+                for flat in _best_finite(score, 6):
                     jr, kk = divmod(int(flat), K)
                     R = float(radii[jr])
                     loop = move(self.loop.est[N], np.linspace(0.0, TWO_PI * R, 72), 1.0 / R)
