@@ -329,6 +329,57 @@ def test_fine_start_by_the_arena_edge_has_no_arc_and_says_so_when_asked():
                            np.array([1500.0, 1500.0, 0.5]), s_f)
 
 
+@settings(max_examples=30, deadline=None)
+@given(turn=st.floats(30.0, 120.0), rho=st.floats(100.0, 400.0), heading=st.floats(0.0, 2.0 * math.pi))
+def test_a_tight_start_leads_on_one_clockwise_arc_to_the_slots_heading_just_behind_it(turn, rho, heading):
+    """Independent: from each of tight_starts' a_i, turning ``turn`` deg clockwise on radius ``rho`` ends 20 um straight
+    behind the slot at its heading (open arena, nothing docked)."""
+    from stressbots.control.slot_approach import TIGHT_TAIL_UM, tight_starts
+
+    goal = np.array([2000.0, 2000.0, heading])
+    (a,) = tight_starts(goal, rho, 250.0, 50.0, (np.zeros((0, 3)), np.zeros(0), np.zeros(0)), (4000.0, 4000.0), [turn])
+    end = move(a, rho * math.radians(turn), 1.0 / rho)
+    behind = goal[:2] - TIGHT_TAIL_UM * np.array([math.sin(heading), math.cos(heading)])
+    assert np.hypot(*(end[:2] - behind)) < 1e-6
+    assert abs(float(angle_difference(end[2], heading))) < 1e-9
+
+
+def test_an_aim_by_the_arena_edge_is_replaced_by_a_tight_arcs_start_inside_it():
+    """A slot heading +x just far enough from the left edge for a quarter turn of the tight radius, no approach line:
+    the S_2f a_i straight behind it lies outside the arena. The aim is then the start of a tight arc (beside the slot),
+    inside the arena by at least the escape clearance, from which that arc reaches the slot's line; a slot in the open
+    keeps its S_2f a_i."""
+    from stressbots.collision import arena_gap
+    from stressbots.control import structure_targets
+    from stressbots.control.runner import _Runner
+    from stressbots.control.slot_approach import straight_behind, tight_starts
+    from stressbots.generate import random_scenario
+    from stressbots.scenario import Noise
+    from stressbots.sim import SimulatedPlant
+
+    scn = random_scenario(3, 0, shape="tee", noise=Noise())
+    run = _Runner(scn, SimulatedPlant(scn, seed=0), structure_targets(scn), ControllerOptions(), 0)
+    i = run.by_rank[1]
+    run.docked[:] = False
+    run.single.approach.approach_length = lambda _i: None  # type: ignore[method-assign, assignment]
+    L_, W_, arena = float(run.L[i]), float(run.W[i]), scn.arena_um
+    rho = run.tune.tight_aim_radius * float(run.r_hat[i])
+    none: tuple = (np.zeros((0, 3)), [], [])
+    # the nearest slot to the edge (10 um steps) that some tight arc still fits beside
+    x = next(x for x in np.arange(100.0, 2000.0, 10.0)
+             if tight_starts(np.array([x, 1500.0, math.pi / 2.0]), rho, L_, W_, none, arena, run.tune.tight_aim_deg))
+    run.goals[i] = [x + 10.0, 1500.0, math.pi / 2.0]
+    assert straight_behind(run.goals[i], run.r[i], run.opts.fine_distance_um)[0] - L_ / 2.0 < 0.0
+    _, back, a_pose, _ = run.single.approach.aim(i, 1, None, [])
+    assert back is None
+    assert arena_gap(a_pose[None], L_, W_, arena)[0] >= run.tune.escape_clearance_um
+    ends = [move(a_pose, rho * math.radians(t), 1.0 / rho) for t in run.tune.tight_aim_deg]
+    assert any(abs(float(angle_difference(e[2], math.pi / 2.0))) < 1e-9 and abs(e[1] - 1500.0) < 1e-6 for e in ends)
+    run.goals[i] = [2000.0, 1500.0, math.pi / 2.0]  # in the open: the S_2f arc's a_i, behind the slot
+    _, _, open_pose, _ = run.single.approach.aim(i, 1, None, [])
+    assert open_pose[0] < 2000.0 - L_
+
+
 @settings(max_examples=20, deadline=None)
 @given(behind=st.floats(0.0, 600.0), w=st.floats(1e-6, 3e-5), extra=st.floats(0.5, 3.0))
 def test_the_aim_leads_further_left_by_the_extra_walk_sigmas_only_while_a_loop_back_is_blocked(behind, w, extra):

@@ -27,7 +27,7 @@ from .loopview import DockingLoop
 from .queries import fine_motion_length, in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
 
 __all__ = ["Bodies", "SlotApproach", "approach_length", "approach_start_on_route", "fine_start", "lead_in_clear", "retarget",
-           "straight_behind"]
+           "straight_behind", "tight_starts"]
 
 
 Bodies = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -61,6 +61,36 @@ def fine_start(goal: np.ndarray, r: float, length: float, width: float, fine_dis
         if ok and not (arena_um is not None and (outside_arena(back, length, width, arena_um) > 0).any()):
             return back[-1]
     return straight_behind(goal, r, fine_distance_um) if straight_if_none else None
+
+
+TIGHT_TAIL_UM = 20.0
+"""um. The tight arcs of :func:`tight_starts` end this far straight behind the slot, as the planner's do: an arc that ends in
+the slot itself sweeps the front corner through the neighbour it docks against."""
+
+
+def tight_starts(goal: np.ndarray, rho: float, length: float, width: float, bodies: Bodies, arena_um: tuple[float, float] | None,
+                 turns_deg: Sequence[float]) -> list[np.ndarray]:
+    """Intermediate poses a_i at the starts of clockwise arcs of radius ``rho`` (um) turning ``turns_deg`` to the slot
+    ``goal``'s heading :data:`TIGHT_TAIL_UM` behind it, in that order, whose swept ``length`` x ``width`` bodies clear the
+    docked ``bodies`` by 0.5 um and stay inside the arena: the planner's tight final approaches
+    (:meth:`stressbots.dock_planning.DockPlanning.approach_path`), which start beside the slot, for a slot whose rear lies
+    near the arena edge.
+
+    >>> a = tight_starts(np.array([500.0, 500.0, 0.0]), 100.0, 50.0, 10.0, (np.zeros((0, 3)), [], []), None, [90.0])[0]
+    >>> np.round(a, 6).tolist()   # a quarter turn back from heading +y, 20 um behind: right and below it, heading -x
+    [600.0, 380.0, 4.712389]
+    """
+    out = []
+    pre = line_pose(goal, TIGHT_TAIL_UM, 0.0, 0.0)
+    for turn in turns_deg:
+        s = rho * math.radians(turn)
+        back = move(pre, -np.linspace(0.0, s, 40), 1.0 / rho)  # poses along the arc, its end first
+        if any((penetration_depth(back, length, width, pj, lj, wj) > 0.5).any() for pj, lj, wj in zip(*bodies, strict=True)):
+            continue
+        if arena_um is not None and (outside_arena(back, length, width, arena_um) > 0).any():
+            continue
+        out.append(back[-1])
+    return out
 
 
 def straight_behind(goal: np.ndarray, r: float, fine_distance_um: float) -> np.ndarray:
@@ -194,6 +224,8 @@ class SlotApproach:
             # both in the measured frame (the slots follow G_1: PairPhase.retarget); only the nominal route's a_i is moved
             first = route_phase is not None and attempt == 0
             a_pose = self.fine_start_on(route_phase, i) if first else self.fine_start(i, goal, route_phase)
+            if not self.clear_of_edge(i, a_pose):
+                a_pose = next((p for p in self.tight_aims(i, goal) if self.clear_of_edge(i, p)), a_pose)
             ready = None
         else:
             a_pose = self._aim_behind(i, goal, back, orbiting)
@@ -229,6 +261,20 @@ class SlotApproach:
         if pose is None and route_phase is not None:
             pose = self._route_start(route_phase, i)
         return pose if pose is not None else straight_behind(goal, lp.r[i], lp.opts.fine_distance_um)
+
+    def clear_of_edge(self, i: int, pose: np.ndarray) -> bool:
+        """Whether robot ``i``'s body at ``pose`` keeps ``Tuning.escape_clearance_um`` from the arena edge: the least
+        clearance a roadmap route is asked at, so an aim closer to the edge (or beyond it) is no route's end."""
+        arena = self.loop.scn.arena_um
+        lp = self.loop
+        return arena is None or float(arena_gap(np.asarray(pose, float)[None], lp.L[i], lp.W[i], arena)[0]) >= lp.tune.escape_clearance_um
+
+    def tight_aims(self, i: int, goal: np.ndarray) -> list[np.ndarray]:
+        """a_i of robot ``i``'s tight arcs into slot ``goal`` (:func:`tight_starts`; ``Tuning.tight_aim_deg`` at
+        ``Tuning.tight_aim_radius`` times its identified turning radius), docked bodies as measured."""
+        lp = self.loop
+        rho = lp.tune.tight_aim_radius * float(lp.r_hat[i])
+        return tight_starts(goal, rho, lp.L[i], lp.W[i], self._bodies(), lp.scn.arena_um, lp.tune.tight_aim_deg)
 
     def fine_start_on(self, ph, i: int) -> np.ndarray:
         """a_i on the nominal route phase ``ph`` (:meth:`_route_start`), else :meth:`fine_start`."""

@@ -279,6 +279,14 @@ class GrossTuning:
     """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
     merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
     off its slot."""
+    tight_aim_deg: tuple[float, ...] = (90.0, 60.0, 45.0)
+    """deg, tried in order. Where a slot's a_i lies within ``escape_clearance_um`` of the arena edge or beyond it (a
+    structure that formed 150-230 um nearer the edge than planned moved a stem's end there: the nominal a_i was 50 um
+    outside the arena, held-out 34:0 at 2x, and every attempt asked for a route to it), the robot aims instead at the
+    start of an arc of this turn into the slot, which starts beside the slot rather than behind it (the planner's
+    ``PlannerOptions.tight_approach_deg``)."""
+    tight_aim_radius: float = 1.1
+    """Radius of those arcs, times the robot's identified turning radius (the planner's ``tight_approach_radius``)."""
     fine_arc_arrival_deg: float = 40.0
     """deg. The S_2f fine motion steers one interpolated arc into the slot only while that arc arrives within this of the
     slot's heading (docking compliance turns the robot flush from there); beyond it, gross motion again."""
