@@ -30,16 +30,18 @@ class PairTuning:
     """G_1: D_(n-1)'s station transfer, D_n's timed rendezvous, the meeting, holding orbits, searched escapes and pair
     rounds (seed App. 3.3; :mod:`~stressbots.control.pair` and its parts)."""
 
-    tend_during_rendezvous: bool = False
+    tend_during_rendezvous: bool = True
     """Whether D_n's timed approach to D_{n-1}'s orbit (:meth:`~stressbots.control.rendezvous.Rendezvous.arrive_timed`)
     first moves waiting orbits that drifted near trouble, every t_x (otherwise nothing tends them for the whole
-    rendezvous; :class:`~stressbots.control.rendezvous.Tending`). Off: with it on (and ``park_retry_drift_um`` = 20)
-    only the tuning set gained (session 12: tuning 2x 84 -> 90/120; held-out 2x seeds 0-3 185 -> 185/240; held-out 1x
-    290 -> 290/300; independent plant 57 -> 56/60)."""
-    tend_during_transfer: bool = False
+    rendezvous; :class:`~stressbots.control.rendezvous.Tending`). On since session 21, with ``tend_during_transfer``:
+    waiting orbits drifted into the arena edge during G_1 and trapped their robots, which then found no route when their
+    turn came (held-out 2x 10:0, 10:3, 34:1, 34:3; 1x 33:3, 34:4); both on: held-out 1x 295 -> 297/300 (no trial
+    lost), 2x 215 -> 216/240 (+4 -3). Session 12 had measured this one alone, with ``park_retry_drift_um`` = 20: only the
+    tuning set gained then."""
+    tend_during_transfer: bool = True
     """Whether D_n's timed run to a clear track (a station-transfer leg) first moves waiting orbits that drifted near
     trouble, every t_x; the leg is planned again after such a move (:class:`~stressbots.control.rendezvous.Tending`).
-    Off: not measured on the benchmark sets yet."""
+    On since session 21, with ``tend_during_rendezvous`` (see there)."""
     g1_clearance_um: float = 25.0
     """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
     wall_clearance_um: float = 40.0
