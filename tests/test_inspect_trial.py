@@ -96,13 +96,13 @@ def test_a_bad_tune_is_one_error_line_and_status_2(capsys):
 
 
 def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
-    """``pins`` (held-out layout 10, a cross of five, plant seed 0 at 2x noise: R0 gives up with 10 um of its path
-    clear): the watched replay ends exactly as the plain one (observation only), the loop's ``drive`` is restored
-    afterwards, and a robot that ended with no clear path was boxed in by some applied step after a pose where it
-    could move on."""
+    """``pins`` (held-out layout 43, a comb of three, plant seed 0 at 2x noise: R0 gives up with no path clear; layout
+    10's R0, traced here before, assembles since its waiting orbit is tended through G_1): the watched replay ends
+    exactly as the plain one (observation only), the loop's ``drive`` is restored afterwards, and a robot that ended
+    with no clear path was boxed in by some applied step after a pose where it could move on."""
     from stressbots.control.loop import PlantLoop
 
-    scn, plan, ps = it._trial("heldout", "10:0", 2.0, "")
+    scn, plan, ps = it._trial("heldout", "43:0", 2.0, "")
     plain, _ = it._run(scn, plan, ps)
     drive = PlantLoop.drive
     with it._PinWatch(scn.names.index("R0")) as watch:
@@ -110,5 +110,5 @@ def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
     assert PlantLoop.drive is drive
     assert (watched.success, watched.failure, watched.duration_s) == (plain.success, plain.failure, plain.duration_s)
     assert plain.failure and "R0" in plain.failure and "um of its path clear" in plain.failure, (
-        f"held-out 10:0 at 2x no longer fails with R0 pinned ({plain.failure!r}): point this test at a trial that does")
+        f"held-out 43:0 at 2x no longer fails with R0 pinned ({plain.failure!r}): point this test at a trial that does")
     assert watch.pins and all(t <= plain.duration_s for t, *_ in watch.pins)

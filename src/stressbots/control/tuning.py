@@ -511,7 +511,7 @@ class ParkingTuning:
     checked (one ran its orbit 137 um into the arena edge so)."""
     start_park_margin_um: float = 100.0
     """um. Before G_1 (t = 0), waiting orbits closer than this to the arena edge, the structure or another orbit
-    are moved away (:mod:`~stressbots.control.parking`): nothing tends them during the G_1 phase, and an orbit
+    are moved away (:mod:`~stressbots.control.parking`): until session 21 nothing tended them during the G_1 phase, and an orbit
     64 um from the edge at t = 0 was 6 um from it at 52 s and trapped by 96 s. Wider than ``park_margin_um`` by
     the drift of one G_1 phase."""
 
