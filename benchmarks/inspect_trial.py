@@ -11,6 +11,9 @@ is the benchmark's run, event for event) and shows one of:
   is outlined in red;
 - ``shape``: each robot's share of the final shape error (RMS of its body-corner residuals after the best rigid
   alignment, um), the RMS without each robot, and the docking and G_1 events: which robot spoiled the shape.
+- ``routes``: every roadmap search of the gross motion that found no route, with the reason the planner gives when
+  asked again (``it starts within 10 um of the arena edge``, ``the start of its straight approach is blocked by ...``):
+  whether the robot was boxed in or aimed somewhere no route ends;
 - ``pins``: every applied step list that took ``--robot`` (default: the robot the failure names) from a pose where it
   can move on to one where it is *boxed in* (:meth:`stressbots.control.escapes.Escapes.boxed_in`: no turn of
   ``Tuning.escape_turns`` then one body length straight keeps ``Tuning.viable_clearance_um`` clear), with the
@@ -26,6 +29,7 @@ Examples::
     python benchmarks/inspect_trial.py snap tuning 31:0 --noise-scale 2 --at 10.4 --robot R4 --out snap.png
     python benchmarks/inspect_trial.py shape tuning 33:1 --noise-scale 2
     python benchmarks/inspect_trial.py pins tuning 118:0
+    python benchmarks/inspect_trial.py routes heldout 34:0 --noise-scale 2 --from 900
     python benchmarks/inspect_trial.py events tuning 30:0 --plant independent --robot R1
     python benchmarks/inspect_trial.py events heldout 20:4 --tune pair_rounds=4
 
@@ -303,14 +307,75 @@ def show_pins(scn, plan, ps: int, robot: str | None, replay: Replay = Replay()) 
     print(f"{robot}: boxed in {len(watch.pins)} time(s), freed {watch.freed} time(s); {verdict}")
 
 
+class _RouteWatch:
+    """While active, records why each roadmap search of the gross motion found no route: ``(t_s, robot, clearance_um,
+    measured pose, target, reason)``, the reason from :func:`stressbots.planning.route` asked again with the same
+    obstacles (the structure at the plain clearance) and its own random stream, so the replay itself is unchanged."""
+
+    def __init__(self):
+        self.failed: list[tuple[float, int, float, np.ndarray, np.ndarray, str]] = []
+
+    def __enter__(self):
+        from stressbots.control import gross
+
+        self._orig = original = gross.GrossMotion.roadmap_route
+        watch = self
+
+        def roadmap_route(gm, i, target, orbiting, extra_discs, clearance):
+            found = original(gm, i, target, orbiting, extra_discs, clearance)
+            if found[1] is None:
+                watch.failed.append((gm.loop.t, i, clearance, gm.loop.est[i].copy(), np.asarray(target, float).copy(),
+                                     watch.reason(gm, i, target, orbiting, extra_discs, clearance)))
+            return found
+
+        gross.GrossMotion.roadmap_route = roadmap_route  # type: ignore[method-assign]
+        return self
+
+    @staticmethod
+    def reason(gm, i, target, orbiting, extra_discs, clearance) -> str:
+        from stressbots.control import gross
+        from stressbots.planning import NoRoute, PlannerOptions, route
+
+        lp = gm.loop
+        obst = gross._roadmap_obstacles(lp, i, orbiting, extra_discs, 0.0)
+        try:
+            route(lp.est[i][None, :], np.zeros(1), np.asarray(target, float), lp.r_hat[i], lp.L[i], lp.W[i], obst,
+                  PlannerOptions(clearance_um=clearance, roadmap_nodes=(60, 200)), np.random.default_rng(0), "")
+        except NoRoute as exc:
+            return str(exc).lstrip(": ")
+        return "found when asked again (another random roadmap)"
+
+    def __exit__(self, *exc):
+        from stressbots.control import gross
+
+        gross.GrossMotion.roadmap_route = self._orig  # type: ignore[method-assign]
+        return False
+
+
+def show_routes(scn, plan, ps: int, robot: str | None, t0: float, t1: float, replay: Replay = Replay()) -> None:
+    with _RouteWatch() as watch:
+        result, _ = _run(scn, plan, ps, replay=replay)
+    assert result is not None
+    print("robots in docking order D_1 .. D_n:", " ".join(docking_order(scn)))
+    shown = 0
+    for t, i, c, pose, target, why in watch.failed:
+        if (robot is None or scn.names[i] == robot) and t0 <= t <= t1:
+            shown += 1
+            print(f"{t:8.1f} {scn.names[i]} at ({pose[0]:.0f}, {pose[1]:.0f}) um {math.degrees(pose[2]) % 360:.0f} deg -> "
+                  f"({target[0]:.0f}, {target[1]:.0f}) um {math.degrees(target[2]) % 360:.0f} deg, {c:g} um clearance: {why}")
+    verdict = "assembled" if result.success else f"not assembled: {result.failure}"
+    print(f"{shown} failed roadmap search(es) shown of {len(watch.failed)}; {verdict}")
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("events", "snap", "shape", "pins"))
+    ap.add_argument("what", choices=("events", "snap", "shape", "pins", "routes"))
     ap.add_argument("set", choices=sorted(SETS))
     ap.add_argument("trial", help="layout index and plant seed, e.g. 25:0")
     ap.add_argument("--noise-scale", type=float, default=1.0, help="multiple of the literature's noise (as the benchmark ran)")
     ap.add_argument("--robot", default=None,
-                    help="one robot's events (events), outlined in red (snap), watched (pins; default: the failing one)")
+                    help="one robot's events or failed searches (events, routes), outlined in red (snap), watched (pins; default: the "
+                         "failing one)")
     ap.add_argument("--from", dest="t0", type=float, default=0.0, help="events from this simulated time (s)")
     ap.add_argument("--to", dest="t1", type=float, default=math.inf, help="events up to this simulated time (s)")
     ap.add_argument("--at", type=float, default=0.0, help="snap: simulated time (s) of the picture")
@@ -333,6 +398,8 @@ def main(argv=None) -> None:
         show_snap(scn, plan, ps, a.at, a.robot, a.out, replay)
     elif a.what == "pins":
         show_pins(scn, plan, ps, a.robot, replay)
+    elif a.what == "routes":
+        show_routes(scn, plan, ps, a.robot, a.t0, a.t1, replay)
     else:
         show_shape(scn, plan, ps, replay)
 

@@ -112,3 +112,21 @@ def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
     assert plain.failure and "R0" in plain.failure and "um of its path clear" in plain.failure, (
         f"held-out 43:0 at 2x no longer fails with R0 pinned ({plain.failure!r}): point this test at a trial that does")
     assert watch.pins and all(t <= plain.duration_s for t, *_ in watch.pins)
+
+
+def test_routes_watch_only_observes_and_names_why_no_route_was_found():
+    """``routes`` on the same trial (held-out 43:0 at 2x): the watched replay ends exactly as the plain one, the gross
+    motion's roadmap search is restored afterwards, and R0's failed searches are explained by the planner's own reason,
+    the arena edge (R0 ends boxed in beside it), re-asked with a random stream of its own."""
+    from stressbots.control.gross import GrossMotion
+
+    scn, plan, ps = it._trial("heldout", "43:0", 2.0, "")
+    plain, _ = it._run(scn, plan, ps)
+    search = GrossMotion.roadmap_route
+    with it._RouteWatch() as watch:
+        watched, _ = it._run(scn, plan, ps)
+    assert GrossMotion.roadmap_route is search
+    assert (watched.success, watched.failure, watched.duration_s) == (plain.success, plain.failure, plain.duration_s)
+    r0 = scn.names.index("R0")
+    assert watch.failed and all(t <= plain.duration_s for t, *_ in watch.failed)
+    assert any(i == r0 and "arena edge" in why for _, i, _, _, _, why in watch.failed)
