@@ -261,12 +261,44 @@ def test_a_held_d_n_minus_1_ends_its_transfer_turn_instead_of_turning_forever():
                                orbiting_below=lambda _k: [], scn=SimpleNamespace(names=("R0", "R1")))
         tr = StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed
         tr.keeps_room = lambda *_a: True  # type: ignore[method-assign]
+        tr.track_clear = lambda *_a: True  # type: ignore[method-assign]
         tr._turn_together(0, 1, 12.0, 0.5)
         return len(drives)
 
     with pytest.raises(Replan, match="does not turn"):
         run(turns=False)
     assert run(turns=True) == 12
+
+
+@pytest.mark.parametrize("track_clear", [True, False])
+def test_d_n_runs_straight_in_the_transfer_turn_only_on_a_clear_track(track_clear):
+    """``_turn_together``: D_n (robot 0) turns half of D_(n-1)'s 12 s turn, then runs straight under P_(n-1), but only
+    while its straight track is clear (``track_clear``) as well as leaving it room to orbit (``keeps_room``, True here):
+    a D_n already short of room from a lower orbit passes keeps_room, and unchecked it ran 176 um into that robot's
+    orbit and docked against its body (held-out 33:0 at 1x). With its track blocked it turns with D_(n-1) throughout."""
+    from types import SimpleNamespace
+
+    from stressbots.control.transfer import StationTransfer
+    from stressbots.control.tuning import Tuning
+
+    drives: list = []
+    est = np.array([[1500.0, 1500.0, 0.0], [800.0, 800.0, 0.0]])
+    omega = np.array([0.4, 0.4])
+
+    def drive(steps):
+        drives.append(steps)
+        est[1, 2] += omega[1] * sum(d for _, d in steps)
+        est[0, 2] += omega[0] * steps[0][1]  # D_n turns only under P_n, the first step
+
+    loop = SimpleNamespace(n=2, est=est, omega_hat=omega, v_hat=np.array([80.0, 80.0]), tx=1.0, tune=Tuning(), drive=drive,
+                           orbiting_below=lambda _k: [], scn=SimpleNamespace(names=("R0", "R1")))
+    tr = StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed
+    tr.keeps_room = lambda *_a: True  # type: ignore[method-assign]
+    tr.track_clear = lambda *_a: track_clear  # type: ignore[method-assign]
+    tr._turn_together(0, 1, 12.0, 0.5)
+    straight_s = sum(d for steps in drives for k, d in steps if k == 1)
+    assert straight_s == pytest.approx(6.0 if track_clear else 0.0, abs=1e-6)
+    assert sum(d for steps in drives for _, d in steps) == pytest.approx(12.0)  # D_(n-1)'s whole turn either way
 
 
 def test_a_station_routes_via_orbits_keep_the_extra_margin_from_the_arena_edge():

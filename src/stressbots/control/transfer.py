@@ -57,8 +57,12 @@ class StationTransfer:
                 break
             dt = left if left <= 1.6 * self.loop.tx else self.loop.tx
             a = min(dt, max((n_turn - n_turned) / self.loop.omega_hat[N], 0.0))
-            if dt - a > 1e-9 and not self.keeps_room(N, (dt - a) * self.loop.v_hat[N], self.loop.orbiting_below(n - 1)):
-                a = dt  # D_n would run out of room to orbit: it turns with D_{n-1} instead (same turn for D_{n-1})
+            run, lower = (dt - a) * self.loop.v_hat[N], self.loop.orbiting_below(n - 1)
+            # D_n would run out of room to orbit, or (already short of room) run into a lower orbit: it turns with D_{n-1}
+            # instead (same turn for D_{n-1}); keeps_room lets a robot short of room go on only on a clear track, and
+            # unchecked here D_n ran 176 um into a waiting robot's orbit and docked against its body (held-out 33:0 at 1x)
+            if dt - a > 1e-9 and not (self.keeps_room(N, run, lower) and self.track_clear(N, run + 40.0, lower)):
+                a = dt
             th0, thN0 = self.loop.est[M, 2], self.loop.est[N, 2]
             self.loop.drive([(n, a), (n - 1, dt - a)])
             n_turned += float(np.mod(self.loop.est[N, 2] - thN0 + 0.5, TWO_PI)) - 0.5
