@@ -236,46 +236,10 @@ def test_d_n_minus_1s_station_leg_is_checked_clear_leg_overrun_s_past_its_end(be
         legs.transfer_option(0, 1, 1.0, d, th_dep, [], centre_M + [0.0, d], q_next)  # no Replan: D_n's options follow
 
 
-def test_a_held_d_n_minus_1_ends_its_transfer_turn_instead_of_turning_forever():
-    """D_{n-1} (robot 1) held against something does not turn: its measured heading stays put while the turn is
-    commanded a t_x at a time. After ``Tuning.turn_stall_frames`` such t_x the leg ends with a Replan (it turned
-    nothing for 3900 s of simulated time before, until the time budget ran out); a robot that turns is not stopped."""
-    from types import SimpleNamespace
-
-    from stressbots.control.pairloop import Replan
-    from stressbots.control.transfer import StationTransfer
-    from stressbots.control.tuning import Tuning
-
-    def run(turns: bool) -> int:
-        drives = []
-        est = np.array([[1500.0, 1500.0, 0.0], [800.0, 800.0, 0.0]])
-        omega = np.array([0.4, 0.4])
-
-        def drive(steps):
-            drives.append(steps)
-            if turns:  # both turn the commanded amount (D_n only in its part of the t_x)
-                est[1, 2] += omega[1] * sum(d for _, d in steps)
-                est[0, 2] += omega[0] * steps[0][1]
-
-        loop = SimpleNamespace(n=2, est=est, omega_hat=omega, v_hat=np.array([80.0, 80.0]), tx=1.0, tune=Tuning(), drive=drive,
-                               orbiting_below=lambda _k: [], scn=SimpleNamespace(names=("R0", "R1")))
-        tr = StationTransfer(SimpleNamespace(loop=loop))  # type: ignore[arg-type]  # duck-typed
-        tr.keeps_room = lambda *_a: True  # type: ignore[method-assign]
-        tr.track_clear = lambda *_a: True  # type: ignore[method-assign]
-        tr._turn_together(0, 1, 12.0, 0.5)
-        return len(drives)
-
-    with pytest.raises(Replan, match="does not turn"):
-        run(turns=False)
-    assert run(turns=True) == 12
-
-
-@pytest.mark.parametrize("track_clear", [True, False])
-def test_d_n_runs_straight_in_the_transfer_turn_only_on_a_clear_track(track_clear):
-    """``_turn_together``: D_n (robot 0) turns half of D_(n-1)'s 12 s turn, then runs straight under P_(n-1), but only
-    while its straight track is clear (``track_clear``) as well as leaving it room to orbit (``keeps_room``, True here):
-    a D_n already short of room from a lower orbit passes keeps_room, and unchecked it ran 176 um into that robot's
-    orbit and docked against its body (held-out 33:0 at 1x). With its track blocked it turns with D_(n-1) throughout."""
+def _turn_together_drives(turns: bool = True, track_clear: bool = True) -> list:
+    """The step lists ``StationTransfer._turn_together(0, 1, 12 s, fraction 0.5)`` drives on a hand-built loop: D_n (robot 0)
+    and D_(n-1) (robot 1) at 0.4 rad/s, both turning the commanded amount when ``turns`` (D_n only under P_n, the first
+    step of a t_x), D_n always with room to orbit and its straight track ``track_clear``."""
     from types import SimpleNamespace
 
     from stressbots.control.transfer import StationTransfer
@@ -287,8 +251,9 @@ def test_d_n_runs_straight_in_the_transfer_turn_only_on_a_clear_track(track_clea
 
     def drive(steps):
         drives.append(steps)
-        est[1, 2] += omega[1] * sum(d for _, d in steps)
-        est[0, 2] += omega[0] * steps[0][1]  # D_n turns only under P_n, the first step
+        if turns:
+            est[1, 2] += omega[1] * sum(d for _, d in steps)
+            est[0, 2] += omega[0] * steps[0][1]
 
     loop = SimpleNamespace(n=2, est=est, omega_hat=omega, v_hat=np.array([80.0, 80.0]), tx=1.0, tune=Tuning(), drive=drive,
                            orbiting_below=lambda _k: [], scn=SimpleNamespace(names=("R0", "R1")))
@@ -296,6 +261,27 @@ def test_d_n_runs_straight_in_the_transfer_turn_only_on_a_clear_track(track_clea
     tr.keeps_room = lambda *_a: True  # type: ignore[method-assign]
     tr.track_clear = lambda *_a: track_clear  # type: ignore[method-assign]
     tr._turn_together(0, 1, 12.0, 0.5)
+    return drives
+
+
+def test_a_held_d_n_minus_1_ends_its_transfer_turn_instead_of_turning_forever():
+    """D_{n-1} (robot 1) held against something does not turn: its measured heading stays put while the turn is
+    commanded a t_x at a time. After ``Tuning.turn_stall_frames`` such t_x the leg ends with a Replan (it turned
+    nothing for 3900 s of simulated time before, until the time budget ran out); a robot that turns is not stopped."""
+    from stressbots.control.pairloop import Replan
+
+    with pytest.raises(Replan, match="does not turn"):
+        _turn_together_drives(turns=False)
+    assert len(_turn_together_drives(turns=True)) == 12
+
+
+@pytest.mark.parametrize("track_clear", [True, False])
+def test_d_n_runs_straight_in_the_transfer_turn_only_on_a_clear_track(track_clear):
+    """``_turn_together``: D_n (robot 0) turns half of D_(n-1)'s 12 s turn, then runs straight under P_(n-1), but only
+    while its straight track is clear (``track_clear``) as well as leaving it room to orbit (``keeps_room``, True here):
+    a D_n already short of room from a lower orbit passes keeps_room, and unchecked it ran 176 um into that robot's
+    orbit and docked against its body (held-out 33:0 at 1x). With its track blocked it turns with D_(n-1) throughout."""
+    drives = _turn_together_drives(track_clear=track_clear)
     straight_s = sum(d for steps in drives for k, d in steps if k == 1)
     assert straight_s == pytest.approx(6.0 if track_clear else 0.0, abs=1e-6)
     assert sum(d for steps in drives for _, d in steps) == pytest.approx(12.0)  # D_(n-1)'s whole turn either way

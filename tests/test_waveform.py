@@ -93,12 +93,19 @@ def test_segments_are_frozen_values():
 @given(st.lists(st.lists(st.tuples(st.integers(0, 4), st.floats(0.01, 5.0)), min_size=1, max_size=4), min_size=1, max_size=8))
 def test_a_synthesizer_gives_the_waveforms_of_synthesize_frame_after_frame(four, frames):
     """Independent of its memory: every frame's waveform from a Synthesizer (transitions remembered from the frames
-    before) equals a fresh :func:`synthesize` from the same arm state."""
+    before) equals a fresh :func:`synthesize` from the same arm state, and both equal the segments of
+    :func:`synthesize_primitive`, step after step, each from the state the step before left (the definition)."""
     synth = wfm.Synthesizer(four)
     state = None
     for frame in frames:
         steps = [(f"P{k}", d) for k, d in frame]
         assert synth(steps, initial=state) == synthesize(four, steps, initial=state)
+        by_step: list = []
+        s = np.zeros(four.n, np.uint8) if state is None else state
+        for prim, d in steps:
+            by_step.extend(synthesize_primitive(four, prim, d, current=s))
+            s = np.array(four.primitive(prim).state, dtype=np.uint8)
+        assert synth(steps, initial=state) == tuple(by_step)
         state = np.array(four.primitive(steps[-1][0]).state, dtype=np.uint8)
 
 

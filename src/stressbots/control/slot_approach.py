@@ -265,8 +265,8 @@ class SlotApproach:
     def clear_of_edge(self, i: int, pose: np.ndarray) -> bool:
         """Whether robot ``i``'s body at ``pose`` keeps ``Tuning.escape_clearance_um`` from the arena edge: the least
         clearance a roadmap route is asked at, so an aim closer to the edge (or beyond it) is no route's end."""
-        arena = self.loop.scn.arena_um
         lp = self.loop
+        arena = lp.scn.arena_um
         return arena is None or float(arena_gap(np.asarray(pose, float)[None], lp.L[i], lp.W[i], arena)[0]) >= lp.tune.escape_clearance_um
 
     def tight_aims(self, i: int, goal: np.ndarray) -> list[np.ndarray]:
