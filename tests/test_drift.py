@@ -146,3 +146,14 @@ def test_a_robot_that_does_not_move_does_not_drift():
     plant.apply([Drive(75.0, 105.0, 3.0)])
     np.testing.assert_array_equal(plant.true_poses(), stopped)
     np.testing.assert_array_equal(plant.odometer, odo)
+
+
+@pytest.mark.parametrize(("o0", "length"), [(0.0, 0.0), (0.0, 730.0), (12.5, 12.5), (24.999, 0.002), (50.0, 25.0),
+                                            (1234.567, 333.3), (99.0, -5.0)])
+def test_pieces_in_plain_floats_are_the_segments_bit_for_bit(o0, length):
+    """``pieces`` (lists of floats, for the simulator's one-time fast path) equals ``segments``."""
+    drift = HeadingDrift(3, SIGMA, np.random.SeedSequence(5))
+    for i in range(3):
+        lengths, kappas = drift.segments(i, o0, length)
+        fl, fk = drift.pieces(i, o0, length)
+        assert np.array_equal(np.array(fl), lengths) and np.array_equal(np.array(fk), kappas)

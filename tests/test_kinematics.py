@@ -238,3 +238,17 @@ def test_one_path_in_plain_floats_is_bit_identical_to_the_array_composition(star
     one = km.poses_from_joints(fast, cum, kappas, s)
     batch = km.poses_from_joints(fast, cum, kappas, np.array([s]))[0]
     assert np.array_equal(one, batch)
+
+
+@settings(max_examples=200, deadline=None)
+@given(starts=st.lists(poses, min_size=1, max_size=6), segments=st.lists(segment_lists, min_size=6, max_size=6))
+def test_end_poses_of_many_paths_in_plain_floats_are_bit_identical_to_move_segment_by_segment(starts, segments):
+    """``follow_ends`` (one sine and one cosine call for every segment of every path); truth: ``move`` on
+    arrays, one segment after the other, per path."""
+    paths = [[(s, k / r) for k, s, r in segs] for segs in segments[: len(starts)]]
+    fast = km.follow_ends(starts, paths)
+    for start, path, end in zip(starts, paths, fast, strict=True):
+        pose = np.array(start)
+        for s, k in path:
+            pose = km.move(pose[None, :], np.array([s]), np.array([k]))[0]
+        assert np.array_equal(np.array(end), pose)

@@ -161,6 +161,17 @@ class HeadingDrift:
         np.minimum(np.maximum(edges, o0, out=edges), end, out=edges)
         return edges[1:] - edges[:-1], self.bias[i] + tab[k0 : k1 + 1]
 
+    def pieces(self, i: int, o0: float, length_um: float) -> tuple[list[float], list[float]]:
+        """:meth:`segments` as lists of plain floats, bit-identical (the same clipping and differences):
+        the simulator asks for a few pieces of several robots at every sub-interval of a Drive, where
+        building small arrays costs more than the arithmetic."""
+        k0, k1, end = self._knots(o0, length_um)
+        walk = self._walk(i, k1)[k0 : k1 + 1].tolist()
+        delta = self.model.knot_um
+        edges = [o0] + [min(max(delta * float(k), o0), end) for k in range(k0 + 1, k1 + 1)] + [end]
+        bias = float(self.bias[i])
+        return [b - a for a, b in zip(edges[:-1], edges[1:], strict=True)], [bias + w for w in walk]
+
     def _knots(self, o0: float, length_um: float) -> tuple[int, int, float]:
         """``(k0, k1, o0 + length)``: the knot intervals ``k0..k1`` an odometer range ``[o0, o0 + length]`` meets."""
         delta = self.model.knot_um
