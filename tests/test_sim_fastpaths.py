@@ -7,6 +7,7 @@ import pytest
 
 from stressbots.generate import LITERATURE_NOISE, random_scenario
 from stressbots.sim import SimulatedPlant
+from stressbots.sim.bodies import depth, depth_one, wall_gap, wall_gap_one, with_trig
 from stressbots.sim.search import drift_poses, drift_poses_one
 
 
@@ -26,3 +27,33 @@ def test_drift_poses_at_one_time_are_the_array_forms_bit_for_bit(seed):
         fast = drift_poses_one(b, drift, b.pose, idx, speed, kappa, tau)
         slow = drift_poses(b, drift, b.pose, idx, speed, kappa, np.array([tau, tau]))[0]
         assert np.array_equal(fast, slow)
+
+
+def test_one_pair_depth_and_wall_gap_in_plain_floats_are_the_array_kernels_bit_for_bit():
+    """``depth_one`` and ``wall_gap_one`` against ``depth`` and ``wall_gap`` on touching, crossing and far
+    pairs of random sizes (the contact rules' probes use the float forms)."""
+    rng = np.random.default_rng(4)
+    m = 2000
+    pa = np.column_stack([rng.uniform(0, 400, m), rng.uniform(0, 400, m), rng.uniform(-7, 7, m)])
+    pb = pa + np.column_stack([rng.normal(0, 150, m), rng.normal(0, 150, m), rng.choice([0.0, np.pi / 2, 1.0], m)])
+    hla, hwa, hlb, hwb = (rng.uniform(10, 130, m) for _ in range(4))
+    want = depth(pa, pb, hla, hwa, hlb, hwb)
+    ta, tb = with_trig([tuple(p) for p in pa.tolist()]), with_trig([tuple(p) for p in pb.tolist()])
+    got = [depth_one(a, b, *h) for a, b, *h in zip(ta, tb, hla.tolist(), hwa.tolist(), hlb.tolist(), hwb.tolist(), strict=True)]
+    assert np.array_equal(np.array(got), want)
+    arena = (500.0, 450.0)
+    gaps = [wall_gap_one(a, hl, hw, arena) for a, hl, hw in zip(ta, hla.tolist(), hwa.tolist(), strict=True)]
+    assert np.array_equal(np.array(gaps), wall_gap(pa, hla, hwa, arena))
+
+
+def test_the_geometry_remembered_at_the_poses_is_forgotten_when_anybody_moves():
+    """``Bodies.pair_depths`` / ``wall_gaps`` / ``within_reach`` are recomputed after a move in place."""
+    scn = random_scenario(4, 901, shape="tee", noise=LITERATURE_NOISE)
+    b = SimulatedPlant(scn, seed=0)._bodies
+    d0, g0, r0 = b.pair_depths(), b.wall_gaps(), b.within_reach()
+    assert b.pair_depths() is d0 and b.wall_gaps() is g0 and b.within_reach() is r0
+    b.pose[1, 0] += 1e-9
+    assert b.pair_depths() is not d0 and b.wall_gaps() is not g0 and b.within_reach() is not r0
+    P = b.pose
+    assert np.array_equal(b.pair_depths(), depth(P[b.I], P[b.J], b.hl[b.I], b.hw[b.I], b.hl[b.J], b.hw[b.J]))
+    assert np.array_equal(b.wall_gaps(), wall_gap(P, b.hl, b.hw, b.arena))

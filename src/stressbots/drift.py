@@ -190,6 +190,13 @@ class HeadingDrift:
             out[i] = self.bias[i] + self._walk(i, k)[k]
         return out
 
+    def curvature_one(self, i: int, odometer: float) -> float:
+        """:meth:`curvature_at` of robot i alone (1/um), a plain float: 0.0 without drift."""
+        if not self.active:
+            return 0.0
+        k = int(math.floor(odometer / self.model.knot_um))
+        return float(self.bias[i]) + float(self._walk(i, k)[k])
+
     def max_abs(self, i: int, o0: float, length_um: float) -> float:
         """Largest drift curvature magnitude (1/um) robot i meets over odometer ``[o0, o0 + length_um]``."""
         if not self.active:

@@ -87,6 +87,42 @@ def depth(pa, pb, hla, hwa, hlb, hwb) -> np.ndarray:
     return np.minimum(np.minimum(o1, o2), np.minimum(o3, o4))
 
 
+Trig = tuple[float, float, float, float]
+"""A pose in plain floats with its heading's sine and cosine: ``(x_um, y_um, sin, cos)``."""
+
+
+def with_trig(poses: list[tuple[float, float, float]]) -> list[Trig]:
+    """``(x, y, sin theta, cos theta)`` of poses (um, rad): one ``np.sin`` and one ``np.cos`` call for all,
+    so the sines are numpy's, the same bits as :func:`depth` and :func:`wall_gap` compute on arrays."""
+    th = np.array([p[2] for p in poses])
+    return list(zip([p[0] for p in poses], [p[1] for p in poses], np.sin(th).tolist(), np.cos(th).tolist(), strict=True))
+
+
+def depth_one(a: Trig, b: Trig, hla: float, hwa: float, hlb: float, hwb: float) -> float:
+    """:func:`depth` of one pair in plain floats, bit-identical (the same operations in the same order):
+    the contact rules probe a few touching pairs per evaluation, where numpy's per-call cost dominates."""
+    sa, ca, sb, cb = a[2], a[3], b[2], b[3]
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    cd = abs(sa * sb + ca * cb)
+    sd = abs(sa * cb - ca * sb)
+    o1 = hla + hlb * cd + hwb * sd - abs(dx * sa + dy * ca)
+    o2 = hwa + hlb * sd + hwb * cd - abs(dx * ca - dy * sa)
+    o3 = hlb + hla * cd + hwa * sd - abs(dx * sb + dy * cb)
+    o4 = hwb + hla * sd + hwa * cd - abs(dx * cb - dy * sb)
+    return min(min(o1, o2), min(o3, o4))
+
+
+def wall_gap_one(p: Trig, hl: float, hw: float, arena) -> float:
+    """:func:`wall_gap` of one body in plain floats, bit-identical (:func:`stressbots.collision.arena_gap`'s
+    operations; its half sizes ``0.5 * (2 hl)`` are ``hl`` exactly)."""
+    s, c = abs(p[2]), abs(p[3])
+    ex = hl * s + hw * c
+    ey = hl * c + hw * s
+    w, h = float(arena[0]), float(arena[1])
+    x, y = p[0], p[1]
+    return min(min(x - ex, w - x - ex), min(y - ey, h - y - ey))
+
+
 def wall_gap(p, hl, hw, arena) -> np.ndarray:
     """Distance (um) from each body (half lengths ``hl``, ``hw``) to the nearest arena wall; negative outside."""
     return arena_gap(p, 2.0 * hl, 2.0 * hw, arena)
@@ -181,10 +217,45 @@ class Bodies:
         self.arena_hit = np.zeros(n, dtype=bool)
         self.events: list[SimEvent] = []
         self.I, self.J = np.triu_indices(n, k=1)  # every pair once
+        self._at_key = b""  # the pose bytes the geometry in _at was computed for
+        self._at: dict[str, np.ndarray] = {}
 
     @property
     def n(self) -> int:
         return self.pose.shape[0]
+
+    def _now(self, name: str, compute) -> np.ndarray:
+        """``compute()`` at the current poses, remembered while they stay the same bit for bit.
+
+        The contact rules evaluate at the end of every Drive and again at the start of the next, at the
+        same poses (and :meth:`~stressbots.sim.SimulatedPlant._quiet` reads the wall gaps in between);
+        keyed on the pose bytes, so any move, in place or not, forgets it. Callers must not modify it.
+        """
+        key = self.pose.tobytes()
+        if key != self._at_key:
+            self._at_key, self._at = key, {}
+        out = self._at.get(name)
+        if out is None:
+            out = self._at[name] = compute()
+        return out
+
+    def pair_depths(self) -> np.ndarray:
+        """Penetration depth (um; <= 0 apart) of every pair ``(I, J)`` now."""
+        P, hl, hw, ii, jj = self.pose, self.hl, self.hw, self.I, self.J
+        return self._now("depth", lambda: depth(P[ii], P[jj], hl[ii], hw[ii], hl[jj], hw[jj]) if ii.size else np.zeros(0))
+
+    def wall_gaps(self) -> np.ndarray:
+        """Gap (um) of every body to the arena edge now; +inf without an arena."""
+        return self._now("wall", lambda: wall_gap(self.pose, self.hl, self.hw, self.arena) if self.arena is not None
+                         else np.full(self.n, np.inf))
+
+    def within_reach(self) -> np.ndarray:
+        """``(n, n)`` bool: body k's centre is within ``reach[i, k]`` of body i's now (the poses a compliance move
+        of i could change: :meth:`~.contact.ContactRules.rule_key`)."""
+        def compute():
+            x, y = self.pose[:, 0], self.pose[:, 1]
+            return np.hypot(x[None, :] - x[:, None], y[None, :] - y[:, None]) < self.reach
+        return self._now("reach", compute)
 
     def gaps(self, poses, ci, cj) -> np.ndarray:
         """Gaps ``(K, Q)`` (um, negative = interpenetration) of candidate pairs ``(ci, cj)`` at poses

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from ..drift import HeadingDrift
-from ..kinematics import move
+from ..kinematics import follow_ends
 from . import compliance
 from .bodies import (
     ARENA,
@@ -28,9 +28,11 @@ from .bodies import (
     PUSH_EPS_UM,
     TOUCH_UM,
     Bodies,
-    depth,
+    Trig,
+    depth_one,
     local,
-    wall_gap,
+    wall_gap_one,
+    with_trig,
 )
 from .search import FREE, HELD, SLIDE, DriveRates, Motion
 
@@ -61,7 +63,6 @@ class ContactRules:
         b = self.b
         speed, kappa, straight, _ = ctx
         n = b.n
-        P, hl, hw = b.pose, b.hl, b.hw
         mode = np.full(n, FREE)
         mode[speed <= 0] = HELD
         for k in forced:
@@ -69,18 +70,11 @@ class ContactRules:
         slide_v = np.zeros((n, 2))
         slide_end = np.full(n, math.inf)
         excluded: set = set()
-        ii, jj = b.I, b.J
-        d0 = depth(P[ii], P[jj], hl[ii], hw[ii], hl[jj], hw[jj]) if ii.size else np.zeros(0)
-        g0 = wall_gap(P, hl, hw, b.arena) if b.arena is not None else np.full(n, np.inf)
+        d0, g0 = b.pair_depths(), b.wall_gaps()
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self.contacts = {}
             return Motion(mode, slide_v, slide_end, excluded, False)
-        probe = move(P, PROBE_UM, kappa + self.drift.curvature_at(b.odo))  # each alone, a hair further on
-        push, approach, touching = self.touch_graph(probe, d0)
-        if b.arena is not None:
-            gp = wall_gap(probe, hl, hw, b.arena)
-            for i in np.flatnonzero((g0 < TOUCH_UM) & (g0 - gp > PUSH_EPS_UM)).tolist():
-                push.setdefault(i, []).append(ARENA)
+        push, approach, touching = self.touch_graph(kappa, d0, g0)
         pushers = set(push)
         static = pushers | set(np.flatnonzero(speed <= 0).tolist()) | forced
         outcomes: Outcomes = {}
@@ -117,24 +111,30 @@ class ContactRules:
         recheck = any(mode[i] == HELD and j >= 0 and mode[j] != HELD for (i, j) in outcomes)
         return Motion(mode, slide_v, slide_end, excluded, recheck)
 
-    def touch_graph(self, probe: np.ndarray, d0: np.ndarray):
-        """``(push, approach, touching)`` of the touching pairs: whom each robot's own motion pushes into,
-        the approach rate of each ordered pair (um per um driven) and whom each robot touches."""
+    def touch_graph(self, kappa: np.ndarray, d0: np.ndarray, g0: np.ndarray):
+        """``(push, approach, touching)`` of the touching pairs: whom each robot's own motion pushes into
+        (the arena edge last), the approach rate of each ordered pair (um per um driven) and whom each
+        robot touches. Base curvatures ``kappa`` (1/um), depths ``d0`` of every pair and wall gaps ``g0``
+        (um) now.
+
+        Each touching robot is moved alone by :data:`~.bodies.PROBE_UM` on its arc (drift included) and
+        the depths are taken again. A handful of pairs per evaluation: plain floats
+        (:func:`~.bodies.depth_one`), bit-identical to the array kernels at a fraction of their cost.
+        """
         b = self.b
-        P, hl, hw = b.pose, b.hl, b.hw
-        ii, jj = b.I, b.J
         push: dict[int, list[int]] = {}
         approach: dict[tuple[int, int], float] = {}
         touching: dict[int, list[int]] = {}
-        if not ii.size:
-            return push, approach, touching
         t = np.flatnonzero(d0 > -TOUCH_UM)
-        if not t.size:
+        pairs = list(zip(b.I[t].tolist(), b.J[t].tolist(), d0[t].tolist(), strict=True))
+        walls = np.flatnonzero(g0 < TOUCH_UM).tolist() if b.arena is not None else []
+        if not (pairs or walls):
             return push, approach, touching
-        a, c = ii[t], jj[t]
-        da = depth(probe[a], P[c], hl[a], hw[a], hl[c], hw[c]) - d0[t]
-        dc = depth(P[a], probe[c], hl[a], hw[a], hl[c], hw[c]) - d0[t]
-        for x, y, rx, ry in zip(a.tolist(), c.tolist(), da.tolist(), dc.tolist(), strict=False):
+        now, probe = self._probes(sorted({k for a, c, _ in pairs for k in (a, c)} | set(walls)), kappa)
+        hl, hw = b.hl.tolist(), b.hw.tolist()
+        for x, y, d in pairs:
+            rx = depth_one(probe[x], now[y], hl[x], hw[x], hl[y], hw[y]) - d
+            ry = depth_one(now[x], probe[y], hl[x], hw[x], hl[y], hw[y]) - d
             touching.setdefault(x, []).append(y)
             touching.setdefault(y, []).append(x)
             approach[(x, y)] = rx / PROBE_UM
@@ -143,7 +143,23 @@ class ContactRules:
                 push.setdefault(x, []).append(y)
             if ry > PUSH_EPS_UM:
                 push.setdefault(y, []).append(x)
+        g = g0.tolist()
+        for i in walls:
+            if g[i] - wall_gap_one(probe[i], hl[i], hw[i], b.arena) > PUSH_EPS_UM:
+                push.setdefault(i, []).append(ARENA)
         return push, approach, touching
+
+    def _probes(self, robots: list[int], kappa: np.ndarray) -> tuple[dict[int, Trig], dict[int, Trig]]:
+        """The poses of ``robots`` now and each moved alone by :data:`~.bodies.PROBE_UM` on its arc of base
+        curvature ``kappa`` plus its drift's (as :func:`~stressbots.kinematics.move` would), with their
+        sines and cosines."""
+        b = self.b
+        odo = b.odo.tolist()
+        now = [tuple(b.pose[k].tolist()) for k in robots]
+        ahead = follow_ends(now, [[(PROBE_UM, float(kappa[k]) + self.drift.curvature_one(k, odo[k]))] for k in robots])
+        trig = with_trig(now + ahead)
+        m = len(robots)
+        return dict(zip(robots, trig[:m], strict=True)), dict(zip(robots, trig[m:], strict=True))
 
     def self_align_cached(self, i: int, j: int, straight) -> tuple[str, str]:
         """``(kind, detail)`` of self-aligning compliance between i and j, remembered while nothing moves."""
@@ -253,10 +269,9 @@ class ContactRules:
         """What a contact rule's outcome depends on: the arm kinds of i and j and, bit for bit, the poses
         of every robot a compliance move of i or j could reach (itself included)."""
         b = self.b
-        P = b.pose
-        x, y = P[:, 0], P[:, 1]
-        near = np.flatnonzero((np.hypot(x - x[i], y - y[i]) < b.reach[i]) | (np.hypot(x - x[j], y - y[j]) < b.reach[j]))
-        return bytes([bool(straight[i]), bool(straight[j])]) + near.tobytes() + P[near].tobytes()
+        within = b.within_reach()
+        near = np.flatnonzero(within[i] | within[j])
+        return bytes([bool(straight[i]), bool(straight[j])]) + near.tobytes() + b.pose[near].tobytes()
 
     def flush_cached(self, i: int, j: int, straight) -> bool:
         """:func:`.compliance.flush`, remembered while nothing near the pair moves (a blocked robot is

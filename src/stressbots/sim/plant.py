@@ -17,7 +17,7 @@ import numpy as np
 from ..drift import DEFAULT_DRIFT, DriftModel, HeadingDrift
 from ..kinematics import wrap
 from ..waveform import Segment, replay
-from .bodies import NEAR_UM, RECHECK_S, Bodies, SimEvent, wall_gap
+from .bodies import NEAR_UM, RECHECK_S, Bodies, SimEvent
 from .contact import ContactRules
 from .search import FREE, HELD, DriveRates, Motion, first_contact, poses_at
 
@@ -315,7 +315,7 @@ class SimulatedPlant:
             if (centre - b.hd[ii] - b.hd[jj] - travel[ii] - travel[jj] <= NEAR_UM).any():
                 return False
         if b.arena is not None:
-            if (wall_gap(P, b.hl, b.hw, b.arena) - travel <= NEAR_UM).any():
+            if (b.wall_gaps() - travel <= NEAR_UM).any():
                 return False
         return bool((self._v > 0).all())
 
