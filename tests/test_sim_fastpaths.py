@@ -5,9 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from stressbots.collision import point_rectangle_distance
 from stressbots.generate import LITERATURE_NOISE, random_scenario
+from stressbots.robots import body_corners
 from stressbots.sim import SimulatedPlant
-from stressbots.sim.bodies import depth, depth_one, wall_gap, wall_gap_one, with_trig
+from stressbots.sim.bodies import TOUCH_UM, depth, depth_one, wall_gap, wall_gap_one, with_trig
+from stressbots.sim.compliance import contact_points
 from stressbots.sim.search import drift_poses, drift_poses_one
 
 
@@ -57,3 +60,37 @@ def test_the_geometry_remembered_at_the_poses_is_forgotten_when_anybody_moves():
     P = b.pose
     assert np.array_equal(b.pair_depths(), depth(P[b.I], P[b.J], b.hl[b.I], b.hw[b.I], b.hl[b.J], b.hw[b.J]))
     assert np.array_equal(b.wall_gaps(), wall_gap(P, b.hl, b.hw, b.arena))
+
+
+def _contact_points_on_arrays(b, i, j):
+    """The array form ``contact_points`` replaced (body_corners, point_rectangle_distance)."""
+    P = b.pose
+    ci = body_corners(P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
+    cj = body_corners(P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
+    eps = max(TOUCH_UM, 2.0 * b.pair_depth(i, j)) + 1e-9
+    di = point_rectangle_distance(ci, P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
+    dj = point_rectangle_distance(cj, P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
+    pts = np.vstack([ci[di <= eps], cj[dj <= eps]])
+    own = np.concatenate([np.ones(int((di <= eps).sum()), bool), np.zeros(int((dj <= eps).sum()), bool)])
+    if pts.shape[0] == 0:
+        pts = np.vstack([ci[[int(np.argmin(di))]], cj[[int(np.argmin(dj))]]])
+        own = np.array([True, False])
+    return pts, own
+
+
+def test_contact_points_in_plain_floats_are_the_array_forms_bit_for_bit():
+    """Touching corners of pairs placed flush, at a corner, crossing and apart (the fallback)."""
+    scn = random_scenario(2, 902, shape="tee", noise=LITERATURE_NOISE)
+    b = SimulatedPlant(scn, seed=0)._bodies
+    rng = np.random.default_rng(6)
+    hl0, hw0, hl1 = float(b.hl[0]), float(b.hw[0]), float(b.hl[1])
+    for k in range(400):
+        th = rng.uniform(0, 2 * np.pi)
+        h = np.array([np.sin(th), np.cos(th)])
+        b.pose[0] = (rng.uniform(100, 300), rng.uniform(100, 300), th)
+        off = [hl0 + hl1, hl0 + hl1 + rng.normal(0, 1e-6), rng.uniform(0, 2 * (hl0 + hl1))][k % 3]
+        side = rng.uniform(-hw0, hw0) * np.array([h[1], -h[0]])
+        b.pose[1, :2] = b.pose[0, :2] + off * h + side
+        b.pose[1, 2] = th + [np.pi, np.pi + rng.normal(0, 0.3), rng.uniform(0, 7)][k % 3]
+        got, want = contact_points(b, 0, 1), _contact_points_on_arrays(b, 0, 1)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])

@@ -249,6 +249,11 @@ class Bodies:
         return self._now("wall", lambda: wall_gap(self.pose, self.hl, self.hw, self.arena) if self.arena is not None
                          else np.full(self.n, np.inf))
 
+    def centre_distances(self) -> np.ndarray:
+        """Distance (um) between the centres of every pair ``(I, J)`` now."""
+        P, ii, jj = self.pose, self.I, self.J
+        return self._now("centre", lambda: np.hypot(P[ii, 0] - P[jj, 0], P[ii, 1] - P[jj, 1]))
+
     def within_reach(self) -> np.ndarray:
         """``(n, n)`` bool: body k's centre is within ``reach[i, k]`` of body i's now (the poses a compliance move
         of i could change: :meth:`~.contact.ContactRules.rule_key`)."""

@@ -15,7 +15,6 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from ..collision import point_rectangle_distance
 from ..kinematics import wrap
 from ..robots import angle_difference, body_corners
 from .bodies import (
@@ -34,29 +33,60 @@ from .bodies import (
     SWEEP_UM,
     TOUCH_UM,
     Bodies,
+    Trig,
     depth,
+    depth_one,
     faces_touched,
     heading_of,
     local,
     rotate_about,
     wall_gap,
+    with_trig,
 )
 
 
 def contact_points(b: Bodies, i: int, j: int):
-    """Touching corners: ``(points (k, 2), is_corner_of_i (k,))`` of bodies i and j."""
+    """Touching corners: ``(points (k, 2), is_corner_of_i (k,))`` of bodies i and j.
+
+    In plain floats (:func:`_corners`, :func:`_corner_distances`), bit-identical to
+    :func:`stressbots.robots.body_corners` and :func:`stressbots.collision.point_rectangle_distance`: every
+    docking compliance and head-on test asks this of one pair, where numpy's per-call cost dominates.
+    """
     P = b.pose
-    ci = body_corners(P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
-    cj = body_corners(P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
-    eps = max(TOUCH_UM, 2.0 * b.pair_depth(i, j)) + 1e-9
-    di = point_rectangle_distance(ci, P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
-    dj = point_rectangle_distance(cj, P[i], 2 * b.hl[i], 2 * b.hw[i])[0]
-    pts = np.vstack([ci[di <= eps], cj[dj <= eps]])
-    own = np.concatenate([np.ones(int((di <= eps).sum()), bool), np.zeros(int((dj <= eps).sum()), bool)])
-    if pts.shape[0] == 0:  # degenerate crossing: fall back to the nearest corners
-        pts = np.vstack([ci[[int(np.argmin(di))]], cj[[int(np.argmin(dj))]]])
+    hl, hw = float(b.hl[i]), float(b.hw[i])
+    hlj, hwj = float(b.hl[j]), float(b.hw[j])
+    ti, tj = with_trig([tuple(P[i].tolist()), tuple(P[j].tolist())])
+    ci, cj = _corners(ti, hl, hw), _corners(tj, hlj, hwj)
+    eps = max(TOUCH_UM, 2.0 * depth_one(ti, tj, hl, hw, hlj, hwj)) + 1e-9
+    d = _corner_distances([(ci, tj, hlj, hwj), (cj, ti, hl, hw)])
+    di, dj = d[:4], d[4:]
+    pts = [p for p, dd in zip(ci, di, strict=True) if dd <= eps] + [p for p, dd in zip(cj, dj, strict=True) if dd <= eps]
+    own = np.arange(len(pts)) < sum(dd <= eps for dd in di)
+    if not pts:  # degenerate crossing: fall back to the nearest corners
+        pts = [ci[di.index(min(di))], cj[dj.index(min(dj))]]
         own = np.array([True, False])
-    return pts, own
+    return np.array(pts, dtype=np.float64).reshape(-1, 2), own
+
+
+def _corners(p: Trig, hl: float, hw: float) -> list[tuple[float, float]]:
+    """:func:`stressbots.robots.body_corners` of one body (half sizes ``hl``, ``hw``): front-left,
+    front-right, rear-right, rear-left, with its operations (``c +- hl h +- hw r``, r = (cos, -sin))."""
+    x, y, s, c = p
+    hx, hy, rx, ry = hl * s, hl * c, hw * c, hw * -s
+    return [(x + hx - rx, y + hy - ry), (x + hx + rx, y + hy + ry), (x - hx + rx, y - hy + ry), (x - hx - rx, y - hy - ry)]
+
+
+def _corner_distances(groups) -> list[float]:
+    """Signed distances (um) of points to a body, as :func:`stressbots.collision.point_rectangle_distance`:
+    ``groups`` of ``(points, body pose with trig, hl, hw)``; one ``np.hypot`` call for all."""
+    us, vs = [], []
+    for pts, (x, y, s, c), hl, hw in groups:
+        for px, py in pts:
+            dx, dy = px - x, py - y
+            us.append(abs(dx * s + dy * c) - hl)
+            vs.append(abs(dx * c + dy * -s) - hw)
+    outside = np.hypot(np.maximum(us, 0.0), np.maximum(vs, 0.0)).tolist()
+    return [o + min(max(u, v), 0.0) for o, u, v in zip(outside, us, vs, strict=True)]
 
 
 def front_face(b: Bodies, i: int, j: int, pts):

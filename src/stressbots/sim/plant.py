@@ -308,10 +308,10 @@ class SimulatedPlant:
         """Whether no body can come within :data:`~.bodies.NEAR_UM` of another or of the arena edge in
         ``duration_s`` (bounding circles grown by each body's largest travel)."""
         b = self._bodies
-        P, ii, jj = b.pose, b.I, b.J
+        ii, jj = b.I, b.J
         travel = bound * duration_s
         if ii.size:
-            centre = np.hypot(P[ii, 0] - P[jj, 0], P[ii, 1] - P[jj, 1])
+            centre = b.centre_distances()
             if (centre - b.hd[ii] - b.hd[jj] - travel[ii] - travel[jj] <= NEAR_UM).any():
                 return False
         if b.arena is not None:

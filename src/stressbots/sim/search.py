@@ -27,7 +27,6 @@ from .bodies import (
     SAMPLE_UM,
     TOUCH_UM,
     Bodies,
-    wall_gap,
 )
 
 FREE, HELD, SLIDE = 0, 1, 2
@@ -121,16 +120,17 @@ def drift_poses_one(b: Bodies, drift: HeadingDrift, p0, idx, speed, kappa, tau: 
     return np.array(follow_ends(starts, paths)).reshape(len(paths), 3)
 
 
-def _candidates(b: Bodies, p0, motion: Motion, U: np.ndarray, horizon: float) -> tuple[np.ndarray, np.ndarray]:
+def _candidates(b: Bodies, motion: Motion, U: np.ndarray, horizon: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs ``(ci, cj)`` that could touch within ``horizon`` s (``cj = -1``: the arena edge), given each
-    body's fastest speed ``U`` (um/s): bounding circles grown by their travel."""
+    body's fastest speed ``U`` (um/s): bounding circles grown by their travel, from the poses now (the
+    sub-interval's start; their centre distances and wall gaps are remembered on the bodies)."""
     moving = motion.mode != HELD
     ii, jj = b.I, b.J
     keep = moving[ii] | moving[jj]
     if keep.any():
         ii, jj = ii[keep], jj[keep]
         reach = (U[ii] + U[jj]) * horizon + 1.0
-        centre = np.hypot(p0[ii, 0] - p0[jj, 0], p0[ii, 1] - p0[jj, 1])
+        centre = b.centre_distances()[keep]
         near = centre - b.hd[ii] - b.hd[jj] < reach
         ii, jj = ii[near], jj[near]
         if motion.excluded and ii.size:
@@ -141,7 +141,7 @@ def _candidates(b: Bodies, p0, motion: Motion, U: np.ndarray, horizon: float) ->
     ci, cj = ii, jj
     if b.arena is not None:
         m = np.flatnonzero(moving)
-        g0a = wall_gap(p0[m], b.hl[m], b.hw[m], b.arena)
+        g0a = b.wall_gaps()[m]
         m = m[g0a - U[m] * horizon < 1.0]
         ci = np.concatenate([ci, m])
         cj = np.concatenate([cj, np.full(m.size, ARENA)])
@@ -153,12 +153,14 @@ def first_contact(b: Bodies, drift: HeadingDrift, p0, motion: Motion, ctx: Drive
 
     ``tau_lo`` is the last time (to ~1e-10 um of travel) with no new interpenetration beyond
     :data:`~.bodies.CONTACT_TOL_UM`; ``pairs`` are the candidate pairs that interpenetrate just after it.
+    ``p0`` holds the bodies' poses now (a copy: the plant moves them after the search); the broad phase
+    reads their centre distances and wall gaps from the bodies.
     """
     moving = motion.mode != HELD
     if horizon <= 0.0 or not moving.any():
         return None
     U = np.where(moving, np.where(motion.mode == SLIDE, np.hypot(*motion.slide_v.T), ctx[3]), 0.0)
-    ci, cj = _candidates(b, p0, motion, U, horizon)
+    ci, cj = _candidates(b, motion, U, horizon)
     if ci.size == 0:
         return None
     Uq = U[ci] + np.where(cj >= 0, U[np.maximum(cj, 0)], 0.0)
