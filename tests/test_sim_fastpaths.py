@@ -7,6 +7,7 @@ import pytest
 
 from stressbots.collision import point_rectangle_distance
 from stressbots.generate import LITERATURE_NOISE, random_scenario
+from stressbots.kinematics import follow, move
 from stressbots.robots import body_corners
 from stressbots.sim import SimulatedPlant
 from stressbots.sim.bodies import TOUCH_UM, depth, depth_one, wall_gap, wall_gap_one, with_trig
@@ -14,9 +15,30 @@ from stressbots.sim.compliance import contact_points
 from stressbots.sim.search import drift_poses, drift_poses_one
 
 
+def _drift_poses_on_arrays(b, drift, p0, idx, speed, kappa, taus):
+    """The array form ``drift_poses`` replaced: drift.segments, follow and move on padded arrays."""
+    tmax = float(taus.max())
+    pieces = [drift.segments(int(i), b.odo[i], sp * tmax) for i, sp in zip(idx, speed, strict=False)]
+    k = max(len(p[0]) for p in pieces)
+    lengths = np.zeros((len(pieces), k))
+    kd = np.zeros((len(pieces), k))
+    for r, (ln, kv) in enumerate(pieces):
+        lengths[r, : ln.size] = ln
+        kd[r, : ln.size] = kv
+    curv = kappa[:, None] + kd
+    nodes = follow(p0, lengths, curv)
+    cum = np.concatenate([np.zeros((len(pieces), 1)), np.cumsum(lengths, axis=1)], axis=1)
+    s = np.minimum(speed[None, :] * taus[:, None], cum[None, :, -1])
+    last = np.array([p[0].size - 1 for p in pieces])
+    j = np.minimum((s[..., None] >= cum[None, :, 1:]).sum(axis=-1), last[None, :])
+    rows = np.arange(len(pieces))[None, :]
+    return move(nodes[rows, j], s - cum[rows, j], curv[rows, j])
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_drift_poses_at_one_time_are_the_array_forms_bit_for_bit(seed):
-    """``drift_poses_one`` (plain floats) against ``drift_poses`` asked for the same time twice (arrays)."""
+def test_drift_poses_in_plain_floats_are_the_array_forms_bit_for_bit(seed):
+    """``drift_poses`` (joints in plain floats) and ``drift_poses_one`` (all in plain floats) against the
+    array form, at one time and at many."""
     scn = random_scenario(4, 900 + seed, shape="tee", noise=LITERATURE_NOISE.scaled(3.0))
     plant = SimulatedPlant(scn, seed=seed)
     b, drift = plant._bodies, plant._drift
@@ -28,8 +50,10 @@ def test_drift_poses_at_one_time_are_the_array_forms_bit_for_bit(seed):
         kappa = np.where(rng.random(4) < 0.5, 1.0 / rng.uniform(100.0, 400.0, 4), 0.0)
         tau = float(rng.choice([0.0, 1e-9, rng.uniform(0.0, 2.0)]))
         fast = drift_poses_one(b, drift, b.pose, idx, speed, kappa, tau)
-        slow = drift_poses(b, drift, b.pose, idx, speed, kappa, np.array([tau, tau]))[0]
-        assert np.array_equal(fast, slow)
+        assert np.array_equal(fast, _drift_poses_on_arrays(b, drift, b.pose, idx, speed, kappa, np.array([tau]))[0])
+        taus = np.linspace(0.0, tau, 7)
+        want = _drift_poses_on_arrays(b, drift, b.pose, idx, speed, kappa, taus)
+        assert np.array_equal(drift_poses(b, drift, b.pose, idx, speed, kappa, taus), want)
 
 
 def test_one_pair_depth_and_wall_gap_in_plain_floats_are_the_array_kernels_bit_for_bit():

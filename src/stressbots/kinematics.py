@@ -55,6 +55,8 @@ __all__ = [
     "move",
     "advance",
     "follow",
+    "follow_ends",
+    "follow_joints",
     "poses_along",
     "poses_from_joints",
     "sample_arclengths",
@@ -229,10 +231,17 @@ def follow_ends(starts: list[tuple[float, float, float]], paths: list[list[tuple
     (two to eight robots, a few pieces each), where numpy's per-call overhead on tiny arrays, not the
     arithmetic, is the cost. The headings along a path need no trigonometry, so they are chained first.
     """
+    return [joints[-1] for joints in follow_joints(starts, paths)]
+
+
+def follow_joints(starts: list[tuple[float, float, float]],
+                  paths: list[list[tuple[float, float]]]) -> list[list[tuple[float, float, float]]]:
+    """Every joint of each path (its start, then the pose after each segment), as :func:`follow_ends`."""
     us: list[float] = []
     mids: list[float] = []
-    ends: list[float] = []
+    headings: list[list[float]] = []
     for (_, _, theta), path in zip(starts, paths, strict=True):
+        th = [theta]
         for s, kappa in path:
             turn = kappa * s
             u = math.pi * (turn * (0.5 / math.pi))  # np.sinc's argument times pi
@@ -241,18 +250,21 @@ def follow_ends(starts: list[tuple[float, float, float]], paths: list[list[tuple
             theta = (theta + turn) % TWO_PI
             if theta >= TWO_PI:
                 theta = 0.0
-        ends.append(theta)
+            th.append(theta)
+        headings.append(th)
     m = len(us)
     sines = np.sin(np.array(us + mids)).tolist()
     cosines = np.cos(np.array(mids)).tolist()
     out = []
     q = 0
-    for (x, y, _), path, theta in zip(starts, paths, ends, strict=True):
-        for s, _ in path:
+    for (x, y, _), path, th in zip(starts, paths, headings, strict=True):
+        joints = [(x, y, th[0])]
+        for k, (s, _) in enumerate(path):
             chord = s * (sines[q] / us[q])
             x, y = x + chord * sines[m + q], y + chord * cosines[q]
+            joints.append((x, y, th[k + 1]))
             q += 1
-        out.append((x, y, theta))
+        out.append(joints)
     return out
 
 

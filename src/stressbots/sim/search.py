@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..drift import HeadingDrift
-from ..kinematics import follow, follow_ends, move
+from ..kinematics import follow_ends, follow_joints, move
 from .bodies import (
     ARENA,
     BISECT_UM,
@@ -72,24 +72,27 @@ def poses_at(b: Bodies, drift: HeadingDrift, p0, motion: Motion, ctx: DriveRates
 def drift_poses(b: Bodies, drift: HeadingDrift, p0, idx, speed, kappa, taus) -> np.ndarray:
     """Poses ``(K, m, 3)`` of robots ``idx`` driving freely for ``taus`` s from ``p0`` on their base
     curvature plus the drift's, which is piecewise constant between odometer knots: exact arcs,
-    composed (all robots at once, pieces padded to a common count)."""
+    composed (the joints in plain floats, :func:`~stressbots.kinematics.follow_joints`; then all times
+    at once, pieces padded to a common count)."""
     if taus.size == 1:
         return drift_poses_one(b, drift, p0, idx, speed, kappa, float(taus[0]))[None]
     tmax = float(taus.max())
-    pieces = [drift.segments(int(i), b.odo[i], sp * tmax) for i, sp in zip(idx, speed, strict=False)]
-    k = max(len(p[0]) for p in pieces)
-    lengths = np.zeros((len(pieces), k))
-    kd = np.zeros((len(pieces), k))
+    pieces = [drift.pieces(i, o, sp * tmax) for i, o, sp in zip(idx.tolist(), b.odo[idx].tolist(), speed.tolist(), strict=True)]
+    m, k = len(pieces), max(len(p[0]) for p in pieces)
+    lengths = np.zeros((m, k))
+    kd = np.zeros((m, k))
     for r, (ln, kv) in enumerate(pieces):
-        lengths[r, : ln.size] = ln
-        kd[r, : ln.size] = kv
+        lengths[r, : len(ln)] = ln
+        kd[r, : len(kv)] = kv
     curv = kappa[:, None] + kd
-    nodes = follow(p0, lengths, curv)  # (m, k + 1, 3): the pose at every knot
-    cum = np.concatenate([np.zeros((len(pieces), 1)), np.cumsum(lengths, axis=1)], axis=1)
+    joints = follow_joints([tuple(p) for p in p0.tolist()],
+                           [list(zip(ln, c[: len(ln)], strict=True)) for (ln, _), c in zip(pieces, curv.tolist(), strict=True)])
+    nodes = np.array([jt + jt[-1:] * (k + 1 - len(jt)) for jt in joints])  # (m, k + 1, 3); padding never read
+    cum = np.concatenate([np.zeros((m, 1)), np.cumsum(lengths, axis=1)], axis=1)
     s = np.minimum(speed[None, :] * taus[:, None], cum[None, :, -1])  # (K, m)
-    last = np.array([p[0].size - 1 for p in pieces])  # each robot's own last piece (not the padding)
+    last = np.array([len(p[0]) - 1 for p in pieces])  # each robot's own last piece (not the padding)
     j = np.minimum((s[..., None] >= cum[None, :, 1:]).sum(axis=-1), last[None, :])  # piece each s lies in
-    rows = np.arange(len(pieces))[None, :]
+    rows = np.arange(m)[None, :]
     return move(nodes[rows, j], s - cum[rows, j], curv[rows, j])
 
 
