@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stressbots.estimation import Estimator
-from stressbots.kinematics import advance
+from stressbots.kinematics import advance, move
 
 
 def _camera(rng, poses, pos_sd=2.0, head_sd=math.radians(1.0)):
@@ -89,3 +89,23 @@ def test_exact_model_and_camera_keep_the_estimate_exact(steps):
     assert np.allclose(est.pose[0, :2], truth[0, :2], atol=1e-6)
     assert abs(math.remainder(est.pose[0, 2] - truth[0, 2], 2 * math.pi)) < 1e-9
     assert abs(est.speed[0] - 100.0) < 1e-6 and abs(est.turn_rate[0] - 0.5) < 1e-9
+
+
+def test_predictions_in_plain_floats_are_move_step_after_step_bit_for_bit():
+    """``Estimator.predict`` (plain floats) against ``move`` on the arrays, one step after the other,
+    frozen robots kept, headings wrapped at the end (the array form it replaced)."""
+    rng = np.random.default_rng(8)
+    n = 5
+    est = Estimator(rng.uniform(0, 500, (n, 3)), np.zeros((n, 3)), rng.uniform(50, 150, n), rng.uniform(100, 300, n))
+    for _ in range(100):
+        est.speed = rng.uniform(40, 160, n)
+        est.turn_rate = rng.uniform(0.2, 1.5, n)
+        est.straight_curvature = rng.normal(0, 1e-4, n)
+        steps = [(rng.random(n) < 0.5, float(rng.uniform(0, 2))) for _ in range(int(rng.integers(0, 4)))]
+        frozen = rng.random(n) < 0.3
+        p = est.pose.copy()
+        for turning, d in steps:
+            curvature = np.where(turning, est.turn_rate / est.speed, est.straight_curvature)
+            p = np.where(frozen[:, None], p, move(p, est.speed * d, curvature))
+        p[:, 2] = np.mod(p[:, 2], 2 * np.pi)
+        assert np.array_equal(est.predict(steps, frozen), p)

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from .kinematics import move
+from .kinematics import follow_ends
 from .robots import TWO_PI, angle_difference
 
 __all__ = ["Estimator"]
@@ -138,17 +138,24 @@ class Estimator:
     def predict(self, steps, frozen, start=None) -> np.ndarray:
         """Dead-reckoned poses after ``steps`` = [(turning mask (n,), duration_s), ...] from ``start`` (default the
         estimates); ``frozen`` robots stay."""
-        p = (self.pose if start is None else np.asarray(start, dtype=np.float64)).copy()
-        for turning, d in steps:
-            p = np.where(frozen[:, None], p, self._advance(p, turning, d))
+        p = self._advance(self.pose if start is None else np.asarray(start, dtype=np.float64), steps, frozen)
         p[:, 2] = np.mod(p[:, 2], TWO_PI)
         return p
 
-    def _advance(self, p, turning, d) -> np.ndarray:
-        """``p`` moved for ``d`` s at the identified speeds: turning robots on their identified circles,
-        the others along arcs of :attr:`straight_curvature`."""
-        curvature = np.where(np.asarray(turning, dtype=bool), self.turn_rate / self.speed, self.straight_curvature)
-        return move(p, self.speed * d, curvature)
+    def _advance(self, p, steps, frozen=None) -> np.ndarray:
+        """``p`` (a new array) moved through ``steps`` at the identified speeds, ``frozen`` robots not at all:
+        turning robots on their identified circles, the others along arcs of :attr:`straight_curvature`.
+
+        In plain floats (:func:`~stressbots.kinematics.follow_ends`), bit-identical to :func:`move` step
+        after step on the arrays: the loop predicts a few robots over a few steps several times per
+        step list, where numpy's per-call cost, not the arithmetic, was the time.
+        """
+        speed, circle, straight = self.speed.tolist(), (self.turn_rate / self.speed).tolist(), self.straight_curvature.tolist()
+        turns = [(np.asarray(turning, dtype=bool).tolist(), d) for turning, d in steps]
+        still = [False] * self.n if frozen is None else np.asarray(frozen, dtype=bool).tolist()
+        paths = [[] if still[i] else [(speed[i] * d, circle[i] if t[i] else straight[i]) for t, d in turns]
+                 for i in range(self.n)]
+        return np.array(follow_ends([tuple(r) for r in np.asarray(p, dtype=np.float64).tolist()], paths)).reshape(self.n, 3)
 
     def update(self, steps, frozen, frame, *, tail=None) -> None:
         """Advance through ``steps`` (as in :meth:`predict`) and take the camera ``frame`` (n, 3): blend it into the
@@ -249,9 +256,7 @@ class Estimator:
         # speed: the measured displacement against the one predicted from the last raw frame
         if valid.any():
             start = np.where(valid[:, None], self._last, 0.0)
-            p = start.copy()
-            for turning, d in steps:
-                p = self._advance(p, turning, d)
+            p = self._advance(start, steps)
             dp = p[:, :2] - start[:, :2]
             dm = frame[:, :2] - start[:, :2]
             dp2 = (dp * dp).sum(axis=1)

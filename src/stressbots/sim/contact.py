@@ -228,21 +228,19 @@ class ContactRules:
         ``d0`` of every pair, wall gaps ``g0``), so two robots jostling against each other do not log
         every touch."""
         b = self.b
-        close = np.flatnonzero(d0 > -NEAR_UM)
-        near_pairs = {(int(a), int(c)) for a, c in zip(b.I[close], b.J[close], strict=True)}
-        arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
-
-        def near(a: int, c: int) -> bool:
-            return a in arena_near if c == ARENA else (min(a, c), max(a, c)) in near_pairs
-
         for pair in sorted(outcomes):
             kind, detail = outcomes[pair]
             if self.contacts.get(pair) != kind:
                 b.log(t_abs, pair[0], kind, pair[1], detail)
         memory = {k: v[0] for k, v in outcomes.items()}
-        for pair, kind in self.contacts.items():
-            if pair not in memory and near(*pair):
-                memory[pair] = kind
+        gone = [(pair, kind) for pair, kind in self.contacts.items() if pair not in memory]
+        if gone:  # usually none: the same pairs touch again
+            close = np.flatnonzero(d0 > -NEAR_UM)
+            near_pairs = set(zip(b.I[close].tolist(), b.J[close].tolist(), strict=True))
+            arena_near = set(np.flatnonzero(g0 < NEAR_UM).tolist())
+            for (a, c), kind in gone:
+                if (a in arena_near) if c == ARENA else ((min(a, c), max(a, c)) in near_pairs):
+                    memory[(a, c)] = kind
         self.contacts = memory
 
     def head_on(self, i: int, j: int, straight, speed, approach) -> bool:
