@@ -306,7 +306,7 @@ def _scripted_single(in_funnel: bool, outcome):
     single = run.single
     seen: dict = {"ready": [], "back_off": 0, "line": 0}
 
-    def steer_through(i, k, orbiting, targets, ready, cut_in):
+    def steer_through(i, k, orbiting, targets, ready, cut_in, aim_region=None):
         seen["ready"].append(ready)
         return False
 

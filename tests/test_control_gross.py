@@ -22,8 +22,9 @@ from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control import ControllerOptions, Tuning
 from stressbots.control.escapes import contact_clearance, escape_moves, escape_sweep
 from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_prefix
+from stressbots.control.queries import in_funnel, line_coords, line_pose, waypoint_region
 from stressbots.control.single import SingleDocking
-from stressbots.control.slot_approach import approach_length, lead_in_clear
+from stressbots.control.slot_approach import SlotApproach, approach_length, lead_in_clear
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 
@@ -389,3 +390,73 @@ def test_start_relief_waives_the_docked_clearance_only_within_the_first_loops_re
         assert gross.obstacles_hit(pose[None], 0, [], target=far_target, start=pose) is (not relief)
         assert gross.obstacles_hit(pose[None], 0, [], target=far_target, start=remote_start)
         assert gross.obstacles_hit(pose[None], 0, [], target=far_target)
+
+
+# -- regions instead of points ----------------------------------------------------------------------------
+
+class MisidentifiedRadius(KinematicLoop):
+    """KinematicLoop whose robot really turns on ``factor`` times the radius the controller identified (``r_hat`` = R)."""
+
+    def __init__(self, pose, tune: Tuning, factor: float):
+        super().__init__(pose, tune)
+        self.factor = factor
+
+    def drive(self, steps) -> None:
+        for k, d in steps:
+            s = np.linspace(0.0, V * d, max(2, int(V * d / 5.0) + 1))
+            along = move(self._est[0], s, 1.0 / (R * self.factor) if k == self.turn_k else 0.0)
+            self.trail.extend(along[1:])
+            self._est[0] = along[-1]
+            self.t += d
+
+
+def _to_waypoint(heading: float, factor: float, regions: bool) -> MisidentifiedRadius:
+    target = np.array([1000.0, 1000.0, heading])
+    loop = MisidentifiedRadius(np.array([600.0, 700.0, 0.3]), Tuning(region_targets=regions), factor)
+    GrossMotion(loop).steer(0, target, 1, 0, [], ready=lambda: False, via=False, max_cycles=80,
+                            region=waypoint_region(target, loop.tune))
+    return loop
+
+
+@pytest.mark.parametrize("factor", [0.93, 0.97, 1.05])
+def test_a_waypoint_region_ends_the_circling_of_a_robot_whose_radius_is_misidentified(factor):
+    """A robot turning on a radius 7 % or 3 % smaller or 5 % larger than identified, re-planned every t_x toward a waypoint of
+    every heading: with the waypoint's region it always gets there (arrived by the exact kinematics) within 60 t_x; aimed
+    at the point it circled the waypoint until the cycle cap for some headings (each loop ended a few um on the side
+    that needs another loop)."""
+    headings = np.radians(np.arange(0.0, 360.0, 20.0))
+    with_region = [_to_waypoint(h, factor, True) for h in headings]
+    for loop, h in zip(with_region, headings, strict=True):
+        assert loop.t <= 60.0 and arrived(loop.est[0], np.array([1000.0, 1000.0, h]), loop.tune)
+    assert max(_to_waypoint(h, factor, False).t for h in headings) >= 79.0  # the point alone: capped somewhere
+
+
+def test_a_nominal_waypoint_ends_on_arrival_although_the_final_region_is_not_reached():
+    """A nominal route's waypoint (``via`` True, ``waypoint`` True) with the final aim's ``ready`` test given (never true
+    here): arriving in the waypoint's region ends the steer; without ``waypoint`` only ``ready`` or a last leg run
+    whole would, and a robot 10 um past the waypoint circles it."""
+    target = np.array([1000.0, 1000.0, 0.0])
+    start = target + np.array([0.0, 10.0, 0.0])
+    loop = KinematicLoop(start)
+    assert GrossMotion(loop).steer(0, target, 1, 0, [], ready=lambda: False, waypoint=True, max_cycles=60) is SteerOutcome.ARRIVED
+    assert arrived(loop.est[0], target, loop.tune) and loop.t <= 10.0
+    circling = KinematicLoop(start)
+    GrossMotion(circling).steer(0, target, 1, 0, [], ready=lambda: False, max_cycles=60)
+    assert circling.t > loop.t
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.floats(150.0, 450.0), st.floats(0.0, 2.0 * math.pi), st.floats(150.0, 260.0))
+def test_the_aim_region_lies_in_the_approach_funnel(back, theta, r):
+    """Every goal of a funnel aim's region but the aim itself is in the funnel (:func:`in_funnel`, independent of how
+    the region is built); no funnel (``back`` None): the aim's waypoint region."""
+    tune = Tuning()
+    loop = SimpleNamespace(r_hat=np.array([r]), tune=tune)
+    approach = SlotApproach(loop)
+    goal = np.array([1000.0, 1000.0, theta])
+    a_pose = line_pose(goal, back, 20.0, -math.radians(6.0))
+    region = approach.aim_region(0, goal, back, a_pose)
+    assert region is not None and np.array_equal(region[0], a_pose) and len(region) > 1
+    assert all(in_funnel(*line_coords(goal, g), back, r, tune) for g in region[1:])
+    a_i = approach.aim_region(0, goal, None, a_pose)  # no funnel: a_i's arrival region
+    assert np.array_equal(a_i, waypoint_region(a_pose, tune))

@@ -95,18 +95,22 @@ def test_a_bad_tune_is_one_error_line_and_status_2(capsys):
     assert capsys.readouterr().err.startswith("error: --tune: 'no_such_field'")
 
 
+_POINT_TARGETS = it.Replay("sim", it.tuning_options("region_targets=False"))
+"""The controller aiming gross motion at points, as before waypoint regions: held-out 43:0 at 2x then fails as traced."""
+
+
 def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
-    """``pins`` (held-out layout 43, a comb of three, plant seed 0 at 2x noise: R0 gives up with no path clear; layout
-    10's R0, traced here before, assembles since its waiting orbit is tended through G_1): the watched replay ends
+    """``pins`` (held-out layout 43, a comb of three, plant seed 0 at 2x noise, replayed without the waypoint regions
+    (``Tuning.region_targets``, with which it assembles): R0 gives up with no path clear): the watched replay ends
     exactly as the plain one (observation only), the loop's ``drive`` is restored afterwards, and a robot that ended
     with no clear path was boxed in by some applied step after a pose where it could move on."""
     from stressbots.control.loop import PlantLoop
 
     scn, plan, ps = it._trial("heldout", "43:0", 2.0, "")
-    plain, _ = it._run(scn, plan, ps)
+    plain, _ = it._run(scn, plan, ps, replay=_POINT_TARGETS)
     drive = PlantLoop.drive
     with it._PinWatch(scn.names.index("R0")) as watch:
-        watched, _ = it._run(scn, plan, ps)
+        watched, _ = it._run(scn, plan, ps, replay=_POINT_TARGETS)
     assert PlantLoop.drive is drive
     assert (watched.success, watched.failure, watched.duration_s) == (plain.success, plain.failure, plain.duration_s)
     assert plain.failure and "R0" in plain.failure and "um of its path clear" in plain.failure, (
@@ -115,16 +119,16 @@ def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
 
 
 def test_routes_watch_only_observes_and_names_why_no_route_was_found():
-    """``routes`` on the same trial (held-out 43:0 at 2x): the watched replay ends exactly as the plain one, the gross
-    motion's roadmap search is restored afterwards, and R0's failed searches are explained by the planner's own reason,
-    the arena edge (R0 ends boxed in beside it), re-asked with a random stream of its own."""
+    """``routes`` on the same trial (held-out 43:0 at 2x, without waypoint regions): the watched replay ends exactly as
+    the plain one, the gross motion's roadmap search is restored afterwards, and R0's failed searches are explained by
+    the planner's own reason, the arena edge (R0 ends boxed in beside it), re-asked with a random stream of its own."""
     from stressbots.control.gross import GrossMotion
 
     scn, plan, ps = it._trial("heldout", "43:0", 2.0, "")
-    plain, _ = it._run(scn, plan, ps)
+    plain, _ = it._run(scn, plan, ps, replay=_POINT_TARGETS)
     search = GrossMotion.roadmap_route
     with it._RouteWatch() as watch:
-        watched, _ = it._run(scn, plan, ps)
+        watched, _ = it._run(scn, plan, ps, replay=_POINT_TARGETS)
     assert GrossMotion.roadmap_route is search
     assert (watched.success, watched.failure, watched.duration_s) == (plain.success, plain.failure, plain.duration_s)
     r0 = scn.names.index("R0")

@@ -74,4 +74,5 @@ class DockingLoop(LoopView, Protocol):
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
-              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None) -> SteerOutcome: ...
+              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None,
+              waypoint: bool = False, region: np.ndarray | None = None) -> SteerOutcome: ...

@@ -351,10 +351,12 @@ class _Runner(PlantLoop):
 
     def steer(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], *, extra_discs=(),
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
-              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None) -> SteerOutcome:
+              clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None,
+              waypoint: bool = False, region: np.ndarray | None = None) -> SteerOutcome:
         """Gross motion of robot ``i`` to ``target``; ARRIVED when there (:meth:`stressbots.control.gross.GrossMotion.steer`)."""
         return self.gross.steer(i, target, turn_k, straight_k, orbiting, extra_discs=extra_discs, max_cycles=max_cycles, ready=ready,
-                                via=via, clearance=clearance, ready_if_blocked=ready_if_blocked)
+                                via=via, clearance=clearance, ready_if_blocked=ready_if_blocked, waypoint=waypoint,
+                                region=region)
 
     def interpolated_steps(self, rho_turn: float, duration: float, turn_k: int, straight_k: int):
         """S_2f for ``duration`` s (:func:`~stressbots.control.queries.interpolated_steps`)."""

@@ -32,7 +32,7 @@ from . import docking
 from .docking import DockOutcome, DockView
 from .gross import SteerOutcome
 from .loopview import DockingLoop
-from .queries import line_pose
+from .queries import line_pose, waypoint_region
 from .slot_approach import SlotApproach
 
 __all__ = ["SingleDocking", "SingleLoop", "before_on_route", "way_points"]
@@ -133,7 +133,8 @@ class SingleDocking:
             # missed in place (predicted) inside the funnel: the funnel test would end the gross motion at once for the
             # same miss (held-out 16:0 at 2x), so it drives to the aim itself (a loop back)
             t_attempt, in_place = lp.t, ready is not None and lp.t == missed_at and ready()
-            stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.approach.cut_in, i, k, back))
+            stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.approach.cut_in, i, k, back),
+                                        self.approach.aim_region(i, goal, back, a_pose) if lp.tune.region_aims else None)
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
             # left the robot there) it would miss again, and six attempts ran out at the same instant
@@ -169,9 +170,11 @@ class SingleDocking:
                        f"{lp.events[-1]['detail'] if lp.events else ''})")
 
     def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None,
-                       cut_in: Callable[[], tuple[str, str] | None]) -> bool:
+                       cut_in: Callable[[], tuple[str, str] | None], aim_region: np.ndarray | None = None) -> bool:
         """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
-        its aim; ``cut_in`` ends one whose path is blocked where the fine motion can start,
+        its aim, whose goals ``aim_region`` may replace it: :meth:`~stressbots.control.gross.GrossMotion.steer`; each
+        waypoint its own arrival region, :func:`~stressbots.control.queries.waypoint_region`); ``cut_in`` ends one whose
+        path is blocked where the fine motion can start,
         :meth:`~stressbots.control.slot_approach.SlotApproach.cut_in`); whether one ended stuck (failure region H: the
         rest are skipped, the caller's recovery takes over).
 
@@ -187,7 +190,8 @@ class SingleDocking:
 
         last = len(targets) - 1
         return any(lp.steer(i, tgt, k, k - 1, orbiting, ready=ready,
-                            ready_if_blocked=partial(skip_or_cut_in, tgt) if n < last and lp.tune.skip_blocked_waypoints else cut_in)
+                            ready_if_blocked=partial(skip_or_cut_in, tgt) if n < last and lp.tune.skip_blocked_waypoints else cut_in,
+                            waypoint=n < last, region=waypoint_region(tgt, lp.tune) if n < last else aim_region)
                    is SteerOutcome.STUCK for n, tgt in enumerate(targets))
 
     def _clear_the_way(self, i: int, k: int, goal: np.ndarray, a_pose: np.ndarray, back: float | None) -> None:

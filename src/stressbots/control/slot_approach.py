@@ -24,7 +24,17 @@ from ..robots import TWO_PI, angle_difference
 from . import docking
 from .escapes import loop_poses
 from .loopview import DockingLoop
-from .queries import fine_motion_length, in_corridor, in_funnel, line_coords, line_pose, merge, turn_fraction
+from .queries import (
+    fine_motion_length,
+    in_corridor,
+    in_funnel,
+    line_coords,
+    line_pose,
+    merge,
+    pose_region,
+    turn_fraction,
+    waypoint_region,
+)
 
 __all__ = ["Bodies", "SlotApproach", "approach_length", "approach_start_on_route", "fine_start", "lead_in_clear", "retarget",
            "straight_behind", "tight_starts"]
@@ -249,6 +259,22 @@ class SlotApproach:
         s = np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2)  # a loop sampled every 10 um
         # each loop checked as the gross motion checks its way to the aim
         return next((p for p in poses if not lp.obstacles_hit(move(p, s, 1.0 / r), i, orbiting, target=p)), poses[0])
+
+    def aim_region(self, i: int, goal: np.ndarray, back: float | None, a_pose: np.ndarray) -> np.ndarray:
+        """Goals ``(K, 3)`` robot ``i``'s gross motion may head for instead of its aim ``a_pose`` in the approach funnel of
+        slot ``goal`` (corridor ``back`` um): ``a_pose`` first, then poses 40 and 80 um further back,
+        10 um less to the right, 3 deg either way, those inside the funnel (:func:`~stressbots.control.queries.in_funnel`):
+        never nearer the slot nor further right, where the line approach has less room to merge (goals 40 um nearer and
+        15 um further right gave more docks off the line at 2x). The funnel test ends the gross motion wherever it enters. With
+        no funnel (``back`` None) the aim is the intermediate pose a_i and its region that of a waypoint
+        (:func:`~stressbots.control.queries.waypoint_region`: inside the arrival region the S_2f fine motion starts from)."""
+        lp = self.loop
+        if back is None:
+            return waypoint_region(a_pose, lp.tune)
+        r = float(lp.r_hat[i])
+        region = pose_region(a_pose, (0.0, -40.0, -80.0), (0.0, -10.0), (0.0, math.radians(3.0), -math.radians(3.0)))
+        inside = [k == 0 or in_funnel(*line_coords(goal, g), back, r, lp.tune) for k, g in enumerate(region)]
+        return region[np.asarray(inside)]
 
     def fine_start(self, i: int, goal: np.ndarray, route_phase=None) -> np.ndarray:
         """The intermediate pose a_i of robot ``i`` for slot ``goal`` (:func:`fine_start`, docked bodies as measured).

@@ -253,6 +253,25 @@ class GrossTuning:
     arrive_um: float = 25.0
     arrive_deg: float = 6.0
     """(arrive_um, arrive_deg) A gross-motion target region (the seed's regions instead of points)."""
+    region_targets: bool = True
+    """Whether gross motion aims at a region around a waypoint (nominal route or roadmap) rather than the point
+    (:func:`~stressbots.control.queries.shortest_into`): its arrival region (``waypoint_region_um``,
+    ``waypoint_region_deg``). Held-out 33:1 at 2x circled a nominal waypoint for 57 s and a roadmap one for another
+    57 s, ending each loop 20-35 um on the side that needs one more. Measured (session 22): held-out 1x 299/300 against
+    298, 2x 216/240 against 217 (11 trials gained, 12 lost: noise)."""
+    region_aims: bool = False
+    """Whether it does so for its aim too: poses inside the approach funnel, or a_i's arrival region
+    (:meth:`~stressbots.control.slot_approach.SlotApproach.aim_region`). Off: measured with the waypoint regions
+    (session 22), held-out 1x 299/300 both ways, 2x 213/240 against 216: a robot that no longer loops back enters its
+    funnel where it first touches it, and more of them docked off their line (11 shape errors at 2x against 9)."""
+    region_min_saving_loops: float = 0.5
+    """Loops (2 pi r) a goal of the region must save on the path to the target itself to be taken instead: the region
+    is for a target that needs a loop more than its neighbours, not for shaving um off ordinary paths."""
+    waypoint_region_um: float = 12.0
+    waypoint_region_deg: float = 3.0
+    """(waypoint_region_um, waypoint_region_deg) A waypoint's goals lie this far (um) ahead, behind, left and right of
+    it and turned this far (deg) either way: about half of ``arrive_um`` / ``arrive_deg``, so the errors of the last leg
+    still end inside its arrival region."""
     left_bias_deg: float = 3.0
     """A turn into a long straight is cut short by up to this much (one-way robots correct clockwise)."""
     whole_leg_factor: float = 1.6
