@@ -161,6 +161,23 @@ def test_a_g1_failure_names_a_d_n_boxed_in_against_the_arena_edge():
         assert boxed or note == ""
 
 
+def test_a_g1_failure_names_the_orbit_d_n_is_hemmed_in_by():
+    """PairPhase.overlap_note names the undocked robot whose orbit disc reaches deepest into D_n's and by how much
+    (independent truth: both heading north, so both turning centres lie R east of the robots and are as far apart as
+    the robots); nothing when no disc overlaps, and a docked robot's orbit does not count."""
+    from stressbots.control.pair import PairPhase
+
+    d_n = np.array([1000.0, 1000.0, 0.0])
+    near = d_n + np.array([1.5 * RSTAR, 0.0, 0.0])  # discs 0.5 r* into each other
+    far = d_n + np.array([0.0, 2.5 * RSTAR, 0.0])  # 0.5 r* apart
+    lp = SimpleNamespace(est=np.array([d_n, near, far]), r_hat=np.array([R, R, R]), rstar=np.array([RSTAR] * 3),
+                         docked=np.zeros(3, bool), n=3, scn=SimpleNamespace(names=("R4", "R3", "R0")))
+    note = PairPhase.overlap_note(SimpleNamespace(loop=lp), 0)  # type: ignore[arg-type]
+    assert note == f"R4's orbit lies {0.5 * RSTAR:.0f} um into R3's as measured; "
+    lp.docked[1] = True
+    assert PairPhase.overlap_note(SimpleNamespace(loop=lp), 0) == ""  # type: ignore[arg-type]
+
+
 # -- back_off: a free robot is never driven blindly --------------------------------------------------
 
 class BackOffLoop:

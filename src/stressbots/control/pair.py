@@ -43,6 +43,7 @@ from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
     approach_room,
+    deepest_overlap,
     framed_goals,
     frames_apart,
     meet_distance,
@@ -122,7 +123,21 @@ class PairPhase:
                 return
         if self.meeting.departure.meet_as_they_are(N, M):
             return
-        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); {self.wedge_note(N, M)}{self.boxed_note(N)}last: {last}")
+        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); {self.wedge_note(N, M)}{self.boxed_note(N)}"
+                              f"{self.overlap_note(N)}last: {last}")
+
+    def overlap_note(self, N: int) -> str:
+        """'R4's orbit lies 150 um into R3's as measured; ' when D_n's orbit disc overlaps another undocked robot's
+        (:func:`~stressbots.control.pair_geometry.deepest_overlap`), else '': D_n hemmed in by an orbit it cannot leave
+        (held-out 38:3 at 2x: R4 beside R3, every pair frame and hold refused at 88 s) otherwise ended with the last
+        stage's symptom alone ("found no timed path")."""
+        lp = self.loop
+        others = [j for j in range(lp.n) if j != N and not lp.docked[j]]
+        hit = deepest_overlap(turning_centres(lp.est, lp.r_hat), lp.rstar, N, others)
+        if hit is None:
+            return ""
+        names = lp.scn.names
+        return f"{names[N]}'s orbit lies {hit[1]:.0f} um into {names[hit[0]]}'s as measured; "
 
     def boxed_note(self, N: int) -> str:
         """'R5 is boxed in against the arena edge ...; ' when D_n can neither turn nor drive on for the arena edge (and

@@ -18,8 +18,8 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints
 from .queries import fine_motion_length, pose_on_orbit
 
-__all__ = ["approach_pose", "approach_room", "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart", "pressed_together",
-           "station_centre", "tight_discs"]
+__all__ = ["approach_pose", "approach_room", "deepest_overlap", "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart",
+           "pressed_together", "station_centre", "tight_discs"]
 
 
 def frames_apart(a, b) -> bool:
@@ -68,6 +68,23 @@ def framed_goals(nominal_goals: np.ndarray, L: np.ndarray, N: int, M: int, phi: 
     out = se2.rotate_about(g, junction, phi)
     out[:, :2] += np.array([dx, dy])
     return out
+
+
+def deepest_overlap(centres, rstar, i: int, others) -> tuple[int, float] | None:
+    """``(j, depth_um)``: the robot ``j`` of ``others`` whose orbit disc (``centres`` (n, 2), radii ``rstar`` (n,), um)
+    reaches deepest into robot ``i``'s, and how deep; None when none overlaps it.
+
+    >>> deepest_overlap(np.array([[0.0, 0.0], [300.0, 0.0], [900.0, 0.0]]), np.array([200.0, 200.0, 200.0]), 0, [1, 2])
+    (1, 100.0)
+    """
+    c = np.asarray(centres, float)
+    r = np.asarray(rstar, float)
+    js = np.asarray(list(others), dtype=int)
+    if js.size == 0:
+        return None
+    depth = r[i] + r[js] - np.hypot(*(c[js] - c[i]).T)
+    k = int(np.argmax(depth))
+    return (int(js[k]), float(depth[k])) if depth[k] > 0.0 else None
 
 
 def tight_discs(disc, wall_clearance_um: float, clearance_um: float) -> list:
