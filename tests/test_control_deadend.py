@@ -14,6 +14,7 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -159,6 +160,28 @@ def test_a_g1_failure_names_a_d_n_boxed_in_against_the_arena_edge():
         note = PairPhase.boxed_note(SimpleNamespace(loop=lp), 0)  # type: ignore[arg-type]
         assert (note == "R5 is boxed in against the arena edge (no clockwise turn and straight of it keeps 5 um from it); ") == boxed
         assert boxed or note == ""
+
+
+def test_g1_stops_re_planning_pair_frames_once_d_n_is_boxed_in():
+    """PairPhase.form_round with D_n boxed in against the arena edge (``boxed_note`` non-empty) and a re-plan due: it
+    tries no frame and returns the last reason (held-out 14:0 at 2x re-planned for 200 s of simulated time); with
+    ``Tuning.give_up_boxed_in`` off, or D_n free, it goes on to re-plan (here: reaches the waiting orbits' park)."""
+    from stressbots.control.pair import PairPhase
+
+    class Parked(Exception):
+        pass
+
+    def park_orbits(*_a, **_k):
+        raise Parked
+
+    for give_up, note, stops in ((True, "R1 is boxed in ...; ", True), (False, "R1 is boxed in ...; ", False), (True, "", False)):
+        lp = SimpleNamespace(tune=Tuning(give_up_boxed_in=give_up), park_orbits=park_orbits, n=3)
+        phase = SimpleNamespace(loop=lp, boxed_note=lambda _n, note=note: note)
+        if stops:
+            assert PairPhase.form_round(phase, 1, 0, 300.0, [], "no track", 3) == (False, 0, "no track")  # type: ignore[arg-type]
+        else:
+            with pytest.raises(Parked):
+                PairPhase.form_round(phase, 1, 0, 300.0, [], "no track", 3)  # type: ignore[arg-type]
 
 
 def test_a_g1_failure_names_the_orbit_d_n_is_hemmed_in_by():

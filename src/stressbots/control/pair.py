@@ -114,7 +114,7 @@ class PairPhase:
             self.loop.log("replan", N, f"G_1 planned with room for the later robots' approaches: the structure turned "
                                        f"{math.degrees(phi):.0f} deg and shifted {math.hypot(dx, dy):.0f} um")
         for round_no in range(self.loop.tune.pair_rounds):
-            if round_no > 0 and not self.between_rounds(N, M, D, lower, last):
+            if round_no > 0 and ((self.loop.tune.give_up_boxed_in and self.boxed_note(N)) or not self.between_rounds(N, M, D, lower, last)):
                 break
             done, tried, last = self.form_round(N, M, D, lower, last,
                                                 self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames, first)
@@ -201,6 +201,8 @@ class PairPhase:
         frames tried, last reason)``; the first round starts in the frame ``first`` (:meth:`room_frame`)."""
         tried: list[tuple[float, float, float]] = [first] if not last else []
         for frame_no in range(frames_max):
+            if (frame_no > 0 or last) and self.loop.tune.give_up_boxed_in and self.boxed_note(N):
+                break  # nothing a re-plan does frees it (boxed_note): the pair phase gives up now
             if frame_no > 0 or last:
                 # a re-plan costs the pair its timing anyway: the waiting orbits, untended while G_1 runs (one phase
                 # took 500 s and two orbits drifted into each other), are moved off trouble first

@@ -170,6 +170,12 @@ class PairTuning:
     to body in time, takes over): turning in place, D_n was carried onto a waiting orbit whose body then blocked every
     way out (held-out 20:4 at 1x). Off: it gained that trial and lost 20:1, held-out 2x 90/120 against 89, the
     independent plant 57/60 both (design.md 3.9, session 13)."""
+    give_up_boxed_in: bool = True
+    """Whether G_1 gives up at once, rather than re-planning pair frames, when D_n is boxed in against the arena edge
+    (:meth:`~stressbots.control.pair.PairPhase.boxed_note`: no clockwise turn and straight of it keeps
+    ``viable_clearance_um`` from it): nothing a re-plan does frees a one-way robot there, and held-out 14:0 at 2x spent
+    200 s of simulated time (7.3 s of wall time, 22x the median pair) re-planning transfers and holds after its D_n was
+    boxed in at 3 s."""
     pair_rounds: int = 2
     """Rounds of pair frames G_1 may try (each up to ``pair_frames``); between rounds D_n goes to wait on a free
     orbit (or gets clear of the orbits), so a round plans from new poses. Every frame of a round failed at one
