@@ -303,3 +303,50 @@ def test_a_station_routes_via_orbits_keep_the_extra_margin_from_the_arena_edge()
     assert all(wall(c) >= RSTAR_N + 25.0 + 60.0 - 1e-9 for c in route[:-1])
     near = orbit_route(start, goal, RSTAR_N, centres, radii, ARENA, clearance=25.0)
     assert near is not None and min(wall(c) for c in near[:-1]) < RSTAR_N + 25.0 + 60.0
+
+
+# -- a hold drive keeps D_n's loop ---------------------------------------------------------------------
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(300.0, 700.0), st.floats(-0.3, 0.3))
+def test_a_hold_drive_stops_before_the_t_x_that_loses_d_ns_loop(disc_ahead, heading):
+    """HoldingOrbit.loses_loop on a hand-built loop whose obstacle check is written here (a loop pose whose centre lies
+    inside a disc hits it): D_n heading about north, an orbit disc ahead-right. Independent truth: the loop of
+    radius R_N from a pose is the circle about its turning centre, so it meets the disc exactly when that centre's
+    distance from the disc's centre is within the disc's radius of R_N (up to the 5 deg sampling of the loop)."""
+    from types import SimpleNamespace
+
+    from stressbots import paths as pathlib
+    from stressbots.control.holding import HoldingOrbit
+    from stressbots.robots import Pose
+
+    disc_c, disc_r = np.array([2.0 * R_N, disc_ahead]), 150.0
+
+    def obstacles_hit(samples, i, orbiting, *, extra_discs=(), clearance=0.0):
+        return any(bool((np.hypot(*(samples[:, :2] - c).T) < r).any()) for c, r in extra_discs)
+
+    start = np.array([0.0, 0.0, heading])
+    hold = object.__new__(HoldingOrbit)
+    hold.loop = SimpleNamespace(r_hat=np.array([R_N]), est=np.array([start]), obstacles_hit=obstacles_hit)
+    path = pathlib.Path(Pose(*start), R_N, (("S", 2000.0),))
+    disc = [(disc_c, disc_r)]
+
+    def meets(pose) -> bool:
+        return abs(float(np.hypot(*(turning_centres(np.asarray(pose), R_N) - disc_c).ravel())) - R_N) < disc_r - 5.0
+
+    def clear(pose) -> bool:
+        return abs(float(np.hypot(*(turning_centres(np.asarray(pose), R_N) - disc_c).ravel())) - R_N) > disc_r + 5.0
+
+    for ahead in (0.0, 100.0, 200.0, 300.0, 400.0, 600.0):
+        end = move(start, ahead, 0.0)
+        got = hold.loses_loop(0, path, ahead, [], disc)
+        if not clear(start):
+            continue
+        if meets(end):
+            assert got
+        elif clear(end):
+            assert not got
+    # a D_n whose loop meets the disc already has nothing to lose
+    hold.loop.est = np.array([move(start, disc_ahead - 100.0, 0.0)])
+    if meets(hold.loop.est[0]):
+        assert not hold.loses_loop(0, path, 300.0, [], disc)

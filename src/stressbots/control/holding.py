@@ -18,6 +18,7 @@ import numpy as np
 from .. import paths as pathlib
 from ..collision import arena_gap
 from ..robots import turning_centres
+from .escapes import loop_poses
 from .gross import SteerOutcome, arrived, path_steps
 from .pair_geometry import tight_discs
 from .station import orbit_room
@@ -152,6 +153,8 @@ class HoldingOrbit:
                 return True
             whole = path.length / vN <= tune.whole_leg_factor * self.loop.tx
             steps = path_steps(path, vN, n, n - 1, None if whole else self.loop.tx)
+            if tune.hold_keeps_loop and self.loses_loop(N, path, vN * sum(d for _, d in steps), lower, disc):
+                return True  # it stops while it can still loop: the caller plans from here
             before = self.loop.est[N, :2].copy()
             self.loop.drive(steps)
             moved = float(np.hypot(*(self.loop.est[N, :2] - before)))
@@ -162,6 +165,21 @@ class HoldingOrbit:
             if whole:
                 return True
         return True
+
+    def loses_loop(self, N: int, path: pathlib.Path, ahead_um: float, lower, disc) -> bool:
+        """Whether D_n, whose clockwise loop from where it is keeps off D_{n-1}'s orbit ``disc``, the lower orbits, the
+        structure and the arena edge, would lose that loop ``ahead_um`` along ``path`` (False when it has none now:
+        nothing to lose). A hold drive that stopped where its way was no longer clear had left D_n's own orbit 144 um
+        into D_{n-1}'s, their bodies 61 um apart, and no sequence of primitives got them apart again (held-out 38:3 at
+        2x: G_1 gave up at 88 s)."""
+        r = float(self.loop.r_hat[N])
+
+        def loop_hits(pose) -> bool:
+            return self.loop.obstacles_hit(loop_poses(pose, r), N, lower, extra_discs=disc, clearance=0.0)
+
+        if loop_hits(self.loop.est[N]):
+            return False
+        return loop_hits(np.asarray(path.pose_at(min(ahead_um, path.length)), float))
 
     def way_onto_orbit(self, N: int, hold, clear) -> pathlib.Path:
         """D_n's shortest clear path onto its holding orbit (the orbit through pose ``hold``), at whichever of
