@@ -450,7 +450,7 @@ def test_a_nominal_waypoint_ends_on_arrival_although_the_final_region_is_not_rea
 def test_the_aim_region_lies_in_the_approach_funnel(back, theta, r):
     """Every goal of a funnel aim's region but the aim itself is in the funnel (:func:`in_funnel`, independent of how
     the region is built); no funnel (``back`` None): the aim's waypoint region."""
-    tune = Tuning()
+    tune = Tuning(region_aims=True)
     loop = SimpleNamespace(r_hat=np.array([r]), tune=tune)
     approach = SlotApproach(loop)
     goal = np.array([1000.0, 1000.0, theta])
@@ -459,4 +459,5 @@ def test_the_aim_region_lies_in_the_approach_funnel(back, theta, r):
     assert region is not None and np.array_equal(region[0], a_pose) and len(region) > 1
     assert all(in_funnel(*line_coords(goal, g), back, r, tune) for g in region[1:])
     a_i = approach.aim_region(0, goal, None, a_pose)  # no funnel: a_i's arrival region
-    assert np.array_equal(a_i, waypoint_region(a_pose, tune))
+    assert a_i is not None and np.array_equal(a_i, waypoint_region(a_pose, tune))
+    assert SlotApproach(SimpleNamespace(r_hat=np.array([r]), tune=Tuning())).aim_region(0, goal, back, a_pose) is None  # off

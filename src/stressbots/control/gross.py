@@ -324,25 +324,19 @@ class GrossMotion:
               max_cycles: int = 400, ready: Callable[[], bool] | None = None, via: bool = True,
               clearance: float | None = None, ready_if_blocked: Callable[[], tuple[str, str] | None] | None = None,
               waypoint: bool = False, region: np.ndarray | None = None) -> SteerOutcome:
-        """Gross motion: drive robot ``i`` to ``target`` by replanning every t_x; ARRIVED when there.
+        """Gross motion: drive robot ``i`` to ``target`` (or a goal of ``region``, :meth:`_into`) by replanning every t_x.
 
-        ``region``: goals ``(K, 3)`` around ``target`` (``target`` first) that do as well; each t_x the path heads for one
-        of them instead when that saves a loop (:meth:`_into`).
+        ARRIVED when there. ``ready()`` True ends the gross motion early (the robot is already in the region from which the next step works:
+        the seed's regions A_i instead of a point); so does arriving at a ``waypoint`` of a route (waiting for the final
+        aim's ``ready`` alone, a robot circled a nominal waypoint for 57 s); so does ``ready_if_blocked()`` (``(event,
+        reason)``, logged) when the path to ``target`` is blocked (a wider region the next step also works from, or a
+        waypoint the caller can do without). A blocked path is routed around the obstacles (:meth:`_blocked`); NO_WAY
+        when there is no way (the caller re-plans), STUCK when the robot stalled or has no route and nothing clear to
+        drive (failure region H; see :class:`SteerOutcome`).
 
-        ``ready()`` True ends the gross motion early (the robot is already in the region from which the
-        next step works: the seed's regions A_i instead of a point); so does arriving in ``target``'s region when it is
-        a ``waypoint`` of a route (``ready`` is the final aim's test: waiting for it alone, a robot circled a nominal
-        waypoint for 57 s on held-out 33:1 at 2x, 12 um from it once a loop, its last leg never short enough to run
-        whole); so does ``ready_if_blocked()`` (``(event, reason)``,
-        logged) when the path to ``target`` is blocked (a wider region the next step also works from, or a waypoint
-        the caller can do without). A blocked path is routed around the
-        obstacles (:meth:`_blocked`); NO_WAY when there is no way (the caller re-plans), STUCK when the robot
-        stalled or has no route and nothing clear to drive (failure region H; see :class:`SteerOutcome`).
-
-        Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight
-        points a little left of where it must. Clockwise is the only correction a one-way robot makes
-        cheaply: a turn overdone (speed or radius misidentified, drift) would cost a full loop at the
-        next replan, a turn cut short costs a slight turn.
+        Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight points a little
+        left of where it must. Clockwise is the only correction a one-way robot makes cheaply: a turn overdone (speed or
+        radius misidentified, drift) would cost a full loop at the next replan, a turn cut short costs a slight turn.
         """
         stalls = 0
         escapes = self.loop.tune.escapes_per_steer

@@ -134,7 +134,7 @@ class SingleDocking:
             # same miss (held-out 16:0 at 2x), so it drives to the aim itself (a loop back)
             t_attempt, in_place = lp.t, ready is not None and lp.t == missed_at and ready()
             stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.approach.cut_in, i, k, back),
-                                        self.approach.aim_region(i, goal, back, a_pose) if lp.tune.region_aims else None)
+                                        self.approach.aim_region(i, goal, back, a_pose))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
             # left the robot there) it would miss again, and six attempts ran out at the same instant
@@ -172,11 +172,12 @@ class SingleDocking:
     def _steer_through(self, i: int, k: int, orbiting: Sequence[int], targets, ready: Callable[[], bool] | None,
                        cut_in: Callable[[], tuple[str, str] | None], aim_region: np.ndarray | None = None) -> bool:
         """Gross motion sigma_1 of robot ``i`` (D_k) to each of ``targets`` in turn (waypoints of the nominal route, then
-        its aim, whose goals ``aim_region`` may replace it: :meth:`~stressbots.control.gross.GrossMotion.steer`; each
-        waypoint its own arrival region, :func:`~stressbots.control.queries.waypoint_region`); ``cut_in`` ends one whose
-        path is blocked where the fine motion can start,
-        :meth:`~stressbots.control.slot_approach.SlotApproach.cut_in`); whether one ended stuck (failure region H: the
-        rest are skipped, the caller's recovery takes over).
+        its aim); whether one ended stuck (failure region H: the rest are skipped, the caller's recovery takes over).
+
+        Each waypoint is reached when the robot arrives in its region
+        (:func:`~stressbots.control.queries.waypoint_region`, also the goals its path may head for); the aim's goals are
+        ``aim_region`` (None: the aim itself). ``cut_in`` ends a leg whose path is blocked where the fine motion can
+        start (:meth:`~stressbots.control.slot_approach.SlotApproach.cut_in`).
 
         A waypoint whose path is blocked is dropped (``Tuning.skip_blocked_waypoints``): the nominal route was planned
         around the nominal orbits and structure, and routing to its waypoint around the measured ones led a robot down

@@ -260,15 +260,18 @@ class SlotApproach:
         # each loop checked as the gross motion checks its way to the aim
         return next((p for p in poses if not lp.obstacles_hit(move(p, s, 1.0 / r), i, orbiting, target=p)), poses[0])
 
-    def aim_region(self, i: int, goal: np.ndarray, back: float | None, a_pose: np.ndarray) -> np.ndarray:
+    def aim_region(self, i: int, goal: np.ndarray, back: float | None, a_pose: np.ndarray) -> np.ndarray | None:
         """Goals ``(K, 3)`` robot ``i``'s gross motion may head for instead of its aim ``a_pose`` in the approach funnel of
         slot ``goal`` (corridor ``back`` um): ``a_pose`` first, then poses 40 and 80 um further back,
         10 um less to the right, 3 deg either way, those inside the funnel (:func:`~stressbots.control.queries.in_funnel`):
         never nearer the slot nor further right, where the line approach has less room to merge (goals 40 um nearer and
         15 um further right gave more docks off the line at 2x). The funnel test ends the gross motion wherever it enters. With
         no funnel (``back`` None) the aim is the intermediate pose a_i and its region that of a waypoint
-        (:func:`~stressbots.control.queries.waypoint_region`: inside the arrival region the S_2f fine motion starts from)."""
+        (:func:`~stressbots.control.queries.waypoint_region`: inside the arrival region the S_2f fine motion starts from).
+        None (the aim itself) unless ``Tuning.region_aims``."""
         lp = self.loop
+        if not lp.tune.region_aims:
+            return None
         if back is None:
             return waypoint_region(a_pose, lp.tune)
         r = float(lp.r_hat[i])
