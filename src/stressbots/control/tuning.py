@@ -132,7 +132,7 @@ class PairTuning:
     (:meth:`~stressbots.control.holding.HoldingOrbit.loses_loop`): stopped there, D_n and D_(n-1) were wedged for good
     (held-out 38:3 at 2x, which it fixes). Off: measured in session 22, held-out 1x 299/300 and the tuning set 236/240
     and the independent plant 115/120 identical, held-out 2x 215/240 against 216 (+3:0 +38:3, -20:3 -34:1 -55:1, each
-    loss a different path, none a hold that stopped short): inside the noise, and below the 2x goal's 0.90."""
+    loss a different path, none a hold that stopped short) and on seeds 4-7 218/240 both: inside the noise."""
     hold_frames: int = 120
     """t_x. Longest drive of D_n to a holding orbit (re-planned every t_x): the gross-motion cap it had before."""
     escape_search_frames: int = 12
