@@ -182,16 +182,11 @@ class HeadingDrift:
     def curvature_at(self, odometer) -> np.ndarray:
         """Drift curvature ``(n,)`` (1/um) each robot has at its odometer reading (um): the knot interval
         the robot is in, or about to enter."""
-        if not self.active:
-            return np.zeros(self.n)
-        out = np.empty(self.n)
-        for i in range(self.n):
-            k = int(math.floor(float(odometer[i]) / self.model.knot_um))
-            out[i] = self.bias[i] + self._walk(i, k)[k]
-        return out
+        return np.array([self.curvature_one(i, float(odometer[i])) for i in range(self.n)], dtype=np.float64)
 
     def curvature_one(self, i: int, odometer: float) -> float:
-        """:meth:`curvature_at` of robot i alone (1/um), a plain float: 0.0 without drift."""
+        """The drift curvature of robot i alone (1/um) at its odometer reading (um), a plain float: 0.0 without drift
+        (:meth:`curvature_at` of every robot)."""
         if not self.active:
             return 0.0
         k = int(math.floor(odometer / self.model.knot_um))
@@ -206,19 +201,11 @@ class HeadingDrift:
         return max(abs(bias + k) for k in self._walk(i, k1)[k0 : k1 + 1].tolist())  # plain floats: ~10x faster for a few knots
 
     def max_abs_all(self, odometer, lengths_um) -> np.ndarray:
-        """:meth:`max_abs` of every robot ``(n,)`` (1/um): odometer readings and lengths (um) ``(n,)``.
-
-        The plant asks this at every Drive; written out over plain floats (the same knots and sums as
-        :meth:`max_abs`), it costs a few microseconds per robot.
-        """
+        """:meth:`max_abs` of every robot ``(n,)`` (1/um): odometer readings and lengths (um) ``(n,)``."""
         if not self.active:
             return np.zeros(self.n)
-        out = []
-        for i, (o, s) in enumerate(zip(np.asarray(odometer, float).tolist(), np.asarray(lengths_um, float).tolist(), strict=True)):
-            k0, k1, _ = self._knots(o, s)
-            bias = float(self.bias[i])
-            out.append(max(abs(bias + k) for k in self._walk(i, k1)[k0 : k1 + 1].tolist()))
-        return np.array(out)
+        return np.array([self.max_abs(i, o, s) for i, (o, s) in enumerate(zip(np.asarray(odometer, float).tolist(),
+                                                                            np.asarray(lengths_um, float).tolist(), strict=True))])
 
     def heading_change(self, i: int, o0: float, length_um: float) -> float:
         """Heading drift (rad, clockwise positive) accumulated over odometer ``[o0, o0 + length_um]``."""

@@ -191,17 +191,12 @@ def follow(start, lengths_um, curvatures_per_um) -> np.ndarray:
 
 
 def _follow_one(start: np.ndarray, lengths: np.ndarray, kappas: np.ndarray) -> np.ndarray:
-    """:func:`follow` for one path, in plain floats (:func:`_move_one`): bit-identical joints without
+    """:func:`follow` for one path, in plain floats (:func:`follow_joints`): bit-identical joints without
     numpy's per-call overhead on 0-d arrays (~40 us per segment; a path's joints are composed each time
     it is sampled). Checked against :func:`move` by a Hypothesis property in the tests.
     """
-    out = np.empty((len(lengths) + 1, 3))
-    out[0] = start
     x, y, th = (float(v) for v in start)
-    for k, (s, kappa) in enumerate(zip(lengths.tolist(), kappas.tolist(), strict=True)):
-        x, y, th = _move_one(x, y, th, s, kappa)
-        out[k + 1] = (x, y, th)
-    return out
+    return np.array(follow_joints([(x, y, th)], [list(zip(lengths.tolist(), kappas.tolist(), strict=True))])[0]).reshape(-1, 3)
 
 
 def _move_one(x: float, y: float, theta: float, s: float, kappa: float) -> tuple[float, float, float]:

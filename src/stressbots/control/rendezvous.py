@@ -25,6 +25,7 @@ from .departure import Departure
 from .gross import path_steps
 from .pair_geometry import tight_discs
 from .pairloop import Replan
+from .queries import pose_region
 
 if TYPE_CHECKING:
     from .pair import PairPhase
@@ -58,13 +59,9 @@ def arrival_region(target, v_um_s: float) -> tuple[np.ndarray, np.ndarray, np.nd
     >>> goals.shape, float(penalty[0]), float(offset.max())
     ((100, 3), 0.0, 1.0)
     """
-    q = np.asarray(target, float)
-    hq = np.array([math.sin(q[2]), math.cos(q[2])])
-    rq = np.array([math.cos(q[2]), -math.sin(q[2])])
-    grid = np.meshgrid([0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0]),
-                       indexing="ij")
-    s, e, d = (g.ravel() for g in grid)
-    goals = np.stack([q[0] + s * hq[0] + e * rq[0], q[1] + s * hq[1] + e * rq[1], np.mod(q[2] + d, TWO_PI)], axis=1)
+    along, right, turn = [0.0, -50.0, 50.0, -100.0, 100.0], [0.0, 20.0, -20.0, 40.0], np.radians([0.0, 3.0, -3.0, 6.0, -6.0])
+    goals = pose_region(target, along, right, turn)
+    s, e, d = (g.ravel() for g in np.meshgrid(along, right, turn, indexing="ij"))  # each goal's offsets, in its order
     offset = s / v_um_s  # further along the line: arrive correspondingly later
     penalty = np.abs(s) / 100.0 + np.abs(e) / 40.0 + np.abs(d) / math.radians(6.0)
     return goals, offset, penalty
