@@ -22,7 +22,7 @@ from ..errors import PlanningError
 from ..estimation import Estimator
 from ..robots import orbit_radii
 from ..waveform import Synthesizer
-from .straight_drift import StraightDrift
+from .straight_drift import StraightDrift, StraightDriftSettings
 
 __all__ = ["PlantLoop", "frame_pieces"]
 
@@ -81,7 +81,7 @@ class PlantLoop:
     """
 
     def __init__(self, scenario, plant, *, budget_s: float, who: str, frame_interval_s: float | None = None,
-                 frames_per_step: int = 1):
+                 frames_per_step: int = 1, drift_turn_max_deg: float = 0.0):
         self.scn = scenario
         self.frame_interval_s = frame_interval_s
         self.frames_per_step = int(frames_per_step)
@@ -109,7 +109,8 @@ class PlantLoop:
         nz = scenario.noise
         self.straight_drift = StraightDrift(n, drift_rad_per_um=nz.heading_drift_rad_per_um,
                                             camera_heading_rad=nz.camera_heading_sd_rad,
-                                            camera_position_um=nz.camera_position_sd_um)
+                                            camera_position_um=nz.camera_position_sd_um,
+                                            settings=StraightDriftSettings(max_turn_rad=math.radians(drift_turn_max_deg)))
         self.straight_drift.frame(obs, np.zeros(n, dtype=bool), np.zeros(n))  # the first frame starts no run
         self.trace_t = [0.0]
         self.trace_p = [self.est.copy()]
@@ -168,8 +169,12 @@ class PlantLoop:
             if m < len(pieces) - 1:
                 self.estimator.blend(turning, self.docked.copy(), frame)
         self.estimator.update([(self.rank <= k, d) for k, d in steps], self.docked.copy(), frame, tail=turning)
-        straight = (self.rank > max(k for k, _ in steps)) & ~self.docked
-        self.straight_drift.frame(frame, straight, self.v_hat * total)
+        turn_s = np.zeros(self.n)
+        for k, d in steps:
+            turn_s += np.where(self.rank <= k, d, 0.0)
+        straight_s = np.maximum(total - turn_s, 0.0)
+        # a frame with a short turn counts too, less the turn (StraightDrift's turn-corrected runs)
+        self.straight_drift.frame(frame, ~self.docked, self.v_hat * straight_s, self.estimator.turn_rate * turn_s)
         self.estimator.straight_curvature = self.straight_drift.kappa  # predictions follow the identified drift
         self.t += total
         self.after_drive(steps)

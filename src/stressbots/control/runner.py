@@ -102,7 +102,8 @@ class _Budget(_Abort):
 class _Runner(PlantLoop):
     def __init__(self, scenario, plant, plan_result, opts: ControllerOptions, seed):
         super().__init__(scenario, plant, budget_s=opts.time_budget_s, who="closed-loop assembly",
-                         frame_interval_s=opts.frame_interval_s, frames_per_step=opts.frames_per_step)
+                         frame_interval_s=opts.frame_interval_s, frames_per_step=opts.frames_per_step,
+                         drift_turn_max_deg=opts.tuning.drift_turn_max_deg)
         self.opts = opts
         self.tune = opts.tuning
         self.seed = seed

@@ -28,6 +28,16 @@ Robust to the camera:
   and the bias's own uncertainty) ends the run *before* that frame: a robot pushed or turned by another
   contributes nothing from the contact on. A frame in which it moved less than ``stop_fraction`` of its
   commanded travel (it touched something) does the same.
+
+Frames with a short turn count too (*turn-corrected* runs): gross motion re-plans every t_x, and nearly
+every frame of it starts with a few degrees of turn before its straight (so does a re-aim burst on an
+approach line). Counting only all-straight frames, a robot that waited on its orbit and then steered to its
+slot reached the structure with its bias still at the prior's zero: at twice the literature's noise, robots
+with a bias of 9-11 deg/mm were identified at under 1 deg/mm and docked 20-45 um right of their slots. A
+frame whose turn is at most ``max_turn_rad`` (predicted from the identified turn rate) adds its straight
+travel to the run and its heading change less that turn; the turn rate's own error enters the turn as
+``turn_rel_sd`` of it. The turn rate is identified on the orbit, drift included, so the bias acts only on
+the straight part.
 """
 
 from __future__ import annotations
@@ -62,6 +72,12 @@ class StraightDriftSettings:
         Floors of the camera's noise in the gates (an exact camera still rounds; 0.05 deg, 0.2 um).
     max_bridge_um:
         Longest commanded travel (um) a run may bridge over frames that did not see the robot.
+    max_turn_rad:
+        Largest predicted turn (rad) of a frame that still counts, corrected (6 deg: gross motion's per-t_x
+        corrections and the approach's re-aim bursts, not the arcs of a merge or a loop).
+    turn_rel_sd:
+        Relative error (sd) of a frame's predicted turn: the identified turn rate's (a few % before an orbit is
+        seen) and the per-drive jitter of the radius.
     """
 
     stop_fraction: float = 0.5
@@ -70,6 +86,8 @@ class StraightDriftSettings:
     min_camera_heading_rad: float = math.radians(0.05)
     min_camera_position_um: float = 0.2
     max_bridge_um: float = 400.0
+    max_turn_rad: float = math.radians(6.0)
+    turn_rel_sd: float = 0.05
 
 
 class StraightDrift:
@@ -119,16 +137,19 @@ class StraightDrift:
         self._dth = np.zeros(n)  # unwrapped heading change over the current run (rad)
         self._last = np.full((n, 3), np.nan)  # last raw frame of the current chain
         self._pending = np.zeros(n)  # straight travel since that frame, over unseen frames (um)
+        self._pending_turn = np.zeros(n)  # predicted turn since that frame, over unseen frames (rad)
+        self._turn_var = np.zeros(n)  # variance (rad^2) the current run's corrected turns add to its heading change
 
-    def run_weight(self, s_um) -> np.ndarray:
-        """Inverse variance ((um/rad)^2) of one run's curvature over ``s_um`` of straight drive."""
+    def run_weight(self, s_um, turn_var=0.0) -> np.ndarray:
+        """Inverse variance ((um/rad)^2) of one run's curvature over ``s_um`` of straight drive whose corrected turns
+        add ``turn_var`` (rad^2) to its heading change."""
         s = np.asarray(s_um, dtype=np.float64)
-        with np.errstate(divide="ignore"):
-            var = 2.0 * self.cam_h**2 / s**2 + self.walk_var_per_um / s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            var = (2.0 * self.cam_h**2 + turn_var) / s**2 + self.walk_var_per_um / s
             return np.where(s > 0, 1.0 / var, 0.0)
 
     def _open(self) -> tuple[np.ndarray, np.ndarray]:
-        w = self.run_weight(self._len)
+        w = self.run_weight(self._len, self._turn_var)
         with np.errstate(invalid="ignore", divide="ignore"):
             k = np.where(self._len > 0, self._dth / np.where(self._len > 0, self._len, 1.0), 0.0)
         return w, k
@@ -149,33 +170,38 @@ class StraightDrift:
         w, _ = self._open()
         return 1.0 / np.sqrt(self._den + w)
 
-    def fits(self, last, raw, seg_um, kappa, kappa_sd) -> bool:
+    def fits(self, last, raw, seg_um, kappa, kappa_sd, turn_rad: float = 0.0) -> bool:
         """Whether a robot seen at ``last`` then ``raw`` (raw frames) after ``seg_um`` of commanded straight
-        travel moved like a straight drive of curvature ``kappa`` (rad/um, known to ``kappa_sd``)."""
+        travel and a turn predicted at ``turn_rad`` moved like a straight drive of curvature ``kappa`` (rad/um,
+        known to ``kappa_sd``) that turned so much. Where in the frame the turn fell is not known here: its
+        sideways effect, up to half the turn over the travel, widens the sideways gate."""
         cfg = self.settings
         dth = float(angle_difference(raw[2], last[2]))
-        var_h = 2.0 * self.cam_h**2 + self.walk_var_per_um * seg_um + (kappa_sd * seg_um) ** 2
-        if abs(dth - kappa * seg_um) > cfg.gate_sigmas * math.sqrt(var_h):
+        var_h = (2.0 * self.cam_h**2 + self.walk_var_per_um * seg_um + (kappa_sd * seg_um) ** 2
+                 + (cfg.turn_rel_sd * turn_rad) ** 2)
+        if abs(dth - turn_rad - kappa * seg_um) > cfg.gate_sigmas * math.sqrt(var_h):
             return False
-        mid = last[2] + 0.5 * kappa * seg_um
+        mid = last[2] + 0.5 * (turn_rad + kappa * seg_um)
         dx, dy = raw[0] - last[0], raw[1] - last[1]
         along = dx * math.sin(mid) + dy * math.cos(mid)
         side = dx * math.cos(mid) - dy * math.sin(mid)
         # the start heading's camera error swings the whole displacement; the curvature's error bends it
         var_p = 2.0 * self.cam_p**2 + (self.cam_h * seg_um) ** 2 + (0.5 * kappa_sd * seg_um**2) ** 2
-        var_p += self.walk_var_per_um * seg_um**3 / 3.0
+        var_p += self.walk_var_per_um * seg_um**3 / 3.0 + (0.5 * turn_rad * seg_um) ** 2
         if abs(side) > cfg.gate_sigmas * math.sqrt(var_p):
             return False
         slack = cfg.gate_sigmas * math.sqrt(2.0) * self.cam_p
         return cfg.stop_fraction * seg_um - slack <= along <= (1.0 + cfg.over_fraction) * seg_um + slack
 
-    def frame(self, raw, straight, travel_um) -> None:
+    def frame(self, raw, straight, travel_um, turn_rad=None) -> None:
         """Take the next raw camera ``frame`` (n, 3) (NaN rows unseen) after a drive in which robots with
-        ``straight`` True drove only straight, by ``travel_um`` (commanded, um)."""
+        ``straight`` True drove straight by ``travel_um`` (commanded, um) and turned by ``turn_rad`` (predicted,
+        rad; default none) besides: a frame whose turn exceeds ``max_turn_rad`` ends the run."""
         raw = np.asarray(raw, float)
         seen = ~np.isnan(raw).any(axis=1)
-        straight = np.asarray(straight, bool)
         travel = np.broadcast_to(np.asarray(travel_um, float), (self.n,))
+        turn = np.zeros(self.n) if turn_rad is None else np.broadcast_to(np.asarray(turn_rad, float), (self.n,))
+        straight = np.asarray(straight, bool) & (np.abs(turn) <= self.settings.max_turn_rad)
         kappa, kappa_sd = self.kappa, self.kappa_sd
         for i in range(self.n):
             chain = not np.isnan(self._last[i, 0])
@@ -184,28 +210,37 @@ class StraightDrift:
                 self._restart(i, raw[i] if seen[i] else None)
             elif not seen[i]:
                 self._pending[i] += travel[i]
+                self._pending_turn[i] += turn[i]
                 if self._pending[i] > self.settings.max_bridge_um:
                     self._close(i)
                     self._restart(i, None)
             else:
-                seg = self._pending[i] + travel[i]
-                if chain and self.fits(self._last[i], raw[i], seg, float(kappa[i]), float(kappa_sd[i])):
-                    self._len[i] += seg
-                    self._dth[i] += float(angle_difference(raw[i, 2], self._last[i, 2]))
-                    self._last[i] = raw[i]
-                    self._pending[i] = 0.0
-                else:  # a contact (or no chain): the run ends before this frame, a new chain starts at it
-                    self._close(i)
-                    self._restart(i, raw[i])
+                self._take(i, raw[i], chain, self._pending[i] + travel[i], self._pending_turn[i] + turn[i],
+                           float(kappa[i]), float(kappa_sd[i]))
+
+    def _take(self, i: int, raw, chain: bool, seg: float, turn: float, kappa: float, kappa_sd: float) -> None:
+        """Robot ``i`` seen at ``raw`` after ``seg`` um straight and a predicted ``turn`` (rad) since its last frame."""
+        if chain and self.fits(self._last[i], raw, seg, kappa, kappa_sd, turn):
+            self._len[i] += seg
+            self._dth[i] += float(angle_difference(raw[2], self._last[i, 2])) - turn
+            self._turn_var[i] += (self.settings.turn_rel_sd * turn) ** 2
+            self._last[i] = raw
+            self._pending[i] = 0.0
+            self._pending_turn[i] = 0.0
+        else:  # a contact (or no chain): the run ends before this frame, a new chain starts at it
+            self._close(i)
+            self._restart(i, raw)
 
     def _restart(self, i: int, pose) -> None:
         self._last[i] = np.nan if pose is None else pose
         self._pending[i] = 0.0
+        self._pending_turn[i] = 0.0
 
     def _close(self, i: int) -> None:
         if self._len[i] > 0:
-            w = float(self.run_weight(self._len[i]))
+            w = float(self.run_weight(self._len[i], self._turn_var[i]))
             self._num[i] += w * self._dth[i] / self._len[i]
             self._den[i] += w
         self._len[i] = 0.0
         self._dth[i] = 0.0
+        self._turn_var[i] = 0.0

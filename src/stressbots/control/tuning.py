@@ -443,6 +443,12 @@ class DockingTuning:
     before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then carries it onto the
     slot, one to the left is corrected by a clockwise burst (about half the literature's 3.7 deg/mm: the random part
     of the drift goes either way)."""
+    drift_turn_max_deg: float = 6.0
+    """deg. Frames in which a robot turned at most this much before or after driving straight identify its heading
+    drift's bias too, less the turn (:class:`~stressbots.control.straight_drift.StraightDrift`'s turn-corrected runs;
+    0: all-straight frames only). Gross motion starts nearly every t_x with a short turn, so robots that waited on
+    their orbits reached their slots with the bias unidentified (robots of 9-11 deg/mm, identified under 1, docked
+    20-45 um right of their slots at 2x: the lead of ``lead_drift_deg_per_mm`` assumes it is known)."""
     aim_heading_sigma_deg: float = 0.6
     """The aim also leads left by the docking offset a heading estimate error of this much would cause, ``(behind +
     L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per frame, filtered), and
