@@ -365,10 +365,11 @@ def _scripted_single(in_funnel: bool, outcome):
     return run, single, seen
 
 
-def test_after_a_line_approach_that_missed_in_place_the_gross_motion_drives_to_the_aim():
+def test_after_a_line_approach_that_missed_in_place_the_gross_motion_drives_until_the_approach_takes_it():
     """The line approach predicted its miss and drove nothing: the next attempt's gross motion is not handed the funnel
-    test (which would end it at once, in the same pose, for the same miss: six attempts at one instant), so it drives
-    to the aim itself, a loop back."""
+    test (which would end it at once, in the same pose, for the same miss: six attempts at one instant), nor may it end
+    by arriving in its aim's region (as coarse); it ends where the line approach's own first frame would take the robot
+    (:meth:`SingleDocking.accepts`)."""
     import pytest
 
     from stressbots.control.docking import DockOutcome
@@ -376,8 +377,10 @@ def test_after_a_line_approach_that_missed_in_place_the_gross_motion_drives_to_t
     run, single, seen = _scripted_single(True, DockOutcome.MISSED)
     with pytest.raises(Exception, match="did not dock"):
         single.dock(1, None)
-    assert seen["ready"][0] is not None                 # the first attempt may end in the funnel
-    assert all(r is None for r in seen["ready"][1:])     # after each in-place miss: to the aim itself
+    assert seen["ready"][0] is not None and getattr(seen["ready"][0], "func", None) is None  # the first: the funnel test
+    # after each in-place miss: the approach's acceptance, with the miss count so far
+    i = run.by_rank[1]
+    assert [(r.func, r.args) for r in seen["ready"][1:]] == [(single.accepts, (i, 1, m)) for m in range(1, run.tune.dock_attempts)]
     assert len(seen["ready"]) == run.tune.dock_attempts
 
 

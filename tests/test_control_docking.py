@@ -397,3 +397,48 @@ def test_the_aim_leads_further_left_by_the_extra_walk_sigmas_only_while_a_loop_b
     assert walk1 == pytest.approx(walk_lead_um(behind, 250.0, w, base.aim_walk_sigmas + extra))
     assert lead1 - walk1 == pytest.approx(lead0 - walk0)
     assert lead1 - lead0 == pytest.approx(extra / base.aim_walk_sigmas * walk0)
+
+
+# -- the funnel aim and the line approach agree ------------------------------------------------------------
+
+WALK_2X = 4.0 * 0.5 * (math.radians(3.7) / 1000.0) ** 2 * 1000.0
+"""rad^2 per um: the drift's random walk at twice the literature's noise (half the 1-mm variance, SPEC 6)."""
+
+
+def _looped_back(behind: float, length: float, kappa: float, left_rad: float) -> bool:
+    """Whether the line approach loops back at once (:func:`~stressbots.control.docking.loops_back`) a robot at the funnel
+    aim's place (``behind`` um out, 20 um right of the line) pointing ``left_rad`` left of it, its drift identified as
+    ``kappa``; checked against the policy's own first frame."""
+    from stressbots.control.docking import loops_back
+    from stressbots.control.queries import line_pose
+
+    goal = np.array([1500.0, 1500.0, 0.3])
+    view = DockView(line_pose(goal, behind, 20.0, -left_rad), 150.0, 200.0, 0.75, goal, length, 150.0, kappa, WALK_2X)
+    policy = line_approach(lambda: view, 2, ControllerOptions(), 1.0, loop_blocked=lambda: False, log=lambda *_: None)
+    try:
+        first = next(policy)
+    except StopIteration as stop:
+        first = stop.value
+    verdict = loops_back(view, 2, ControllerOptions(), 1.0, loop_blocked=lambda: False)
+    assert verdict == (first is DockOutcome.MISSED)
+    return verdict
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(150.0, 700.0), st.floats(150.0, 320.0), st.floats(0.0, 14.0))
+def test_a_robot_at_its_funnel_aim_is_never_looped_back(behind, length, kappa_deg_per_mm):
+    """Wherever the gross motion ends exactly at its funnel aim (:func:`~stressbots.control.slot_approach.funnel_aim_left_rad`,
+    the identified clockwise drift up to 14 deg/mm, 2x the literature's walk), the line approach takes the robot from
+    there: a loop back would only return it to the same aim, and six attempts missed in place (held-out 39:3 at 2x)."""
+    from stressbots.control.slot_approach import funnel_aim_left_rad
+
+    kappa = math.radians(kappa_deg_per_mm) / 1000.0
+    left = funnel_aim_left_rad(behind, length, kappa, Tuning().funnel_psi_deg)
+    assert not _looped_back(behind, length, kappa, left)
+
+
+def test_the_plain_six_degree_aim_is_looped_back_under_a_strong_identified_drift():
+    """The check above can fail: with 12 deg/mm identified, the fixed 6 deg aim 450 um out is a pose the line approach
+    loops back from at once."""
+    assert _looped_back(450.0, 250.0, math.radians(12.0) / 1000.0, math.radians(6.0))
+    assert not _looped_back(450.0, 250.0, 0.0, math.radians(6.0))

@@ -114,14 +114,16 @@ def test_a_move_on_whose_first_stop_boxes_the_robot_in_is_not_taken():
 
 # -- arcs in where a loop is blocked ---------------------------------------------------------------------
 
-def docking_loop(pose, goal, blocked: bool, bodies=()):
-    """The least of a closed loop SlotApproach.cut_in / can_arc_in read; ``loop_blocked`` as told."""
+def docking_loop(pose, goal, blocked: bool, bodies=(), kappa: float = 0.0):
+    """The least of a closed loop SlotApproach.cut_in / can_arc_in read; ``loop_blocked`` as told; every robot's identified
+    straight-line drift ``kappa`` (rad/um)."""
     est = np.array([pose, *[b[0] for b in bodies]], float)
     n = len(est)
     lp = SimpleNamespace(
         est=est, goals=np.array([goal] * n, float), r_hat=np.full(n, R), L=np.full(n, L), W=np.full(n, W),
         docked=np.array([False] + [True] * (n - 1)), opts=ControllerOptions(), tune=Tuning(), rstar=np.full(n, RSTAR),
         scn=SimpleNamespace(arena_um=(2000.0, 2000.0)), orbiting_below=lambda _k: [],
+        straight_drift=SimpleNamespace(kappa=np.full(n, kappa)),
     )
     lp.obstacles_hit = GrossMotion(lp).obstacles_hit
     sa = SlotApproach(lp)

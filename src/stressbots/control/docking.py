@@ -38,8 +38,8 @@ from .loopview import Steps
 from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions, Tuning
 
-__all__ = ["DockOutcome", "DockView", "LineFix", "compliant_aim", "contact_offset", "lead_um", "reaim_turn_rad",
-           "stopped_verdict", "line_approach", "settle", "walk_lead_um"]
+__all__ = ["DockOutcome", "DockView", "LineFix", "compliant_aim", "contact_offset", "lead_um", "line_approach", "loops_back",
+           "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
 
 
 
@@ -243,8 +243,9 @@ def aim_lead(view: DockView, behind_um: float, tune: Tuning, loop_blocked: Calla
     (:func:`lead_um`), the docking offset of a heading estimate off by ``Tuning.aim_heading_sigma_deg`` (a burst
     planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left), and
     ``Tuning.aim_walk_sigmas`` of the walk, ``Tuning.blocked_walk_sigmas`` more while ``loop_blocked()`` (a miss to
-    the right is then for good: driven in or trapped)."""
-    kappa = math.degrees(view.drift_rad_per_um) * 1000.0 + tune.lead_drift_deg_per_mm
+    the right is then for good: driven in or trapped). An identified counter-clockwise drift counts as none: aiming
+    right of the slot would bet on it, and what it really does (it carries the robot left) clockwise bursts fix."""
+    kappa = math.degrees(max(view.drift_rad_per_um, 0.0)) * 1000.0 + tune.lead_drift_deg_per_mm
     lead = lead_um(behind_um, view.length_um, kappa, tune.aim_left_um)
     lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind_um, 0.0) + 0.5 * view.length_um)
     sigmas = tune.aim_walk_sigmas + (tune.blocked_walk_sigmas if tune.blocked_walk_sigmas > 0.0 and loop_blocked() else 0.0)
@@ -287,6 +288,19 @@ def line_approach(
     else:
         return DockOutcome.GAVE_UP
     return (yield from settle(see, k, opts, tx))
+
+
+def loops_back(view: DockView, k: int, opts: ControllerOptions, tx: float, *, loop_blocked: Callable[[], bool],
+               attempt: int = 0) -> bool:
+    """Whether :func:`line_approach` started from ``view`` would loop robot ``D_k`` back at once (its first frame: a
+    miss it cannot correct from there). The test the gross motion's end must pass where the approach funnel's bounds
+    are too coarse (after a miss in place)."""
+    policy = line_approach(lambda: view, k, opts, tx, loop_blocked=loop_blocked, log=lambda *_: None, attempt=attempt)
+    try:
+        next(policy)
+    except StopIteration as stop:
+        return stop.value is DockOutcome.MISSED
+    return False
 
 
 def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0,

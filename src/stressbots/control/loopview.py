@@ -19,6 +19,7 @@ from .tuning import ControllerOptions, Tuning
 
 if TYPE_CHECKING:
     from .gross import SteerOutcome
+    from .straight_drift import StraightDrift
 
 __all__ = ["DockingLoop", "LoopView", "Steps"]
 
@@ -59,6 +60,7 @@ class DockingLoop(LoopView, Protocol):
     r: np.ndarray
     goals: np.ndarray
     motion: tuple[float, np.ndarray, np.ndarray] | None
+    straight_drift: StraightDrift
 
     @property
     def omega_hat(self) -> np.ndarray: ...

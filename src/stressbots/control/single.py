@@ -42,7 +42,6 @@ class SingleLoop(DockingLoop, Protocol):
     """What single-robot docking uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
 
     events: list[dict]
-    straight_drift: Any
     t: float
     """Simulated time (s) of the latest frame."""
 
@@ -131,9 +130,12 @@ class SingleDocking:
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
             # missed in place (predicted) inside the funnel: the funnel test would end the gross motion at once for the
-            # same miss (held-out 16:0 at 2x), so it drives to the aim itself (a loop back)
+            # same miss (held-out 16:0 at 2x), and so would arriving in the aim's region (25 um, 6 deg: 60 um of docking
+            # offset 450 um out; six attempts ran out at one instant, held-out 13:3 at 2x). So it steers to the aim
+            # until the line approach takes it (a loop back, ended by the approach's own test)
             t_attempt, in_place = lp.t, ready is not None and lp.t == missed_at and ready()
-            stuck = self._steer_through(i, k, orbiting, targets, None if in_place else ready, partial(self.approach.cut_in, i, k, back),
+            steer_ready = partial(self.accepts, i, k, misses) if in_place else ready
+            stuck = self._steer_through(i, k, orbiting, targets, steer_ready, partial(self.approach.cut_in, i, k, back),
                                         self.approach.aim_region(i, goal, back, a_pose))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
@@ -228,11 +230,20 @@ class SingleDocking:
     def line_approach(self, i: int, k: int, attempt: int = 0) -> DockOutcome:
         """Fine motion along the approach line (:func:`stressbots.control.docking.line_approach`)."""
         lp = self.loop
-        outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, lp.opts, lp.tx,
-                                                  loop_blocked=lambda: self.approach.loop_blocked(i, k, lp.tune.loop_back_clearance_um),
+        outcome = self.play(docking.line_approach(lambda: self.dock_view(i), k, lp.opts, lp.tx, loop_blocked=self._loop_blocked(i, k),
                                                   log=lambda kind, detail: lp.log(kind, i, f"{lp.scn.names[i]} {detail}"),
                                                   attempt=attempt))
         return self.dock_verdict(i, outcome)
+
+    def _loop_blocked(self, i: int, k: int) -> Callable[[], bool]:
+        """Whether a loop back of robot ``i`` (D_k) from where it is would meet the structure, a lower orbit or the edge."""
+        return lambda: self.approach.loop_blocked(i, k, self.loop.tune.loop_back_clearance_um)
+
+    def accepts(self, i: int, k: int, attempt: int = 0) -> bool:
+        """Whether the line approach of robot ``i`` (D_k) takes it from where it is (its first frame would not loop it
+        back: :func:`~stressbots.control.docking.loops_back`)."""
+        lp = self.loop
+        return not docking.loops_back(self.dock_view(i), k, lp.opts, lp.tx, loop_blocked=self._loop_blocked(i, k), attempt=attempt)
 
     def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
         """Record a docking outcome: docked robots join the structure; the others are logged."""

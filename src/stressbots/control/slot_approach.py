@@ -36,8 +36,8 @@ from .queries import (
     waypoint_region,
 )
 
-__all__ = ["Bodies", "SlotApproach", "approach_length", "approach_start_on_route", "fine_start", "lead_in_clear", "retarget",
-           "straight_behind", "tight_starts"]
+__all__ = ["Bodies", "SlotApproach", "approach_length", "approach_start_on_route", "fine_start", "funnel_aim_left_rad", "lead_in_clear",
+           "retarget", "straight_behind", "tight_starts"]
 
 
 Bodies = tuple[np.ndarray, np.ndarray, np.ndarray]
@@ -192,6 +192,26 @@ def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, le
     return False
 
 
+def funnel_aim_left_rad(behind_um: float, length_um: float, kappa_rad_per_um: float, funnel_psi_deg: float) -> float:
+    """How far left of its approach line (rad) a robot's funnel aim ``behind_um`` um behind its slot points: 6 deg, and
+    more by the turn that undoes the offset an identified clockwise drift ``kappa_rad_per_um`` adds on the way in
+    (:func:`~stressbots.control.docking.lead_um`, the line approach's own lead, over the lever ``behind + L/2``), at most
+    1 deg short of the funnel's ``funnel_psi_deg``.
+
+    The line approach leads left by that offset; an aim that did not would be a pose it loops back from at once, and
+    the loop back to the aim ends where it starts (with a 9 deg/mm bias identified, six attempts missed in place,
+    held-out 39:3 at 2x). A counter-clockwise drift needs nothing: it carries the robot left, which bursts fix.
+
+    >>> round(math.degrees(funnel_aim_left_rad(450.0, 250.0, 0.0, 12.0)), 6)
+    6.0
+    >>> round(math.degrees(funnel_aim_left_rad(450.0, 250.0, math.radians(9.0) / 1000.0, 12.0)), 2)   # 9 deg/mm
+    8.47
+    """
+    lead = docking.lead_um(behind_um, length_um, math.degrees(max(kappa_rad_per_um, 0.0)) * 1000.0, 0.0)
+    turn = math.radians(6.0) + lead / (max(behind_um, 0.0) + 0.5 * length_um)
+    return min(turn, math.radians(funnel_psi_deg - 1.0))
+
+
 def retarget(pose: np.ndarray, motion: tuple[float, np.ndarray, np.ndarray] | None) -> np.ndarray:
     """A nominal pose moved by the rigid ``motion`` ``(phi_rad, c_nom, c_meas)`` the structure took when G_1
     formed (rotation by ``phi`` about ``c_nom``, then ``c_nom`` to ``c_meas``, um); unchanged when None."""
@@ -255,10 +275,16 @@ class SlotApproach:
         cost as many trials as the loops saved."""
         lp = self.loop
         extra, r = lp.tune.aim_behind_extra_um, float(lp.r_hat[i])
-        poses = [line_pose(goal, b, 20.0, -math.radians(6.0)) for b in (back, back + 0.5 * extra, back + extra)]
+        poses = [line_pose(goal, b, 20.0, -self.aim_left_rad(i, b)) for b in (back, back + 0.5 * extra, back + extra)]
         s = np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2)  # a loop sampled every 10 um
         # each loop checked as the gross motion checks its way to the aim
         return next((p for p in poses if not lp.obstacles_hit(move(p, s, 1.0 / r), i, orbiting, target=p)), poses[0])
+
+    def aim_left_rad(self, i: int, behind_um: float) -> float:
+        """How far left of its approach line (rad) robot ``i``'s funnel aim ``behind_um`` um behind its slot points
+        (:func:`funnel_aim_left_rad` with its identified straight-line drift)."""
+        lp = self.loop
+        return funnel_aim_left_rad(behind_um, float(lp.L[i]), float(lp.straight_drift.kappa[i]), lp.tune.funnel_psi_deg)
 
     def aim_region(self, i: int, goal: np.ndarray, back: float | None, a_pose: np.ndarray) -> np.ndarray | None:
         """Goals ``(K, 3)`` robot ``i``'s gross motion may head for instead of its aim ``a_pose`` in the approach funnel of
