@@ -410,9 +410,9 @@ class MisidentifiedRadius(KinematicLoop):
             self.t += d
 
 
-def _to_waypoint(heading: float, factor: float, regions: bool) -> MisidentifiedRadius:
+def _to_waypoint(heading: float, factor: float, regions: bool, widen: float = 0.0) -> MisidentifiedRadius:
     target = np.array([1000.0, 1000.0, heading])
-    loop = MisidentifiedRadius(np.array([600.0, 700.0, 0.3]), Tuning(region_targets=regions), factor)
+    loop = MisidentifiedRadius(np.array([600.0, 700.0, 0.3]), Tuning(region_targets=regions, circling_widen=widen), factor)
     GrossMotion(loop).steer(0, target, 1, 0, [], ready=lambda: False, via=False, max_cycles=80,
                             region=waypoint_region(target, loop.tune))
     return loop
@@ -429,6 +429,22 @@ def test_a_waypoint_region_ends_the_circling_of_a_robot_whose_radius_is_misident
     for loop, h in zip(with_region, headings, strict=True):
         assert loop.t <= 60.0 and arrived(loop.est[0], np.array([1000.0, 1000.0, h]), loop.tune)
     assert max(_to_waypoint(h, factor, False).t for h in headings) >= 79.0  # the point alone: capped somewhere
+
+
+@pytest.mark.parametrize("factor", [0.93, 0.97, 1.05])
+def test_a_waypoint_missed_loop_after_loop_is_reached_once_its_arrival_region_widens(factor):
+    """The same robots aimed at the point alone (no waypoint region) but with ``Tuning.circling_widen``: each loop spent
+    on the waypoint widens its arrival region by ``arrive_um`` / ``arrive_deg`` (:func:`circling_scale`), so every
+    heading is reached, within the widened region as checked here by the exact kinematics, well before the cycle cap
+    that the fixed region runs into."""
+    from stressbots.control.gross import circling_scale
+
+    for h in np.radians(np.arange(0.0, 360.0, 20.0)):
+        loop = _to_waypoint(h, factor, False, widen=1.0)
+        period = 2.0 * math.pi * R / V
+        scale = circling_scale(loop.t, period, 1.0)
+        assert loop.t < 79.0 and scale <= 4.0
+        assert arrived(loop.est[0], np.array([1000.0, 1000.0, h]), loop.tune, scale)
 
 
 def test_a_nominal_waypoint_ends_on_arrival_although_the_final_region_is_not_reached():

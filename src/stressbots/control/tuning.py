@@ -276,6 +276,12 @@ class GrossTuning:
     (:meth:`~stressbots.control.slot_approach.SlotApproach.aim_region`). Off: measured with the waypoint regions
     (session 22), held-out 1x 299/300 both ways, 2x 213/240 against 216: a robot that no longer loops back enters its
     funnel where it first touches it, and more of them docked off their line (11 shape errors at 2x against 9)."""
+    circling_widen: float = 0.0
+    """A route waypoint's arrival region (``arrive_um``, ``arrive_deg``) grows by this much of itself for every whole loop
+    spent steering to it (:func:`~stressbots.control.gross.circling_scale`; 0: never): a waypoint nearly on the robot's
+    turning circle is missed by a few degrees a loop, every loop (tuning 90:0 with the drift identified: four loops round
+    one waypoint, then boxed in against the arena edge; at 1 it assembles). Measured at 1 (session 23, drift
+    identification off): held-out 1x 299/300 (identical), 2x 213/240 against 216 (13 shape errors against 9): off."""
     region_min_saving_loops: float = 0.5
     """Loops (2 pi r) a goal of the region must save on the path to the target itself to be taken instead: the region
     is for a target that needs a loop more than its neighbours, not for shaving um off ordinary paths."""
@@ -443,12 +449,14 @@ class DockingTuning:
     before it docks (:func:`~stressbots.control.docking.lead_um`): a drift to the right then carries it onto the
     slot, one to the left is corrected by a clockwise burst (about half the literature's 3.7 deg/mm: the random part
     of the drift goes either way)."""
-    drift_turn_max_deg: float = 6.0
+    drift_turn_max_deg: float = 0.0
     """deg. Frames in which a robot turned at most this much before or after driving straight identify its heading
     drift's bias too, less the turn (:class:`~stressbots.control.straight_drift.StraightDrift`'s turn-corrected runs;
     0: all-straight frames only). Gross motion starts nearly every t_x with a short turn, so robots that waited on
-    their orbits reached their slots with the bias unidentified (robots of 9-11 deg/mm, identified under 1, docked
-    20-45 um right of their slots at 2x: the lead of ``lead_drift_deg_per_mm`` assumes it is known)."""
+    their orbits reached their slots with the bias unidentified (robots of 9-11 deg/mm identified under 1 docked 20-45
+    um right of their slots at 2x). At 6 the bias is identified (18:1's 9.0 deg/mm as 9.2) and the shape error's median
+    falls 5 % at 2x, but the success rates did not follow: held-out 2x 433/480 against 434 (seeds 0-7), 1x 298/300
+    against 299, the tuning set 234/240 against 236, the independent plant 112/120 against 115 (session 23): off."""
     aim_heading_sigma_deg: float = 0.6
     """The aim also leads left by the docking offset a heading estimate error of this much would cause, ``(behind +
     L/2) sigma``: far out, a re-aim burst overshoots by about that much (camera: 1 deg per frame, filtered), and
