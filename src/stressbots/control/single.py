@@ -129,13 +129,11 @@ class SingleDocking:
             goal, back, a_pose, ready = self.approach.aim(i, attempt, route_phase, orbiting)
             lp.unblock_orbits(k, i, way_points(goal, a_pose, back, float(lp.r_hat[i])))
             targets = [w for w in waypoints[:-1] if before_on_route(w, a_pose, route_phase, lp.r[i])] + [a_pose]
-            # missed in place (predicted) inside the funnel: the funnel test would end the gross motion at once for the
-            # same miss (held-out 16:0 at 2x), and so would arriving in the aim's region (25 um, 6 deg: 60 um of docking
-            # offset 450 um out; six attempts ran out at one instant, held-out 13:3 at 2x). So it steers to the aim
-            # until the line approach takes it (a loop back, ended by the approach's own test)
+            # missed in place inside the funnel: the funnel test (16:0) or arriving in the aim's region (13:3, 2x) would end
+            # the gross motion at once for the same miss, so it ends where the line approach takes the robot (accepts)
             t_attempt, in_place = lp.t, ready is not None and lp.t == missed_at and ready()
-            steer_ready = partial(self.accepts, i, k, misses) if in_place else ready
-            stuck = self._steer_through(i, k, orbiting, targets, steer_ready, partial(self.approach.cut_in, i, k, back),
+            stuck = self._steer_through(i, k, orbiting, targets, partial(self.accepts, i, k, misses) if in_place else ready,
+                                        partial(self.approach.cut_in, i, k, back),
                                         self.approach.aim_region(i, goal, back, a_pose))
             waypoints = []
             # the corridor shortcut only from somewhere new: from where a line approach just missed (a blocked loop back
