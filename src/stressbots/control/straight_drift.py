@@ -37,7 +37,9 @@ with a bias of 9-11 deg/mm were identified at under 1 deg/mm and docked 20-45 um
 frame whose turn is at most ``max_turn_rad`` (predicted from the identified turn rate) adds its straight
 travel to the run and its heading change less that turn; the turn rate's own error enters the turn as
 ``turn_rel_sd`` of it. The turn rate is identified on the orbit, drift included, so the bias acts only on
-the straight part.
+the straight part. The closed loop counts such frames only with ``Tuning.drift_turn_max_deg`` above 0 (off:
+measured, the success rates did not follow the identification; :class:`StraightDriftSettings` itself defaults to
+6 deg for direct use).
 """
 
 from __future__ import annotations
