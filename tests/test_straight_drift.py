@@ -12,7 +12,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stressbots.control.straight_drift import StraightDrift
+from stressbots.control.straight_drift import StraightDrift, StraightDriftSettings
 from stressbots.estimation import Estimator
 from stressbots.kinematics import move
 
@@ -21,8 +21,9 @@ CAM_H, CAM_P = math.radians(1.0), 2.0
 
 
 def _ident(n=1, scale=1.0):
+    """Turn-corrected runs on (frames turning up to 6 deg count); all-straight frames are unaffected by that."""
     return StraightDrift(n, drift_rad_per_um=SIGMA * scale, camera_heading_rad=CAM_H * scale,
-                         camera_position_um=CAM_P * scale)
+                         camera_position_um=CAM_P * scale, settings=StraightDriftSettings(max_turn_rad=math.radians(6.0)))
 
 
 def _drive(d, p, kappa, frames, step_um, rng=None, scale=1.0, dropout=0.0):

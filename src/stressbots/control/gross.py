@@ -400,9 +400,10 @@ class GrossMotion:
         """Whether robot ``i`` is in ``target``'s arrival region (:func:`arrived`), on a route's leg widened for every loop
         spent on it since ``t0`` (:func:`circling_scale`)."""
         lp = self.loop
+        if not leg_of_route or lp.tune.circling_widen <= 0.0:
+            return arrived(lp.est[i], target, lp.tune)
         period = TWO_PI * float(lp.r_hat[i]) / float(lp.v_hat[i])
-        scale = circling_scale(lp.t - t0, period, lp.tune.circling_widen) if leg_of_route else 1.0
-        return arrived(lp.est[i], target, lp.tune, scale)
+        return arrived(lp.est[i], target, lp.tune, circling_scale(lp.t - t0, period, lp.tune.circling_widen))
 
     def _into(self, i: int, target: np.ndarray, region: np.ndarray | None) -> pathlib.Path:
         """Robot ``i``'s shortest path from its measured pose to ``target``, or to the goal of ``region`` that saves

@@ -37,9 +37,8 @@ with a bias of 9-11 deg/mm were identified at under 1 deg/mm and docked 20-45 um
 frame whose turn is at most ``max_turn_rad`` (predicted from the identified turn rate) adds its straight
 travel to the run and its heading change less that turn; the turn rate's own error enters the turn as
 ``turn_rel_sd`` of it. The turn rate is identified on the orbit, drift included, so the bias acts only on
-the straight part. The closed loop counts such frames only with ``Tuning.drift_turn_max_deg`` above 0 (off:
-measured, the success rates did not follow the identification; :class:`StraightDriftSettings` itself defaults to
-6 deg for direct use).
+the straight part. Off unless ``max_turn_rad`` is set (the closed loop's ``Tuning.drift_turn_max_deg``, 0:
+measured, the success rates did not follow the identification).
 """
 
 from __future__ import annotations
@@ -75,8 +74,8 @@ class StraightDriftSettings:
     max_bridge_um:
         Longest commanded travel (um) a run may bridge over frames that did not see the robot.
     max_turn_rad:
-        Largest predicted turn (rad) of a frame that still counts, corrected (6 deg: gross motion's per-t_x
-        corrections and the approach's re-aim bursts, not the arcs of a merge or a loop).
+        Largest predicted turn (rad) of a frame that still counts, corrected (0: all-straight frames only; 6 deg takes
+        gross motion's per-t_x corrections and the approach's re-aim bursts, not the arcs of a merge or a loop).
     turn_rel_sd:
         Relative error (sd) of a frame's predicted turn: the identified turn rate's (a few % before an orbit is
         seen) and the per-drive jitter of the radius.
@@ -88,7 +87,7 @@ class StraightDriftSettings:
     min_camera_heading_rad: float = math.radians(0.05)
     min_camera_position_um: float = 0.2
     max_bridge_um: float = 400.0
-    max_turn_rad: float = math.radians(6.0)
+    max_turn_rad: float = 0.0
     turn_rel_sd: float = 0.05
 
 
