@@ -25,6 +25,7 @@ from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_p
 from stressbots.control.queries import in_funnel, line_coords, line_pose, waypoint_region
 from stressbots.control.single import SingleDocking
 from stressbots.control.slot_approach import SlotApproach, approach_length, lead_in_clear
+from stressbots.control.straight_drift import StraightDrift
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 
@@ -96,6 +97,11 @@ def test_lead_in_falls_back_to_the_longest_clear_corridor_when_none_is_reachable
 
 # -- gross motion through a kinematic loop ------------------------------------------------------------
 
+def _no_drift(n: int) -> StraightDrift:
+    """A straight-drift identification of ``n`` robots that knows of no drift (its curvatures are all 0)."""
+    return StraightDrift(n, drift_rad_per_um=0.0, camera_heading_rad=0.0, camera_position_um=0.0)
+
+
 class KinematicLoop:
     """A closed loop for one free robot (index 0) with exact kinematics: turns under ``turn_k``, straight
     otherwise, camera = truth. Records every pose the robot passes (``trail``) and the events."""
@@ -113,6 +119,7 @@ class KinematicLoop:
         self._est = np.array([pose], float)
         self.trail = [self._est[0].copy()]
         self.events: list[tuple[str, str]] = []
+        self.straight_drift = _no_drift(1)
 
     @property
     def est(self) -> np.ndarray:
@@ -274,6 +281,7 @@ class BesideTheStructure(KinematicLoop):
         self.docked = np.array([False, True])
         self._est = np.array([pose, docked_pose], float)
         self.scn = SimpleNamespace(arena_um=ARENA, names=("R0", "R1"))
+        self.straight_drift = _no_drift(2)
 
 
 def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was_planned_with():
@@ -477,3 +485,88 @@ def test_the_aim_region_lies_in_the_approach_funnel(back, theta, r):
     a_i = approach.aim_region(0, goal, None, a_pose)  # no funnel: a_i's arrival region
     assert a_i is not None and np.array_equal(a_i, waypoint_region(a_pose, tune))
     assert SlotApproach(SimpleNamespace(r_hat=np.array([r]), tune=Tuning())).aim_region(0, goal, back, a_pose) is None  # off
+
+
+# -- the straight's heading under heading noise ----------------------------------------------------------
+
+class NoisyHeading(KinematicLoop):
+    """KinematicLoop whose estimate (what the controller sees) is the true pose with its heading off by a fresh
+    Gaussian error of ``sd_deg`` after every drive (seeded); ``truth`` is the pose the robot really has."""
+
+    def __init__(self, pose, tune: Tuning, sd_deg: float, seed: int):
+        super().__init__(pose, tune)
+        self.truth = self._est.copy()
+        self.sd = math.radians(sd_deg)
+        self.rng = np.random.default_rng(seed)
+        self.turned = 0.0  # rad the robot really turned
+
+    def drive(self, steps) -> None:
+        for k, d in steps:
+            s = np.linspace(0.0, V * d, max(2, int(V * d / 5.0) + 1))
+            along = move(self.truth[0], s, 1.0 / R if k == self.turn_k else 0.0)
+            self.trail.extend(along[1:])
+            self.truth[0] = along[-1]
+            self.turned += V * d / R if k == self.turn_k else 0.0
+            self.t += d
+        self._est[0] = self.truth[0] + np.array([0.0, 0.0, self.rng.normal(0.0, self.sd)])
+
+
+def _hovering_start(turn_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """A start and a target whose shortest path is a clockwise turn of ``turn_deg`` into a 1500 um straight, then a
+    40 deg turn (a route's waypoint, say)."""
+    start = np.array([200.0, 150.0, math.radians(20.0)])
+    path = pathlib.Path(Pose(*start), R, (("R", R * math.radians(turn_deg)), ("S", 1500.0), ("R", R * math.radians(40.0))))
+    return start, np.array(path.end)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0.3, 2.9))
+def test_a_turn_within_the_left_bias_is_held_and_keeps_the_robot_anticlockwise_of_its_straight(turn_deg):
+    """With ``left_bias_hold`` a turn into a long straight smaller than ``left_bias_deg`` is not driven: one t_x later
+    the robot has its heading still (exact kinematics) and its shortest path starts with a slight turn, not a loop.
+    Without it half the turn is driven, and the margin left is half of what it was."""
+    start, target = _hovering_start(turn_deg)
+    for hold, turned in ((True, 0.0), (False, 0.5 * math.radians(turn_deg))):
+        loop = KinematicLoop(start, Tuning(left_bias_hold=hold))
+        GrossMotion(loop).steer(0, target, 1, 0, [], max_cycles=1)
+        assert loop.est[0, 2] - start[2] == pytest.approx(turned, abs=1e-6)
+        first = pathlib.shortest_path(loop.est[0], target, R).segments[0]
+        assert first[0] == "R" and first[1] < R * math.radians(6.0)  # anticlockwise of its straight: a slight turn, no loop
+
+
+def test_under_heading_noise_a_held_robot_keeps_its_margin_and_never_loops():
+    """Twenty robots 2.5 deg anticlockwise of a 1500 um straight, steered with 0.5 deg heading noise per frame (about the
+    filtered estimate's error at the literature's noise). Without the hold every one turns a full loop on the way (the
+    truth's turning, from the exact kinematics): halving the last turns converges on the straight's heading and a frame
+    past it re-plans a loop. With the hold none does, and they take less than half the time."""
+    def runs(tune: Tuning) -> tuple[int, float, int]:
+        looped, took, there = 0, 0.0, 0
+        for seed in range(20):
+            start, target = _hovering_start(2.5)
+            loop = NoisyHeading(start, tune, 0.5, seed)
+            there += GrossMotion(loop).steer(0, target, 1, 0, [], max_cycles=60) is SteerOutcome.ARRIVED
+            looped += loop.turned > math.pi
+            took += loop.t
+        return looped, took, there
+
+    held, plain = runs(Tuning(left_bias_hold=True)), runs(Tuning(left_bias_hold=False))
+    assert held[0] == 0 and held[2] == 20 and plain[0] >= 15
+    assert held[1] < 0.5 * plain[1]
+
+
+def test_a_left_bias_that_would_run_into_the_wall_shrinks_rather_than_vanish():
+    """A robot 6 deg right of a 1400 um straight along the left arena wall (100 um off it): the whole bias (3 deg left)
+    would bring that straight within the clearance of the wall, so plain it is refused and the robot turns onto the
+    straight's exact heading (no margin). With ``left_bias_shrink`` it keeps a smaller margin, and the straight it is
+    left on keeps the clearance all the way (exact kinematics, :func:`arena_gap`)."""
+    start = np.array([100.0, 200.0, -math.radians(6.0)])
+    target = np.array(pathlib.Path(Pose(*start), R, (("R", R * math.radians(6.0)), ("S", 1400.0))).end)
+    turned = {}
+    for shrink in (False, True):
+        loop = KinematicLoop(start, Tuning(left_bias_hold=True, left_bias_shrink=shrink))
+        GrossMotion(loop).steer(0, target, 1, 0, [], max_cycles=1)
+        turned[shrink] = (math.degrees(loop.est[0, 2] - start[2]) + 180.0) % 360.0 - 180.0
+        ahead = move(loop.est[0], np.linspace(0.0, 1300.0, 131), 0.0)
+        assert float(arena_gap(ahead, L, W, ARENA).min()) >= loop.opts.clearance_um
+    assert turned[False] == pytest.approx(6.0, abs=1e-6)
+    assert 3.0 < turned[True] < 5.5

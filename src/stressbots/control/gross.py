@@ -29,6 +29,7 @@ from .escapes import Escapes
 from .loopview import LoopView, Steps
 from .prefixed import describe_prefix, first_clear, remaining_prefix
 from .queries import shortest_into, trim_steps, waypoint_region
+from .straight_drift import StraightDrift
 from .tuning import Tuning
 
 __all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "circling_scale", "clear_prefix", "path_steps"]
@@ -46,6 +47,7 @@ class GrossLoop(LoopView, Protocol):
     t: float
     replans: int
     routes_rng: np.random.Generator
+    straight_drift: StraightDrift
 
     @property
     def rstar(self) -> np.ndarray: ...
@@ -364,6 +366,7 @@ class GrossMotion:
             if (ready is not None and ready()) or ((ready is None or leg_of_route) and self._on_target(i, target, t0, leg_of_route)):
                 return _ended(True, stalled)
             path = self._into(i, target, region)
+            path = self._loop_deferred(i, path) or path
             # a route's waypoint legs at the route's own clearance (the docked one blocked them: a new route every t_x)
             if (self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
                                    target=target if via else None, start=p)
@@ -438,13 +441,52 @@ class GrossMotion:
         segs = path.segments
         if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.loop.tx):
             return steps
-        cut_um = min(r * math.radians(self.loop.tune.left_bias_deg), 0.5 * segs[0][1])
-        biased = pathlib.Path(self.loop.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
-        if steps[0][1] > cut_um / v and not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs,
-                                                               clearance=clearance, target=target):
-            steps = [(steps[0][0], steps[0][1] - cut_um / v), (straight_k, cut_um / v), *steps[1:]]
-            steps = trim_steps(steps, self.loop.tx)
+        full_cut_um = r * (math.radians(self.loop.tune.left_bias_deg) + self._drift_lead_rad(i, segs[1][1]))
+        # held: a turn within the bias is not driven (halving it every t_x converged on the straight's heading, and
+        # one noisy frame past it cost a loop); else cut by the bias, at most half the turn (the whole bias, kept for
+        # turns up to twice it, entered the approach funnels further left: more docks off the line at 2x)
+        hold = self.loop.tune.left_bias_hold and segs[0][1] <= full_cut_um
+        first = segs[0][1] if hold else min(full_cut_um, 0.5 * segs[0][1])
+        # a cut whose straight passes too near an obstacle gives way to a smaller one (Tuning.left_bias_shrink)
+        for cut_um in (first, 0.5 * first, 0.25 * first) if self.loop.tune.left_bias_shrink else (first,):
+            if steps[0][1] < cut_um / v - 1e-12 or (steps[0][1] <= cut_um / v and cut_um < segs[0][1] - 1e-9):
+                continue
+            biased = pathlib.Path(self.loop.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
+            if not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
+                turn = [(steps[0][0], steps[0][1] - cut_um / v)] if steps[0][1] - cut_um / v > 1e-12 else []
+                return trim_steps([*turn, (straight_k, cut_um / v), *steps[1:]], self.loop.tx)
         return steps
+
+    def _loop_deferred(self, i: int, path: pathlib.Path) -> pathlib.Path | None:
+        """Straight on instead of ``path``'s full loop when robot ``i`` is measured just past the heading of a long
+        straight (``Tuning.loop_defer_deg``): its path with that straight from where it is (checked and driven like
+        any other); None otherwise.
+
+        A one-way robot pointing a little clockwise of its straight needs a full loop, one a little anticlockwise a
+        slight turn; at 2x the literature's noise the estimate is off by about 1 deg, and a robot on its straight
+        looped whenever one frame put it past (held-out 41:0 at 2x: three loops round one roadmap waypoint, 60 s).
+        Straight on, a robot truly past falls further behind the straight's heading, and loops once that straight is
+        shorter than ``Tuning.loop_defer_min_straight_tx`` t_x; one that was not is on its way."""
+        lp = self.loop
+        eps = math.radians(lp.tune.loop_defer_deg)
+        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
+        segs = path.segments
+        if eps <= 0.0 or not (segs[0][0] == "R" and segs[0][1] >= r * (TWO_PI - eps)):
+            return None
+        back = lp.est[i] - np.array([0.0, 0.0, eps])  # eps anticlockwise: a straight within reach without a loop?
+        alt = pathlib.shortest_path(back, path.end, r).segments
+        if not (alt[0][0] == "R" and alt[0][1] <= r * eps and len(alt) > 1 and alt[1][0] == "S"
+                and alt[1][1] >= lp.tune.loop_defer_min_straight_tx * v * lp.tx):
+            return None
+        return pathlib.Path(lp.est[i], r, (("S", alt[0][1] + alt[1][1]), *alt[2:]))
+
+    def _drift_lead_rad(self, i: int, straight_um: float) -> float:
+        """How far (rad) anticlockwise of its straight robot ``i`` starts a ``straight_um`` straight so that its identified
+        clockwise heading drift (``straight_drift.kappa``, rad/um) curves it onto the straight's end: half the heading the
+        drift turns it by over the straight (the chord of a circular arc), times ``Tuning.gross_drift_lead`` (0: none).
+        An anticlockwise drift is not led: the robot then corrects clockwise, as it can."""
+        lead = self.loop.tune.gross_drift_lead
+        return lead * max(float(self.loop.straight_drift.kappa[i]), 0.0) * 0.5 * straight_um if lead > 0.0 else 0.0
 
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
         """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
