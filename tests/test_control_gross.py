@@ -25,7 +25,6 @@ from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_p
 from stressbots.control.queries import in_funnel, line_coords, line_pose, waypoint_region
 from stressbots.control.single import SingleDocking
 from stressbots.control.slot_approach import SlotApproach, approach_length, lead_in_clear
-from stressbots.control.straight_drift import StraightDrift
 from stressbots.kinematics import move
 from stressbots.robots import Pose, orbit_radii
 
@@ -97,11 +96,6 @@ def test_lead_in_falls_back_to_the_longest_clear_corridor_when_none_is_reachable
 
 # -- gross motion through a kinematic loop ------------------------------------------------------------
 
-def _no_drift(n: int) -> StraightDrift:
-    """A straight-drift identification of ``n`` robots that knows of no drift (its curvatures are all 0)."""
-    return StraightDrift(n, drift_rad_per_um=0.0, camera_heading_rad=0.0, camera_position_um=0.0)
-
-
 class KinematicLoop:
     """A closed loop for one free robot (index 0) with exact kinematics: turns under ``turn_k``, straight
     otherwise, camera = truth. Records every pose the robot passes (``trail``) and the events."""
@@ -119,7 +113,6 @@ class KinematicLoop:
         self._est = np.array([pose], float)
         self.trail = [self._est[0].copy()]
         self.events: list[tuple[str, str]] = []
-        self.straight_drift = _no_drift(1)
 
     @property
     def est(self) -> np.ndarray:
@@ -281,7 +274,6 @@ class BesideTheStructure(KinematicLoop):
         self.docked = np.array([False, True])
         self._est = np.array([pose, docked_pose], float)
         self.scn = SimpleNamespace(arena_um=ARENA, names=("R0", "R1"))
-        self.straight_drift = _no_drift(2)
 
 
 def test_a_committed_route_along_the_structure_is_driven_at_the_clearance_it_was_planned_with():
@@ -429,13 +421,14 @@ def _to_waypoint(heading: float, factor: float, regions: bool, widen: float = 0.
 @pytest.mark.parametrize("factor", [0.93, 0.97, 1.05])
 def test_a_waypoint_region_ends_the_circling_of_a_robot_whose_radius_is_misidentified(factor):
     """A robot turning on a radius 7 % or 3 % smaller or 5 % larger than identified, re-planned every t_x toward a waypoint of
-    every heading: with the waypoint's region it always gets there (arrived by the exact kinematics) within 60 t_x; aimed
+    every heading: with the waypoint's region it always gets there (arrived by the exact kinematics) within 65 t_x (60
+    before the left bias's hold: the slowest heading, 5 % wide, now takes 61 t_x, the mean 20.6 against 18.8); aimed
     at the point it circled the waypoint until the cycle cap for some headings (each loop ended a few um on the side
     that needs another loop)."""
     headings = np.radians(np.arange(0.0, 360.0, 20.0))
     with_region = [_to_waypoint(h, factor, True) for h in headings]
     for loop, h in zip(with_region, headings, strict=True):
-        assert loop.t <= 60.0 and arrived(loop.est[0], np.array([1000.0, 1000.0, h]), loop.tune)
+        assert loop.t <= 65.0 and arrived(loop.est[0], np.array([1000.0, 1000.0, h]), loop.tune)
     assert max(_to_waypoint(h, factor, False).t for h in headings) >= 79.0  # the point alone: capped somewhere
 
 
@@ -527,7 +520,7 @@ def test_a_turn_within_the_left_bias_is_held_and_keeps_the_robot_anticlockwise_o
     Without it half the turn is driven, and the margin left is half of what it was."""
     start, target = _hovering_start(turn_deg)
     for hold, turned in ((True, 0.0), (False, 0.5 * math.radians(turn_deg))):
-        loop = KinematicLoop(start, Tuning(left_bias_hold=hold))
+        loop = KinematicLoop(start, Tuning(left_bias_hold=hold, left_bias_shrink=False))
         GrossMotion(loop).steer(0, target, 1, 0, [], max_cycles=1)
         assert loop.est[0, 2] - start[2] == pytest.approx(turned, abs=1e-6)
         first = pathlib.shortest_path(loop.est[0], target, R).segments[0]
@@ -549,7 +542,8 @@ def test_under_heading_noise_a_held_robot_keeps_its_margin_and_never_loops():
             took += loop.t
         return looped, took, there
 
-    held, plain = runs(Tuning(left_bias_hold=True)), runs(Tuning(left_bias_hold=False))
+    held = runs(Tuning(left_bias_hold=True, loop_defer_deg=0.0, left_bias_shrink=False))
+    plain = runs(Tuning(left_bias_hold=False, loop_defer_deg=0.0, left_bias_shrink=False))
     assert held[0] == 0 and held[2] == 20 and plain[0] >= 15
     assert held[1] < 0.5 * plain[1]
 
@@ -570,3 +564,25 @@ def test_a_left_bias_that_would_run_into_the_wall_shrinks_rather_than_vanish():
         assert float(arena_gap(ahead, L, W, ARENA).min()) >= loop.opts.clearance_um
     assert turned[False] == pytest.approx(6.0, abs=1e-6)
     assert 3.0 < turned[True] < 5.5
+
+
+@pytest.mark.parametrize(("past_deg", "straight_um", "deferred"),
+                         [(1.0, 1500.0, True), (1.9, 900.0, True), (3.0, 1500.0, False), (1.0, 300.0, False)])
+def test_a_loop_is_deferred_only_for_a_robot_just_past_a_long_straight(past_deg, straight_um, deferred):
+    """A robot ``past_deg`` clockwise of a ``straight_um`` straight (then a 40 deg turn): its shortest path starts with
+    a full loop. With ``loop_defer_deg`` 2 it drives straight on instead (its path: the straight from where it is, as
+    long as the straight it missed and the turn after it) when it is under 2 deg past and the straight is at least
+    ``loop_defer_min_straight_tx`` (4) t_x long; otherwise the loop stands."""
+    on_line = np.array([500.0, 200.0, 0.0])
+    target = np.array(pathlib.Path(Pose(*on_line), R, (("S", straight_um), ("R", R * math.radians(40.0)))).end)
+    start = on_line + np.array([0.0, 0.0, math.radians(past_deg)])
+    loop = KinematicLoop(start, Tuning(loop_defer_deg=2.0))
+    shortest = pathlib.shortest_path(start, target, R)
+    assert shortest.segments[0][0] == "R" and shortest.segments[0][1] > R * math.radians(350.0)  # the premise: a loop
+    got = GrossMotion(loop)._loop_deferred(0, shortest)
+    if not deferred:
+        assert got is None
+        return
+    assert got is not None and got.segments[0][0] == "S" and np.allclose(got.start, start)
+    assert got.segments[0][1] == pytest.approx(straight_um, rel=0.02) and got.segments[1][0] == "R"
+    assert GrossMotion(KinematicLoop(start, Tuning(loop_defer_deg=0.0)))._loop_deferred(0, shortest) is None  # 0: off

@@ -95,13 +95,15 @@ def test_a_bad_tune_is_one_error_line_and_status_2(capsys):
     assert capsys.readouterr().err.startswith("error: --tune: 'no_such_field'")
 
 
-_POINT_TARGETS = it.Replay("sim", it.tuning_options("region_targets=False"))
-"""The controller aiming gross motion at points, as before waypoint regions: held-out 43:0 at 2x then fails as traced."""
+_POINT_TARGETS = it.Replay("sim", it.tuning_options("region_targets=False,left_bias_hold=False,loop_defer_deg=0,left_bias_shrink=False"))
+"""The controller aiming gross motion at points, as before waypoint regions, and its left bias as before session 24 (no
+hold, no deferred loop, no shrinking): held-out 43:0 at 2x then fails as traced."""
 
 
 def test_pins_watch_only_observes_and_finds_the_pin_of_a_robot_that_gave_up():
     """``pins`` (held-out layout 43, a comb of three, plant seed 0 at 2x noise, replayed without the waypoint regions
-    (``Tuning.region_targets``, with which it assembles): R0 gives up with no path clear): the watched replay ends
+    (``Tuning.region_targets``) and the left bias as before session 24, with either of which it assembles: R0 gives up
+    with no path clear): the watched replay ends
     exactly as the plain one (observation only), the loop's ``drive`` is restored afterwards, and a robot that ended
     with no clear path was boxed in by some applied step after a pose where it could move on."""
     from stressbots.control.loop import PlantLoop

@@ -29,7 +29,6 @@ from .escapes import Escapes
 from .loopview import LoopView, Steps
 from .prefixed import describe_prefix, first_clear, remaining_prefix
 from .queries import shortest_into, trim_steps, waypoint_region
-from .straight_drift import StraightDrift
 from .tuning import Tuning
 
 __all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "circling_scale", "clear_prefix", "path_steps"]
@@ -47,7 +46,6 @@ class GrossLoop(LoopView, Protocol):
     t: float
     replans: int
     routes_rng: np.random.Generator
-    straight_drift: StraightDrift
 
     @property
     def rstar(self) -> np.ndarray: ...
@@ -441,7 +439,7 @@ class GrossMotion:
         segs = path.segments
         if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.loop.tx):
             return steps
-        full_cut_um = r * (math.radians(self.loop.tune.left_bias_deg) + self._drift_lead_rad(i, segs[1][1]))
+        full_cut_um = r * math.radians(self.loop.tune.left_bias_deg)
         # held: a turn within the bias is not driven (halving it every t_x converged on the straight's heading, and
         # one noisy frame past it cost a loop); else cut by the bias, at most half the turn (the whole bias, kept for
         # turns up to twice it, entered the approach funnels further left: more docks off the line at 2x)
@@ -479,14 +477,6 @@ class GrossMotion:
                 and alt[1][1] >= lp.tune.loop_defer_min_straight_tx * v * lp.tx):
             return None
         return pathlib.Path(lp.est[i], r, (("S", alt[0][1] + alt[1][1]), *alt[2:]))
-
-    def _drift_lead_rad(self, i: int, straight_um: float) -> float:
-        """How far (rad) anticlockwise of its straight robot ``i`` starts a ``straight_um`` straight so that its identified
-        clockwise heading drift (``straight_drift.kappa``, rad/um) curves it onto the straight's end: half the heading the
-        drift turns it by over the straight (the chord of a circular arc), times ``Tuning.gross_drift_lead`` (0: none).
-        An anticlockwise drift is not led: the robot then corrects clockwise, as it can."""
-        lead = self.loop.tune.gross_drift_lead
-        return lead * max(float(self.loop.straight_drift.kappa[i]), 0.0) * 0.5 * straight_um if lead > 0.0 else 0.0
 
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
         """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the

@@ -292,25 +292,26 @@ class GrossTuning:
     still end inside its arrival region."""
     left_bias_deg: float = 3.0
     """A turn into a long straight is cut short by up to this much (one-way robots correct clockwise)."""
-    left_bias_hold: bool = False
+    left_bias_hold: bool = True
     """Whether a turn into a long straight no longer than ``left_bias_deg`` is not driven at all, so the robot keeps
     a standing margin left of the straight's heading. Cut by half every t_x instead, the margin shrank to nothing
     within a few t_x, and a frame's heading error (1 deg at 2x) past the straight's heading re-planned a full loop:
-    held-out 41:0 at 2x looped four times round its first roadmap waypoint (60 s) that way."""
-    gross_drift_lead: float = 0.0
-    """How much of the chord lead of its identified clockwise heading drift a gross motion's long straight starts with
-    (:meth:`~stressbots.control.gross.GrossMotion._drift_lead_rad`; 0: none, 1: all), on top of ``left_bias_deg``:
-    a robot drifting 5 deg/mm clockwise turns 7 deg over a 1500 um straight, and each t_x it ended a little clockwise
-    of its re-planned straight's heading, until one frame put it past and it looped (held-out 6:4: 5 deg/mm, 1 to 3
-    identified)."""
-    left_bias_shrink: bool = False
+    held-out 41:0 at 2x looped four times round its first roadmap waypoint (60 s) that way. Measured alone (session 24,
+    against off): held-out 1x 297/300 (298), 2x seeds 0-3 223/240 (216), seeds 4-7 219/240 (222), tuning 235/240 (236),
+    independent plant 116/120 (114); simulated assembly time 12-14 % shorter. Holding the whole bias for turns up to twice
+    it as well measured 217/240 at 2x, with more docks off the line (10 shape errors over 10 um against 4)."""
+    left_bias_shrink: bool = True
     """Whether a left bias whose biased straight would pass too near an obstacle is tried at half and a quarter of itself
     before none is kept: refused whole, a robot driving a long straight along the structure kept no margin at all and
-    looped for the first frame that put it past its heading (held-out 6:4: next to the stem it was to dock at the end of)."""
-    loop_defer_deg: float = 0.0
+    looped for the first frame that put it past its heading (held-out 6:4: next to the stem it was to dock at the end of).
+    Measured with ``loop_defer_deg`` 2 on top of the hold (session 24): held-out 1x 298/300 (6:4 assembles; the hold
+    alone 297), 2x 220/240 and 219/240 on seeds 0-3 and 4-7, tuning 235/240, independent plant 115/120: within the
+    noise of the hold alone on success, 5-6 % shorter assemblies again."""
+    loop_defer_deg: float = 2.0
     """A robot measured up to this far (deg) clockwise of the heading of a long straight drives straight one t_x instead
     of the full loop its shortest path starts with (:meth:`~stressbots.control.gross.GrossMotion._loop_deferred`; 0:
-    never): about twice the heading estimate's error at 2x the literature's camera noise."""
+    never): about twice the heading estimate's error at 2x the literature's camera noise. With the hold, 2x seeds 0-3:
+    225/240 (223 without); measured with ``left_bias_shrink`` above."""
     loop_defer_min_straight_tx: float = 4.0
     """A loop is deferred only while that straight is at least this many t_x long: a robot truly past its heading loops
     later, and the loop should not move near its target (the structure)."""
