@@ -21,7 +21,7 @@ from stressbots import planning
 from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control import ControllerOptions, Tuning
 from stressbots.control.escapes import contact_clearance, escape_moves, escape_sweep
-from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_prefix
+from stressbots.control.gross import GrossMotion, SteerOutcome, arrived, clear_prefix, loop_deferred
 from stressbots.control.queries import in_funnel, line_coords, line_pose, waypoint_region
 from stressbots.control.single import SingleDocking
 from stressbots.control.slot_approach import SlotApproach, approach_length, lead_in_clear
@@ -494,14 +494,11 @@ class NoisyHeading(KinematicLoop):
         self.turned = 0.0  # rad the robot really turned
 
     def drive(self, steps) -> None:
-        for k, d in steps:
-            s = np.linspace(0.0, V * d, max(2, int(V * d / 5.0) + 1))
-            along = move(self.truth[0], s, 1.0 / R if k == self.turn_k else 0.0)
-            self.trail.extend(along[1:])
-            self.truth[0] = along[-1]
-            self.turned += V * d / R if k == self.turn_k else 0.0
-            self.t += d
-        self._est[0] = self.truth[0] + np.array([0.0, 0.0, self.rng.normal(0.0, self.sd)])
+        self._est[0] = self.truth[0]  # the exact kinematics move the truth ...
+        super().drive(steps)
+        self.truth[0] = self._est[0]
+        self.turned += sum(V * d / R for k, d in steps if k == self.turn_k)
+        self._est[0] = self.truth[0] + np.array([0.0, 0.0, self.rng.normal(0.0, self.sd)])  # ... the controller sees this
 
 
 def _hovering_start(turn_deg: float) -> tuple[np.ndarray, np.ndarray]:
@@ -572,17 +569,22 @@ def test_a_loop_is_deferred_only_for_a_robot_just_past_a_long_straight(past_deg,
     """A robot ``past_deg`` clockwise of a ``straight_um`` straight (then a 40 deg turn): its shortest path starts with
     a full loop. With ``loop_defer_deg`` 2 it drives straight on instead (its path: the straight from where it is, as
     long as the straight it missed and the turn after it) when it is under 2 deg past and the straight is at least
-    ``loop_defer_min_straight_tx`` (4) t_x long; otherwise the loop stands."""
+    ``loop_defer_min_straight_tx`` (4) t_x long (:func:`loop_deferred`); otherwise the loop stands."""
     on_line = np.array([500.0, 200.0, 0.0])
     target = np.array(pathlib.Path(Pose(*on_line), R, (("S", straight_um), ("R", R * math.radians(40.0)))).end)
     start = on_line + np.array([0.0, 0.0, math.radians(past_deg)])
-    loop = KinematicLoop(start, Tuning(loop_defer_deg=2.0))
+    tune = Tuning()
     shortest = pathlib.shortest_path(start, target, R)
     assert shortest.segments[0][0] == "R" and shortest.segments[0][1] > R * math.radians(350.0)  # the premise: a loop
-    got = GrossMotion(loop)._loop_deferred(0, shortest)
+    assert tune.loop_defer_deg == 2.0 and tune.loop_defer_min_straight_tx == 4.0
+    got = loop_deferred(start, shortest, R, math.radians(tune.loop_defer_deg), tune.loop_defer_min_straight_tx * V * 1.0)
     if not deferred:
         assert got is None
         return
     assert got is not None and got.segments[0][0] == "S" and np.allclose(got.start, start)
     assert got.segments[0][1] == pytest.approx(straight_um, rel=0.02) and got.segments[1][0] == "R"
-    assert GrossMotion(KinematicLoop(start, Tuning(loop_defer_deg=0.0)))._loop_deferred(0, shortest) is None  # 0: off
+    assert loop_deferred(start, shortest, R, 0.0, 0.0) is None  # 0: off
+    # and in a gross motion: one t_x later the robot has driven straight on (exact kinematics), not turned
+    loop = KinematicLoop(start)
+    GrossMotion(loop).steer(0, target, 1, 0, [], max_cycles=1)
+    assert loop.est[0, 2] == pytest.approx(start[2]) and loop.est[0, 1] == pytest.approx(start[1] + V * math.cos(start[2]))

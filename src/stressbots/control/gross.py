@@ -31,7 +31,8 @@ from .prefixed import describe_prefix, first_clear, remaining_prefix
 from .queries import shortest_into, trim_steps, waypoint_region
 from .tuning import Tuning
 
-__all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "circling_scale", "clear_prefix", "path_steps"]
+__all__ = ["Detour", "GrossLoop", "GrossMotion", "SteerOutcome", "arrived", "circling_scale", "clear_prefix", "loop_deferred",
+           "path_steps"]
 
 
 
@@ -156,6 +157,38 @@ def circling_scale(elapsed_s: float, period_s: float, widen_per_loop: float) -> 
     (1.0, 2.0, 3.0)
     """
     return 1.0 + widen_per_loop * math.floor(max(elapsed_s, 0.0) / period_s) if period_s > 0 else 1.0
+
+
+def loop_deferred(pose, path: pathlib.Path, r_um: float, defer_rad: float, min_straight_um: float) -> pathlib.Path | None:
+    """Straight on instead of ``path``'s full loop when ``pose`` is less than ``defer_rad`` (rad) clockwise of the
+    heading of a straight at least ``min_straight_um`` (um) long: that path from ``pose``, the straight run from where it
+    is (as long as the one it missed), then the rest; None otherwise (turning radius ``r_um``).
+
+    A one-way robot pointing a little clockwise of its straight needs a full loop, one a little anticlockwise a slight
+    turn; at 2x the literature's noise the estimate is off by about 1 deg, and a robot on its straight looped whenever one
+    frame put it past (held-out 41:0 at 2x: three loops round one roadmap waypoint, 60 s). Straight on, a robot truly past
+    falls further behind the straight's heading and loops once the straight is shorter; one that was not is on its way.
+
+    >>> import math
+    >>> goal = pathlib.Path((0.0, 0.0, 0.0), 200.0, (("S", 1500.0), ("R", 200.0 * math.radians(40.0)))).end
+    >>> past = pathlib.shortest_path((0.0, 0.0, math.radians(1.0)), goal, 200.0)  # 1 deg clockwise of its straight
+    >>> [(k, round(ell)) for k, ell in past.segments]  # a full loop first
+    [('R', 1253), ('S', 1503), ('R', 140)]
+    >>> [(k, round(ell)) for k, ell in loop_deferred(past.start, past, 200.0, math.radians(2.0), 400.0).segments]
+    [('S', 1500), ('R', 140)]
+    >>> further = pathlib.shortest_path((0.0, 0.0, math.radians(3.0)), goal, 200.0)  # 3 deg past: the loop stands
+    >>> loop_deferred(further.start, further, 200.0, math.radians(2.0), 400.0) is None
+    True
+    """
+    segs = path.segments
+    if defer_rad <= 0.0 or not (segs[0][0] == "R" and segs[0][1] >= r_um * (TWO_PI - defer_rad)):
+        return None
+    back = np.asarray(pose, dtype=np.float64) - np.array([0.0, 0.0, defer_rad])  # a straight within reach from here?
+    alt = pathlib.shortest_path(back, path.end, r_um).segments
+    if not (alt[0][0] == "R" and alt[0][1] <= r_um * defer_rad and len(alt) > 1 and alt[1][0] == "S"
+            and alt[1][1] >= min_straight_um):
+        return None
+    return pathlib.Path(pose, r_um, (("S", alt[0][1] + alt[1][1]), *alt[2:]))
 
 
 def _roadmap_obstacles(loop: GrossLoop, i: int, orbiting, extra_discs, box_margin: float = 0.0):
@@ -348,9 +381,10 @@ class GrossMotion:
         when there is no way (the caller re-plans), STUCK when the robot stalled or has no route and nothing clear to
         drive (failure region H; see :class:`SteerOutcome`).
 
-        Left bias: a turn that leads into a long straight is cut short by up to 3 deg, so the straight points a little
-        left of where it must. Clockwise is the only correction a one-way robot makes cheaply: a turn overdone (speed or
-        radius misidentified, drift) would cost a full loop at the next replan, a turn cut short costs a slight turn.
+        Left bias: a turn that leads into a long straight is cut short by up to 3 deg (:meth:`_left_biased`), so the
+        straight points a little left of where it must. Clockwise is the only correction a one-way robot makes cheaply:
+        a turn overdone (speed or radius misidentified, drift) would cost a full loop at the next replan, a turn cut short
+        costs a slight turn.
         """
         stalls = 0
         escapes = self.loop.tune.escapes_per_steer
@@ -364,7 +398,6 @@ class GrossMotion:
             if (ready is not None and ready()) or ((ready is None or leg_of_route) and self._on_target(i, target, t0, leg_of_route)):
                 return _ended(True, stalled)
             path = self._into(i, target, region)
-            path = self._loop_deferred(i, path) or path
             # a route's waypoint legs at the route's own clearance (the docked one blocked them: a new route every t_x)
             if (self.obstacles_hit(path.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance,
                                    target=target if via else None, start=p)
@@ -408,11 +441,14 @@ class GrossMotion:
 
     def _into(self, i: int, target: np.ndarray, region: np.ndarray | None) -> pathlib.Path:
         """Robot ``i``'s shortest path from its measured pose to ``target``, or to the goal of ``region`` that saves
-        ``Tuning.region_min_saving_loops`` loops on it (:func:`~stressbots.control.queries.shortest_into`)."""
+        ``Tuning.region_min_saving_loops`` loops on it (:func:`~stressbots.control.queries.shortest_into`); straight on
+        instead of a loop it is measured just past (:func:`loop_deferred`, ``Tuning.loop_defer_deg``)."""
         p, r, tune = self.loop.est[i], float(self.loop.r_hat[i]), self.loop.tune
         if region is not None and tune.region_targets:
             target = region[shortest_into(p, region, r, tune.region_min_saving_loops * 2.0 * math.pi * r)]
-        return pathlib.shortest_path(p, target, r)
+        path = pathlib.shortest_path(p, target, r)
+        min_straight_um = tune.loop_defer_min_straight_tx * float(self.loop.v_hat[i]) * self.loop.tx
+        return loop_deferred(p, path, r, math.radians(tune.loop_defer_deg), min_straight_um) or path
 
     def _drive_leg(self, i: int, path: pathlib.Path, v: float, turn_k: int, straight_k: int, orbiting, extra_discs, clearance,
                    target) -> tuple[bool, bool]:
@@ -434,7 +470,9 @@ class GrossMotion:
         (see :meth:`steer`). The cut applies to every t_x of a turn longer than one t_x, not only its end: each such
         t_x turns a little less, so a long turn runs wide (a loop's circle drifted 58 um in 3 t_x on held-out 6:2).
         Cutting only the turn's end was measured in session 15 and lost as many trials as it won (tuning 1x 227/240
-        against 229): the wide turn is a standing margin, and the next re-plan corrects it clockwise, cheaply."""
+        against 229): the wide turn is a standing margin, and the next re-plan corrects it clockwise, cheaply. A turn
+        within the bias is not driven at all (``Tuning.left_bias_hold``), and a bias whose straight would pass too near
+        an obstacle is tried smaller before none (``Tuning.left_bias_shrink``)."""
         v, r = self.loop.v_hat[i], self.loop.r_hat[i]
         segs = path.segments
         if not (len(segs) > 1 and segs[0][0] == "R" and segs[1][0] == "S" and segs[1][1] > 0.5 * v * self.loop.tx):
@@ -454,29 +492,6 @@ class GrossMotion:
                 turn = [(steps[0][0], steps[0][1] - cut_um / v)] if steps[0][1] - cut_um / v > 1e-12 else []
                 return trim_steps([*turn, (straight_k, cut_um / v), *steps[1:]], self.loop.tx)
         return steps
-
-    def _loop_deferred(self, i: int, path: pathlib.Path) -> pathlib.Path | None:
-        """Straight on instead of ``path``'s full loop when robot ``i`` is measured just past the heading of a long
-        straight (``Tuning.loop_defer_deg``): its path with that straight from where it is (checked and driven like
-        any other); None otherwise.
-
-        A one-way robot pointing a little clockwise of its straight needs a full loop, one a little anticlockwise a
-        slight turn; at 2x the literature's noise the estimate is off by about 1 deg, and a robot on its straight
-        looped whenever one frame put it past (held-out 41:0 at 2x: three loops round one roadmap waypoint, 60 s).
-        Straight on, a robot truly past falls further behind the straight's heading, and loops once that straight is
-        shorter than ``Tuning.loop_defer_min_straight_tx`` t_x; one that was not is on its way."""
-        lp = self.loop
-        eps = math.radians(lp.tune.loop_defer_deg)
-        v, r = float(lp.v_hat[i]), float(lp.r_hat[i])
-        segs = path.segments
-        if eps <= 0.0 or not (segs[0][0] == "R" and segs[0][1] >= r * (TWO_PI - eps)):
-            return None
-        back = lp.est[i] - np.array([0.0, 0.0, eps])  # eps anticlockwise: a straight within reach without a loop?
-        alt = pathlib.shortest_path(back, path.end, r).segments
-        if not (alt[0][0] == "R" and alt[0][1] <= r * eps and len(alt) > 1 and alt[1][0] == "S"
-                and alt[1][1] >= lp.tune.loop_defer_min_straight_tx * v * lp.tx):
-            return None
-        return pathlib.Path(lp.est[i], r, (("S", alt[0][1] + alt[1][1]), *alt[2:]))
 
     def roadmap_route(self, i: int, target, orbiting, extra_discs, clearance: float):
         """``(waypoints, path)``: the planner's roadmap route from the measured pose around the orbits, the
