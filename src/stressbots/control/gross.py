@@ -485,8 +485,8 @@ class GrossMotion:
         first = segs[0][1] if hold else min(full_cut_um, 0.5 * segs[0][1])
         # a cut whose straight passes too near an obstacle gives way to a smaller one (Tuning.left_bias_shrink)
         for cut_um in (first, 0.5 * first, 0.25 * first) if self.loop.tune.left_bias_shrink else (first,):
-            if steps[0][1] < cut_um / v - 1e-12 or (steps[0][1] <= cut_um / v and cut_um < segs[0][1] - 1e-9):
-                continue
+            if cut_um < segs[0][1] - 1e-9 and steps[0][1] <= cut_um / v:
+                continue  # a part of the turn is cut only from a first step longer than the cut
             biased = pathlib.Path(self.loop.est[i], r, (("R", segs[0][1] - cut_um), ("S", segs[1][1] + cut_um)))
             if not self.obstacles_hit(biased.sample(10.0), i, orbiting, extra_discs=extra_discs, clearance=clearance, target=target):
                 turn = [(steps[0][0], steps[0][1] - cut_um / v)] if steps[0][1] - cut_um / v > 1e-12 else []

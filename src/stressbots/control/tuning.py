@@ -309,7 +309,7 @@ class GrossTuning:
     noise of the hold alone on success, 5-6 % shorter assemblies again."""
     loop_defer_deg: float = 2.0
     """A robot measured up to this far (deg) clockwise of the heading of a long straight drives straight one t_x instead
-    of the full loop its shortest path starts with (:meth:`~stressbots.control.gross.GrossMotion._loop_deferred`; 0:
+    of the full loop its shortest path starts with (:func:`~stressbots.control.gross.loop_deferred`; 0:
     never): about twice the heading estimate's error at 2x the literature's camera noise. With the hold, 2x seeds 0-3:
     225/240 (223 without); measured with ``left_bias_shrink`` above."""
     loop_defer_min_straight_tx: float = 4.0
