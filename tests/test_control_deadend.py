@@ -184,6 +184,44 @@ def test_g1_stops_re_planning_pair_frames_once_d_n_is_boxed_in():
                 PairPhase.form_round(phase, 1, 0, 300.0, [], "no track", 3)  # type: ignore[arg-type]
 
 
+class _Gave(Exception):
+    pass
+
+
+def _scripted_pair_phase(rounds_tried, moved: bool, boxed: str = "", pair_rounds: int = 2):
+    """A PairPhase stand-in whose rounds fail as scripted: ``rounds_tried`` frames per round, each failing with "R1 found
+    no timed path to its approach line"; D_n moves between rounds when ``moved``; ``boxed`` is its boxed note."""
+    tries = iter(rounds_tried)
+    tune = Tuning(pair_rounds=pair_rounds)
+    lp = SimpleNamespace(n=2, by_rank={1: 0, 2: 1}, tune=tune, scn=SimpleNamespace(names=("R0", "R1")),
+                         orbiting_below=lambda _k: [], abort=_Gave, log=lambda *_a: None)
+    return SimpleNamespace(
+        loop=lp, meet_distance=lambda *_a: 300.0, room_frame=lambda *_a: (0.0, 0.0, 0.0),
+        form_round=lambda *_a: (False, next(tries), "R1 found no timed path to its approach line"),
+        between_rounds=lambda *_a: moved, meeting=SimpleNamespace(departure=SimpleNamespace(meet_as_they_are=lambda *_a: False)),
+        wedge_note=lambda *_a: "", boxed_note=lambda _n: boxed, overlap_note=lambda _n: "")
+
+
+@pytest.mark.parametrize(("rounds_tried", "moved", "boxed", "starts"), [
+    ((6, 3), True, "", "G_1 not formed: 2 rounds of pair frames (9 frames) failed, R1 waiting on a free orbit"),
+    ((6,), False, "", "G_1 not formed: R1 could not move off where 6 pair frame(s) failed"),
+    ((1,), False, "R1 is boxed in ...; ", "G_1 not formed: no re-plan frees R1 after 1 pair frame(s); R1 is boxed in"),
+    ((4,), True, "", "G_1 not formed: no pair frame is left clear of the orbits as measured after 4 pair frame(s)"),
+])
+def test_a_g1_failure_gives_why_re_planning_stopped_not_a_stage_symptom(rounds_tried, moved, boxed, starts):
+    """PairPhase.form's failure says first why re-planning G_1 stopped (every round failed, D_n could not move, D_n
+    boxed in, no frame left), and the last frame's symptom only after it (issue 12, goal 1: never a failure of the
+    kind "no timed path"; tuning 93:0 ended with "last: R3 found no timed path to its approach line")."""
+    from stressbots.control.pair import PairPhase
+
+    with pytest.raises(_Gave) as gave:
+        PairPhase.form(_scripted_pair_phase(rounds_tried, moved, boxed))
+    message = str(gave.value)
+    assert message.startswith(starts), message
+    assert message.endswith("; the last frame failed because R1 found no timed path to its approach line")
+    assert message.index("no timed path") > message.index(";")
+
+
 def test_a_g1_failure_names_the_orbit_d_n_is_hemmed_in_by():
     """PairPhase.overlap_note names the undocked robot whose orbit disc reaches deepest into D_n's and by how much
     (independent truth: both heading north, so both turning centres lie R east of the robots and are as far apart as

@@ -39,6 +39,7 @@ import numpy as np
 from ..collision import arena_gap, bodies_hit_discs, point_rectangle_distance
 from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
+from .g1_failure import G1Stop, g1_failure
 from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
@@ -113,18 +114,26 @@ class PairPhase:
             phi, dx, dy = first
             self.loop.log("replan", N, f"G_1 planned with room for the later robots' approaches: the structure turned "
                                        f"{math.degrees(phi):.0f} deg and shifted {math.hypot(dx, dy):.0f} um")
+        stop, rounds = G1Stop.ROUNDS, 0
         for round_no in range(self.loop.tune.pair_rounds):
-            if round_no > 0 and ((self.loop.tune.give_up_boxed_in and self.boxed_note(N)) or not self.between_rounds(N, M, D, lower, last)):
+            if round_no > 0 and self.loop.tune.give_up_boxed_in and self.boxed_note(N):
+                stop = G1Stop.BOXED
                 break
-            done, tried, last = self.form_round(N, M, D, lower, last,
-                                                self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames, first)
-            frames += tried
+            if round_no > 0 and not self.between_rounds(N, M, D, lower, last):
+                stop = G1Stop.UNMOVED
+                break
+            most = self.loop.tune.pair_frames if round_no == 0 else self.loop.tune.round_frames
+            done, tried, last = self.form_round(N, M, D, lower, last, most, first)
+            frames, rounds = frames + tried, rounds + 1
             if done:
                 return
+            if tried < most:  # the round stopped early: D_n boxed in, or no frame left
+                stop = G1Stop.BOXED if self.loop.tune.give_up_boxed_in and self.boxed_note(N) else G1Stop.NO_FRAMES
+                break
         if self.meeting.departure.meet_as_they_are(N, M):
             return
-        raise self.loop.abort(f"G_1 not formed after {frames} pair frame(s); {self.wedge_note(N, M)}{self.boxed_note(N)}"
-                              f"{self.overlap_note(N)}last: {last}")
+        raise self.loop.abort(g1_failure(self.loop.scn.names[N], stop, frames, rounds,
+                                         f"{self.wedge_note(N, M)}{self.boxed_note(N)}{self.overlap_note(N)}", last))
 
     def overlap_note(self, N: int) -> str:
         """'R4's orbit lies 150 um into R3's as measured; ' when D_n's orbit disc overlaps another undocked robot's
