@@ -433,7 +433,7 @@ def test_a_robot_at_its_funnel_aim_is_never_looped_back(behind, length, kappa_de
     from stressbots.control.slot_approach import funnel_aim_left_rad
 
     kappa = math.radians(kappa_deg_per_mm) / 1000.0
-    left = funnel_aim_left_rad(behind, length, kappa, Tuning().funnel_psi_deg)
+    left = funnel_aim_left_rad(behind, length, kappa, Tuning().funnel_psi_deg, Tuning().funnel_aim_left_deg)
     assert not _looped_back(behind, length, kappa, left)
 
 

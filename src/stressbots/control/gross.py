@@ -191,6 +191,19 @@ def loop_deferred(pose, path: pathlib.Path, r_um: float, defer_rad: float, min_s
     return pathlib.Path(pose, r_um, (("S", alt[0][1] + alt[1][1]), *alt[2:]))
 
 
+def search_key(i: int, target, docked_count: int, orbiting: Sequence[int]) -> tuple:
+    """What a roadmap search's answer for robot ``i`` depends on, coarsely: the robot, its target (5 um, ~3 deg), the
+    structure (``docked_count`` robots docked) and the robots orbiting: the key :class:`GrossMotion` counts failed
+    searches under.
+
+    >>> search_key(3, (1002.0, 498.0, 0.1), 2, [5, 1]) == search_key(3, (1001.0, 499.0, 0.11), 2, [1, 5])
+    True
+    """
+    t = np.asarray(target, float)
+    return (i, round(float(t[0]) / 5.0), round(float(t[1]) / 5.0), round(float(t[2]) * 20.0), int(docked_count),
+            tuple(sorted(orbiting)))
+
+
 def _roadmap_obstacles(loop: GrossLoop, i: int, orbiting, extra_discs, box_margin: float = 0.0):
     """The planner's obstacles for robot ``i``'s roadmap route (:meth:`GrossMotion.roadmap_route`), as measured: the
     orbits but its own and ``extra_discs`` (``(centre, radius)``), the docked bodies ``box_margin`` um wider all round,
@@ -220,7 +233,7 @@ class GrossMotion:
     def __init__(self, loop: GrossLoop):
         self.loop = loop
         self.escapes = Escapes(self)  # ways off an obstacle and on, checked by obstacles_hit
-        # failed roadmap searches per (robot, target, structure, orbits) (:meth:`_search_key`): each costs a full
+        # failed roadmap searches per (robot, target, structure, orbits) (:func:`search_key`): each costs a full
         # roadmap build, and failing runs spent most of their wall time asking again and again
         self._failed: dict[tuple, int] = {}
         # per robot: (target, path) of the last prefixed detour (prefixed_detour): its rest is tried first next t_x
@@ -268,15 +281,9 @@ class GrossMotion:
             return True
         return False
 
-    def _search_key(self, i: int, target, orbiting: Sequence[int]) -> tuple:
-        """What a roadmap search's answer depends on, coarsely: robot, target (5 um, ~3 deg), structure, orbits."""
-        t = np.asarray(target, float)
-        return (i, round(float(t[0]) / 5.0), round(float(t[1]) / 5.0), round(float(t[2]) * 20.0), int(self.loop.docked.sum()),
-                tuple(sorted(orbiting)))
-
     def _searches_left(self, i: int, target, orbiting: Sequence[int]) -> int:
         """Roadmap searches robot ``i`` may still spend on ``target`` (``Tuning.route_searches_max`` failed ones in all)."""
-        return self.loop.tune.route_searches_max - self._failed.get(self._search_key(i, target, orbiting), 0)
+        return self.loop.tune.route_searches_max - self._failed.get(search_key(i, target, int(self.loop.docked.sum()), orbiting), 0)
 
     def _blocked(self, i: int, target: np.ndarray, turn_k: int, straight_k: int, orbiting: Sequence[int], extra_discs, ready,
                  clearance, path, quiet: int, escapes: int, stalled: bool) -> Detour:
@@ -313,7 +320,7 @@ class GrossMotion:
                     if ready is not None and ready():
                         return Detour(SteerOutcome.ARRIVED, quiet, escapes, stalled)
                 return Detour(None if self.loop.t > t_before else routed, quiet, escapes, stalled)
-            key = self._search_key(i, target, orbiting)
+            key = search_key(i, target, int(self.loop.docked.sum()), orbiting)
             self._failed[key] = self._failed.get(key, 0) + 1
             quiet = self.loop.tune.no_route_quiet_cycles
             self.loop.log("no-route", i, f"no way around the obstacles to its target; drives the clear part of its path, asks again "

@@ -111,8 +111,9 @@ class SingleDocking:
 
         The approach line runs back from the slot along its heading. The funnel is the region from which a
         one-way robot can merge onto that line without a loop: to the line's right, pointing left of it
-        (or on it), far enough behind the slot. The gross motion aims at a pose inside it (20 um right,
-        6 deg left: the errors of the last leg then keep it inside) and stops as soon as the measured pose
+        (or on it), far enough behind the slot. The gross motion aims at a pose inside it
+        (``Tuning.funnel_aim_right_um`` right, ``Tuning.funnel_aim_left_deg`` left: the errors of the last leg then keep
+        it inside) and stops as soon as the measured pose
         is in it; the fine motion (:meth:`line_approach`) merges and drives straight in. Where the line's
         corridor is blocked (a tight gap) the S_2f arc of the nominal plan is used instead.
         """

@@ -192,9 +192,11 @@ def lead_in_clear(goal: np.ndarray, back: float, lead_in_um: float, r: float, le
     return False
 
 
-def funnel_aim_left_rad(behind_um: float, length_um: float, kappa_rad_per_um: float, funnel_psi_deg: float) -> float:
-    """How far left of its approach line (rad) a robot's funnel aim ``behind_um`` um behind its slot points: 6 deg, and
-    more by the turn that undoes the offset an identified clockwise drift ``kappa_rad_per_um`` adds on the way in
+def funnel_aim_left_rad(behind_um: float, length_um: float, kappa_rad_per_um: float, funnel_psi_deg: float,
+                        aim_left_deg: float = 6.0) -> float:
+    """How far left of its approach line (rad) a robot's funnel aim ``behind_um`` um behind its slot points:
+    ``aim_left_deg`` (``Tuning.funnel_aim_left_deg``), and more by the turn that undoes the offset an identified
+    clockwise drift ``kappa_rad_per_um`` adds on the way in
     (:func:`~stressbots.control.docking.lead_um`, the line approach's own lead, over the lever ``behind + L/2``), at most
     1 deg short of the funnel's ``funnel_psi_deg``.
 
@@ -208,7 +210,7 @@ def funnel_aim_left_rad(behind_um: float, length_um: float, kappa_rad_per_um: fl
     8.47
     """
     lead = docking.lead_um(behind_um, length_um, math.degrees(max(kappa_rad_per_um, 0.0)) * 1000.0, 0.0)
-    turn = math.radians(6.0) + lead / (max(behind_um, 0.0) + 0.5 * length_um)
+    turn = math.radians(aim_left_deg) + lead / (max(behind_um, 0.0) + 0.5 * length_um)
     return min(turn, math.radians(funnel_psi_deg - 1.0))
 
 
@@ -263,8 +265,9 @@ class SlotApproach:
         return goal, back, a_pose, ready
 
     def _aim_behind(self, i: int, goal: np.ndarray, back: float, orbiting: Sequence[int]) -> np.ndarray:
-        """The pose robot ``i``'s gross motion aims at in the approach funnel of slot ``goal`` (corridor ``back`` um): 20 um
-        right of the line, pointing 6 deg left of it (the errors of the last leg then keep it in the funnel), at the
+        """The pose robot ``i``'s gross motion aims at in the approach funnel of slot ``goal`` (corridor ``back`` um):
+        ``Tuning.funnel_aim_right_um`` right of the line, pointing :meth:`aim_left_rad` left of it (the errors of the last
+        leg then keep it in the funnel), at the
         corridor's end, or half or all of ``Tuning.aim_behind_extra_um`` further back: the nearest from which a clockwise
         loop keeps clear of the ``orbiting`` robots, the structure and the arena edge (the corridor's end when none does).
 
@@ -275,7 +278,8 @@ class SlotApproach:
         cost as many trials as the loops saved."""
         lp = self.loop
         extra, r = lp.tune.aim_behind_extra_um, float(lp.r_hat[i])
-        poses = [line_pose(goal, b, 20.0, -self.aim_left_rad(i, b)) for b in (back, back + 0.5 * extra, back + extra)]
+        right = lp.tune.funnel_aim_right_um
+        poses = [line_pose(goal, b, right, -self.aim_left_rad(i, b)) for b in (back, back + 0.5 * extra, back + extra)]
         s = np.linspace(0.0, TWO_PI * r, int(TWO_PI * r / 10.0) + 2)  # a loop sampled every 10 um
         # each loop checked as the gross motion checks its way to the aim
         return next((p for p in poses if not lp.obstacles_hit(move(p, s, 1.0 / r), i, orbiting, target=p)), poses[0])
@@ -284,7 +288,8 @@ class SlotApproach:
         """How far left of its approach line (rad) robot ``i``'s funnel aim ``behind_um`` um behind its slot points
         (:func:`funnel_aim_left_rad` with its identified straight-line drift)."""
         lp = self.loop
-        return funnel_aim_left_rad(behind_um, float(lp.L[i]), float(lp.straight_drift.kappa[i]), lp.tune.funnel_psi_deg)
+        return funnel_aim_left_rad(behind_um, float(lp.L[i]), float(lp.straight_drift.kappa[i]), lp.tune.funnel_psi_deg,
+                                   lp.tune.funnel_aim_left_deg)
 
     def aim_region(self, i: int, goal: np.ndarray, back: float | None, a_pose: np.ndarray) -> np.ndarray | None:
         """Goals ``(K, 3)`` robot ``i``'s gross motion may head for instead of its aim ``a_pose`` in the approach funnel of

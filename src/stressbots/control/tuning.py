@@ -341,6 +341,14 @@ class GrossTuning:
     """deg. The approach funnel takes a robot pointing at most this far left of its approach line: the line approach
     merges by clockwise bursts, and from 32 deg (tried where the way to the funnel was blocked) they docked a robot 74 um
     off its slot."""
+    funnel_aim_left_deg: float = 6.0
+    """deg. The funnel aim points this far left of the approach line (more by the lead an identified clockwise drift
+    needs: :func:`~stressbots.control.slot_approach.funnel_aim_left_rad`), so that the last leg's heading error keeps
+    the robot pointing into the funnel (``funnel_psi_deg``) rather than past the line's heading, where only a loop
+    brings it back."""
+    funnel_aim_right_um: float = 20.0
+    """um. The funnel aim lies this far right of the approach line: the line approach merges by clockwise bursts from
+    the right, and a last leg that ends a few um left of its aim is then still on the right side of the line."""
     tight_aim_deg: tuple[float, ...] = (90.0, 60.0, 45.0)
     """deg, tried in order. Where a slot's a_i lies within ``escape_clearance_um`` of the arena edge or beyond it (a
     structure that formed 150-230 um nearer the edge than planned moved a stem's end there: the nominal a_i was 50 um
