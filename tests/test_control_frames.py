@@ -145,3 +145,34 @@ def test_a_heading_alone_far_off_is_blended_not_taken():
     pushed = ahead + [30.0, 0.0, off]
     est.update([(straight, 0.1)], free, pushed)
     assert np.allclose(est.pose, pushed)
+
+
+@given(st.lists(st.tuples(st.integers(0, 2), st.floats(0.05, 1.5)), min_size=1, max_size=4), st.floats(0.05, 0.4))
+@settings(max_examples=25, deadline=None)
+def test_the_predicted_track_is_where_the_robots_go(steps, dt):
+    """PlantLoop.predicted_track, without noise: its last poses are where the plant takes the robots along the same steps
+    (the simulator's truth), every sample is at most ``dt`` s of driving after the one before, and each robot's samples
+    follow the exact kinematics of its primitive (P_k: ranks <= k turn on their identified circles, the rest go straight)."""
+    from stressbots.kinematics import move
+
+    scn = random_scenario(3, 5, shape="tee", noise=LITERATURE_NOISE.scaled(0.0))
+    plant = SimulatedPlant(scn, seed=0)
+    loop = PlantLoop(scn, plant, budget_s=100.0, who="test")
+    track = loop.predicted_track(steps, dt_s=dt)
+    assert track.shape == (1 + sum(max(1, math.ceil(d / dt - 1e-9)) for _, d in steps), 3, 3)
+    assert np.array_equal(track[0], loop.est)
+    ranks = loop.rank
+    # sample by sample: a robot of rank <= k turns on its circle, the others run straight
+    row = 1
+    for k, d in steps:
+        cuts = max(1, math.ceil(d / dt - 1e-9))
+        for _ in range(cuts):
+            for i in range(3):
+                curv = 1.0 / loop.r_hat[i] if ranks[i] <= k else 0.0
+                want = move(track[row - 1, i], loop.v_hat[i] * d / cuts, curv)
+                assert np.allclose(track[row, i, :2], want[:2], atol=1e-6)
+            row += 1
+    loop.drive(steps)
+    truth = plant.true_poses()
+    assert np.allclose(track[-1, :, :2], truth[:, :2], atol=1e-3)
+    assert np.allclose(angle_difference(track[-1, :, 2], truth[:, 2]), 0.0, atol=1e-6)

@@ -350,3 +350,29 @@ def test_a_hold_drive_stops_before_the_t_x_that_loses_d_ns_loop(disc_ahead, head
     hold.loop.est = np.array([move(start, disc_ahead - 100.0, 0.0)])
     if meets(hold.loop.est[0]):
         assert not hold.loses_loop(0, path, 300.0, [], disc)
+
+
+def test_d_n_s_drives_check_d_prev_s_body_at_the_same_instants():
+    """PairPhase.body_gap (what D_n's timing loop checks every t_x): the least gap between
+    D_n's and D_{n-1}'s bodies along the predicted track, at the same instants. Independent truth: two parallel bodies
+    side by side, their long sides 7 um apart at one instant (the track brings them together, then apart), while the
+    same poses a step apart in time never come that close; inf with ``Tuning.loop_body_clearance_um`` off."""
+    from types import SimpleNamespace
+
+    from stressbots.control.pair import PairPhase
+    from stressbots.control.tuning import Tuning
+
+    L, W = 250.0, 60.0
+    xs = np.array([120.0, 80.0, 60.0 + 7.0, 90.0])  # D_n's x: the bodies 7 um apart at the third instant
+    track = np.zeros((len(xs), 2, 3))
+    track[:, 0, 0] = xs
+    for tune, want in ((Tuning(loop_body_clearance_um=20.0), 7.0), (Tuning(loop_body_clearance_um=0.0), math.inf)):
+        lp = SimpleNamespace(tune=tune, L=np.array([L, L]), W=np.array([W, W]), predicted_track=lambda _s, _t=track: _t)
+        gap = PairPhase.body_gap(SimpleNamespace(loop=lp), 0, 1, [(1, 1.0)])  # type: ignore[arg-type]
+        assert gap == pytest.approx(want)
+    # D_{n-1} a step behind in time: at the instant D_n is at x = 67 the other body is elsewhere (y = 400 um)
+    late = track.copy()
+    late[:, 1, 1] = [0.0, 0.0, 400.0, 0.0]
+    lp = SimpleNamespace(tune=Tuning(loop_body_clearance_um=20.0), L=np.array([L, L]), W=np.array([W, W]),
+                         predicted_track=lambda _s: late)
+    assert PairPhase.body_gap(SimpleNamespace(loop=lp), 0, 1, [(1, 1.0)]) == pytest.approx(80.0 - 60.0)  # type: ignore[arg-type]

@@ -139,16 +139,20 @@ class HoldingOrbit:
         """D_n drives its shortest path to ``hold``, re-planned every t_x while it stays clear
         (:meth:`hold_way_clear`); it stops where the way is no longer clear (the caller plans from there).
         False when D_n stalled (``Tuning.stall_count`` frames in a row under ``Tuning.stall_fraction`` of
-        the commanded travel: blocked, failure region H)."""
+        the commanded travel: blocked, failure region H). ``disc``: D_{n-1}'s orbit disc, with ``Tuning.fresh_pair_disc``
+        as measured at each t_x."""
         n, vN, rN, tune = self.loop.n, self.loop.v_hat[N], self.loop.r_hat[N], self.loop.tune
+        M = self.loop.by_rank[n - 1]
         stalls = 0
         hold_c = turning_centres(np.asarray(hold, float), rN)[0]
         for frame in range(tune.hold_frames):
+            if tune.fresh_pair_disc and frame > 0:
+                disc = self.pair.orbit_disc(M)
             # on the holding orbit counts once D_n has driven toward it: a D_n already there drives on to the hold
             # pose as before (that time is its wait)
             if arrived(self.loop.est[N], hold, tune) or (frame > 0 and self.on_hold_orbit(N, hold_c, lower, disc)):
                 return True
-            path = self.way_onto_orbit(N, hold, lambda smp: self.hold_way_clear(N, smp, lower, disc, short))
+            path = self.way_onto_orbit(N, hold, lambda smp, disc=disc: self.hold_way_clear(N, smp, lower, disc, short))
             if not self.hold_way_clear(N, path.sample(10.0), lower, disc, short):
                 return True
             whole = path.length / vN <= tune.whole_leg_factor * self.loop.tx

@@ -152,6 +152,23 @@ class PlantLoop:
     def after_drive(self, steps: Sequence[tuple[int, float]]) -> None:
         """Called after every frame :meth:`drive` read (failure detection hooks); nothing by default."""
 
+    def predicted_track(self, steps: Sequence[tuple[int, float]], dt_s: float = 0.1) -> np.ndarray:
+        """Every robot's predicted poses ``(S, n, 3)`` along primitive steps ``(k, duration_s)`` from the estimates: the
+        start, then every ``dt_s`` s or less (each step cut evenly) and the end of each step; docked robots stay. A query
+        of the estimator's model (identified speeds, radii and straight drift), nothing is driven.
+
+        Checking two bodies against each other at the same instants is what a disc check cannot do: an orbit disc
+        stands for wherever its robot may be, these poses say where it is."""
+        frozen = self.docked.copy()
+        p = self.est.copy()
+        out = [p]
+        for k, d in steps:
+            cuts = max(1, math.ceil(d / dt_s - 1e-9))
+            for _ in range(cuts):
+                p = self.estimator.predict([(self.rank <= k, d / cuts)], frozen, start=p)
+                out.append(p)
+        return np.stack(out)
+
     def drive(self, steps: Sequence[tuple[int, float]]) -> None:
         """Apply primitive steps ``(k, duration_s)``, then update the estimates from the next frame."""
         steps = [(int(k), float(d)) for k, d in steps if d > 1e-9]

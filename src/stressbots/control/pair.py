@@ -44,6 +44,7 @@ from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
     approach_room,
+    body_gap_along,
     deepest_overlap,
     framed_goals,
     frames_apart,
@@ -80,6 +81,19 @@ class PairPhase:
     def centre(self, i: int) -> np.ndarray:
         """Measured turning centre of robot ``i`` (with its identified radius)."""
         return turning_centres(self.loop.est[i], self.loop.r_hat[i])[0]
+
+    def orbit_disc(self, M: int) -> list[tuple[np.ndarray, float]]:
+        """D_{n-1}'s (robot ``M``'s) orbit disc as measured now: ``[(centre, r*)]`` (um), its turning centre and swept
+        radius with the identified radius (what D_n's paths keep clear of while G_1 forms)."""
+        return [(self.centre(M), float(self.loop.rstar[M]))]
+
+    def body_gap(self, N: int, M: int, steps) -> float:
+        """The least gap (um; < 0: overlap) between D_n's and D_{n-1}'s (``M``'s) bodies along ``steps`` as predicted at
+        the same instants (:func:`~stressbots.control.pair_geometry.body_gap_along`); inf with
+        ``Tuning.loop_body_clearance_um`` off."""
+        if self.loop.tune.loop_body_clearance_um <= 0.0:
+            return math.inf
+        return body_gap_along(self.loop.predicted_track(steps), N, M, self.loop.L, self.loop.W)
 
     def meet_distance(self, N: int, M: int) -> float:
         """D_n's centre distance from D_{n-1}'s tangent point at departure (:func:`meet_distance`)."""
@@ -247,7 +261,7 @@ class PairPhase:
         self.loop.log("hold", N, f"every pair frame failed ({last}); {self.loop.scn.names[N]} waits on a free orbit and G_1 "
                                  "is planned again")
         q = self.approach_pose(N, M, self.centre(M), D)
-        disc = [(self.centre(M), self.loop.rstar[M])]
+        disc = self.orbit_disc(M)
         if not self.holding.to_holding(N, q, lower, disc):
             self.recovery.escape(N, lower)
         return bool(np.hypot(*(self.loop.est[N, :2] - before)) >= self.loop.tune.round_moved_um)

@@ -18,7 +18,8 @@ from ..kinematics import move
 from ..robots import TWO_PI, angle_difference, front_midpoints
 from .queries import fine_motion_length, pose_on_orbit
 
-__all__ = ["approach_pose", "approach_room", "deepest_overlap", "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart",
+__all__ = ["approach_pose", "approach_room", "body_gap_along", "deepest_overlap",
+           "framed_goals", "frames_apart", "meet_distance", "pair_can_keep_apart",
            "pressed_together", "station_centre", "tight_discs"]
 
 
@@ -91,6 +92,20 @@ def tight_discs(disc, wall_clearance_um: float, clearance_um: float) -> list:
     """Discs ``(centre, radius)`` shrunk so that obstacle checks at ``wall_clearance_um`` keep ``clearance_um``
     from them."""
     return [(c, r - wall_clearance_um + clearance_um) for c, r in disc]
+
+
+def body_gap_along(track: np.ndarray, i: int, j: int, L, W) -> float:
+    """The least gap (um; < 0: overlap) between robots ``i``'s and ``j``'s bodies along ``track`` ``(S, n, 3)`` (poses at
+    the same instants: :meth:`~stressbots.control.loop.PlantLoop.predicted_track`); ``L``, ``W`` body lengths and widths
+    (um) indexed like the robots. The gap is the separating-axis one (:func:`~stressbots.collision.penetration_depth`), at
+    most the true distance.
+
+    >>> track = np.zeros((3, 2, 3)); track[:, 0, 0] = [200.0, 67.0, 150.0]   # side by side, 7 um apart at the middle
+    >>> round(body_gap_along(track, 0, 1, np.array([250.0, 250.0]), np.array([60.0, 60.0])), 6)
+    7.0
+    """
+    depth = penetration_depth(track[:, i], L[i], W[i], track[:, j], L[j], W[j])
+    return float(-np.max(depth))
 
 
 def pressed_together(pose_N, body_N, pose_M, body_M, *, within_um: float, dt_s: float = 0.2) -> float | None:

@@ -40,5 +40,8 @@ class PairLoop(DockingLoop, Protocol):
     @property
     def rstar(self) -> np.ndarray: ...
 
+    def predicted_track(self, steps: Sequence[tuple[int, float]], dt_s: float = 0.1) -> np.ndarray:
+        """Every robot's predicted poses (S, n, 3) along ``steps`` (:meth:`stressbots.control.loop.PlantLoop.predicted_track`)."""
+
     def park_orbits(self, k: int, top: int | None = None, margin_um: float | None = None, among: Sequence[int] = ()) -> None:
         """Move waiting orbits that drifted near trouble (:meth:`stressbots.control.runner._Runner.park_orbits`)."""

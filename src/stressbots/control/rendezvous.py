@@ -241,7 +241,7 @@ class Rendezvous:
                     self._plan, prev, moves0 = None, None, self.tend_moves
             vN = self.loop.v_hat[N]
             q = target_fn()
-            disc = [(self.pair.centre(M), self.loop.rstar[M])]
+            disc = self.pair.orbit_disc(M)
             arrivals = self._arrivals(M, th_dep, early)
             path = self.continued(N, arrivals, lower, disc)
             if path is None and prev is not None and prev.length - vN * self.loop.tx <= self.loop.tune.final_leg_s * vN:
@@ -254,7 +254,7 @@ class Rendezvous:
                     # another would too; the caller falls back (another leg option, a holding orbit, a new frame)
                     self.loop.log("retry", N, f"{self.loop.scn.names[N]} missed its time after {loops - 1} timing loops")
                     return False
-                self._drive_timing_loop(N, loop, vN, lower, disc, tend)
+                self._drive_timing_loop(N, M, loop, vN, lower, disc, tend)
                 prev = None
                 continue
             prev = path
@@ -319,9 +319,12 @@ class Rendezvous:
             loop = None if found is None else found[4]
         return path, loop
 
-    def _drive_timing_loop(self, N: int, loop: tuple[float, int], vN: float, lower, disc, tend: Tending = Tending.OFF) -> None:
+    def _drive_timing_loop(self, N: int, M: int, loop: tuple[float, int], vN: float, lower, disc,
+                           tend: Tending = Tending.OFF) -> None:
         """D_n circles ``loop`` = (radius_um, count) interpolated loops (P_n / P_{n-1} alternating) at ``vN``
-        um/s, a t_x at a time; it stops early where the rest is no longer clear (:meth:`loop_clear`), or (``tend``)
+        um/s, a t_x at a time; it stops early where the rest is no longer clear (:meth:`loop_clear`; against D_{n-1}'s
+        (``M``'s) orbit ``disc``, or with ``Tuning.fresh_pair_disc`` its disc as measured at each t_x; and the next t_x
+        against D_{n-1}'s body at the same instants, ``Tuning.loop_body_clearance_um``), or (``tend``)
         where a waiting orbit had to be moved (:meth:`_tended`: the timing is then planned again)."""
         n = self.loop.n
         R, m = loop
@@ -331,10 +334,19 @@ class Rendezvous:
         while total > 1e-6:  # the loop, a t_x at a time (it ends where it began)
             if tend is not Tending.OFF and self._tended(n):
                 break
+            if self.loop.tune.fresh_pair_disc:
+                disc = self.pair.orbit_disc(M)
             if not self.loop_clear(N, R, total, lower, disc):
                 self.loop.log("loop", N, f"{self.loop.scn.names[N]}'s timing loop has drifted toward an obstacle; "
                                          "it plans again from here")
                 break
             d = min(self.loop.tx, total)
-            self.loop.drive(self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1))
+            steps = self.loop.interpolated_steps(float(self.loop.r_hat[N] / R), d, n, n - 1)
+            gap = self.pair.body_gap(N, M, steps)
+            if gap < self.loop.tune.loop_body_clearance_um:
+                names = self.loop.scn.names
+                self.loop.log("loop", N, f"{names[N]}'s timing loop would pass {gap:.0f} um from {names[M]}'s body; "
+                                         "it plans again from here")
+                break
+            self.loop.drive(steps)
             total -= d

@@ -42,6 +42,14 @@ class PairTuning:
     """Whether D_n's timed run to a clear track (a station-transfer leg) first moves waiting orbits that drifted near
     trouble, every t_x; the leg is planned again after such a move (:class:`~stressbots.control.rendezvous.Tending`).
     On since session 21, with ``tend_during_rendezvous`` (see there)."""
+    fresh_pair_disc: bool = True
+    """Whether D_n's manoeuvres that run many t_x (a timing loop, a drive to a holding orbit) check each t_x against
+    D_{n-1}'s orbit disc as measured at that frame (:meth:`~stressbots.control.pair.PairPhase.orbit_disc`), not as
+    it was when the manoeuvre began. The identified radius of a robot that has barely turned yet keeps changing while
+    it orbits (held-out 40:4 at 2x: D_{n-1}'s r_hat 205 -> 223 um in 9 s, its measured centre 55 um away): a 15 s
+    timing loop checked against the disc of its first frame ran D_n into D_{n-1}'s body, and they stayed wedged. Alone
+    (session 25): held-out 1x and 2x seeds 0-3 trial for trial the same, a few durations changed; with
+    ``loop_body_clearance_um`` see there."""
     g1_clearance_um: float = 25.0
     """Clearance of D_n's timed paths from D_{n-1}'s orbit while G_1 forms (its approach runs close to it)."""
     wall_clearance_um: float = 40.0
@@ -170,6 +178,16 @@ class PairTuning:
     """um. Clearance the rest of D_n's timing loop keeps from the arena edge and the orbits, checked from its
     measured pose every t_x; below it the loop stops and the timing is planned again. The loop was planned at
     ``wall_clearance_um`` (40 um): this leaves 25 um for drift before the check fires."""
+    loop_body_clearance_um: float = 20.0
+    """um (0: off). Each t_x of D_n's timing loop must also keep this far from D_{n-1}'s body as predicted at the same
+    instants (:meth:`~stressbots.control.pair.PairPhase.body_gap`), else the loop stops and the timing is planned again.
+    The rest of the loop is checked against D_{n-1}'s orbit disc at no margin (``loop_clearance_um`` less the G_1
+    shortfall): a loop predicted to pass 4 um outside that disc ran into D_{n-1}'s body one t_x later, where its body
+    was just then (held-out 40:4 at 2x; predicted 17 um apart, they touched), and the pair stayed wedged. With
+    ``fresh_pair_disc`` (session 25): held-out 2x seeds 4-7 221/240 against 219 (+33:7 +40:4), tuning 236/240 against
+    235 (+93:0), held-out 1x and 2x seeds 0-3 trial for trial the same. The same check on D_n's drives to a holding
+    orbit (stop before a t_x that ends within 20 um of D_{n-1}'s body) lost 32:0, 55:1 and 33:5 at 2x and gained
+    none: a hold stopped there left D_n unable to move at all."""
     recovery_keeps_off_discs: bool = False
     """When True, D_n's direct way out of the orbits around it (:meth:`~stressbots.control.pair_recovery.PairRecovery.escape`)
     stops turning before its body would enter a lower robot's orbit disc it is not in (then the searched escape, body
