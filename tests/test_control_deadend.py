@@ -148,16 +148,16 @@ def test_a_robot_heading_into_the_arena_edge_a_few_um_ahead_is_boxed_in_one_alon
 
 
 def test_a_g1_failure_names_a_d_n_boxed_in_against_the_arena_edge():
-    """PairPhase.boxed_note: the failure message says D_n is pinned against the edge (tuning 116:0 gave up with only
+    """g1_failure.boxed_note: the failure message says D_n is pinned against the edge (tuning 116:0 gave up with only
     "found no timed path to its approach line"), and says nothing for a D_n that can still move on."""
-    from stressbots.control.pair import PairPhase
+    from stressbots.control.g1_failure import boxed_note
 
     into = np.array([1000.0, 2000.0 - 0.5 * L - 20.0, 0.0])
     for pose, boxed in ((into, True), (np.array([1000.0, 1000.0, 0.3]), False)):
         lp = hand_loop(pose)
         lp.gross = GrossMotion(lp)
         lp.scn.names = ("R5",)
-        note = PairPhase.boxed_note(SimpleNamespace(loop=lp), 0)  # type: ignore[arg-type]
+        note = boxed_note(lp, 0)
         assert (note == "R5 is boxed in against the arena edge (no clockwise turn and straight of it keeps 5 um from it); ") == boxed
         assert boxed or note == ""
 
@@ -194,12 +194,14 @@ def _scripted_pair_phase(rounds_tried, moved: bool, boxed: str = "", pair_rounds
     tries = iter(rounds_tried)
     tune = Tuning(pair_rounds=pair_rounds)
     lp = SimpleNamespace(n=2, by_rank={1: 0, 2: 1}, tune=tune, scn=SimpleNamespace(names=("R0", "R1")),
-                         orbiting_below=lambda _k: [], abort=_Gave, log=lambda *_a: None)
+                         orbiting_below=lambda _k: [], abort=_Gave, log=lambda *_a: None,
+                         est=np.array([[0.0, 0.0, 0.0], [2000.0, 0.0, 0.0]]), docked=np.zeros(2, bool),
+                         r_hat=np.array([R, R]), rstar=np.array([RSTAR, RSTAR]))
     return SimpleNamespace(
         loop=lp, meet_distance=lambda *_a: 300.0, room_frame=lambda *_a: (0.0, 0.0, 0.0),
         form_round=lambda *_a: (False, next(tries), "R1 found no timed path to its approach line"),
         between_rounds=lambda *_a: moved, meeting=SimpleNamespace(departure=SimpleNamespace(meet_as_they_are=lambda *_a: False)),
-        wedge_note=lambda *_a: "", boxed_note=lambda _n: boxed, overlap_note=lambda _n: "")
+        boxed_note=lambda _n: boxed, body=lambda _i: (250.0, 60.0, 100.0, 200.0))
 
 
 @pytest.mark.parametrize(("rounds_tried", "moved", "boxed", "starts"), [
@@ -223,20 +225,20 @@ def test_a_g1_failure_gives_why_re_planning_stopped_not_a_stage_symptom(rounds_t
 
 
 def test_a_g1_failure_names_the_orbit_d_n_is_hemmed_in_by():
-    """PairPhase.overlap_note names the undocked robot whose orbit disc reaches deepest into D_n's and by how much
+    """g1_failure.overlap_note names the undocked robot whose orbit disc reaches deepest into D_n's and by how much
     (independent truth: both heading north, so both turning centres lie R east of the robots and are as far apart as
     the robots); nothing when no disc overlaps, and a docked robot's orbit does not count."""
-    from stressbots.control.pair import PairPhase
+    from stressbots.control.g1_failure import overlap_note
 
     d_n = np.array([1000.0, 1000.0, 0.0])
     near = d_n + np.array([1.5 * RSTAR, 0.0, 0.0])  # discs 0.5 r* into each other
     far = d_n + np.array([0.0, 2.5 * RSTAR, 0.0])  # 0.5 r* apart
     lp = SimpleNamespace(est=np.array([d_n, near, far]), r_hat=np.array([R, R, R]), rstar=np.array([RSTAR] * 3),
                          docked=np.zeros(3, bool), n=3, scn=SimpleNamespace(names=("R4", "R3", "R0")))
-    note = PairPhase.overlap_note(SimpleNamespace(loop=lp), 0)  # type: ignore[arg-type]
+    note = overlap_note(lp, 0)
     assert note == f"R4's orbit lies {0.5 * RSTAR:.0f} um into R3's as measured; "
     lp.docked[1] = True
-    assert PairPhase.overlap_note(SimpleNamespace(loop=lp), 0) == ""  # type: ignore[arg-type]
+    assert overlap_note(lp, 0) == ""
 
 
 # -- back_off: a free robot is never driven blindly --------------------------------------------------

@@ -39,17 +39,15 @@ import numpy as np
 from ..collision import arena_gap, bodies_hit_discs, point_rectangle_distance
 from ..kinematics import move
 from ..robots import TWO_PI, turning_centres
-from .g1_failure import G1Stop, g1_failure
+from .g1_failure import G1Stop, boxed_note, g1_failure, overlap_note, wedge_note
 from .holding import HoldingOrbit
 from .pair_geometry import (
     approach_pose,
     approach_room,
     body_gap_along,
-    deepest_overlap,
     framed_goals,
     frames_apart,
     meet_distance,
-    pressed_together,
     station_centre,
     tight_discs,
 )
@@ -146,32 +144,13 @@ class PairPhase:
                 break
         if self.meeting.departure.meet_as_they_are(N, M):
             return
-        raise self.loop.abort(g1_failure(self.loop.scn.names[N], stop, frames, rounds,
-                                         f"{self.wedge_note(N, M)}{self.boxed_note(N)}{self.overlap_note(N)}", last))
-
-    def overlap_note(self, N: int) -> str:
-        """'R4's orbit lies 150 um into R3's as measured; ' when D_n's orbit disc overlaps another undocked robot's
-        (:func:`~stressbots.control.pair_geometry.deepest_overlap`), else '': D_n hemmed in by an orbit it cannot leave
-        (held-out 38:3 at 2x: R4 beside R3, every pair frame and hold refused at 88 s) otherwise ended with the last
-        stage's symptom alone ("found no timed path")."""
         lp = self.loop
-        others = [j for j in range(lp.n) if j != N and not lp.docked[j]]
-        hit = deepest_overlap(turning_centres(lp.est, lp.r_hat), lp.rstar, N, others)
-        if hit is None:
-            return ""
-        names = lp.scn.names
-        return f"{names[N]}'s orbit lies {hit[1]:.0f} um into {names[hit[0]]}'s as measured; "
+        wedged = wedge_note(lp.scn.names, N, M, (lp.est[N], self.body(N)), (lp.est[M], self.body(M)), lp.tune.escape_body_clearance_um)
+        raise lp.abort(g1_failure(lp.scn.names[N], stop, frames, rounds, f"{wedged}{self.boxed_note(N)}{overlap_note(lp, N)}", last))
 
     def boxed_note(self, N: int) -> str:
-        """'R5 is boxed in against the arena edge ...; ' when D_n can neither turn nor drive on for the arena edge (and
-        the docked bodies) alone (:meth:`~stressbots.control.escapes.Escapes.boxed_in` with no orbits), else ''.
-        Nothing G_1 re-plans frees a one-way robot there, and the last stage's reason ("found no timed path") would
-        name a symptom (tuning 116:0 at 1x: D_n pinned against the bottom edge at 21 s, G_1 gave up at 185 s)."""
-        lp = self.loop
-        if not lp.gross.escapes.boxed_in(N, lp.est[N], []):
-            return ""
-        return (f"{lp.scn.names[N]} is boxed in against the arena edge (no clockwise turn and straight of it keeps "
-                f"{lp.tune.viable_clearance_um:.0f} um from it); ")
+        """D_n's note when it is boxed in against the arena edge (:func:`~stressbots.control.g1_failure.boxed_note`)."""
+        return boxed_note(self.loop, N)
 
     def room_frame(self, N: int, M: int, D: float, lower) -> tuple[float, float, float]:
         """The pair frame G_1 first aims at: the nominal one, unless a later robot's approach has less than
@@ -206,17 +185,6 @@ class PairPhase:
         ``(length_um, width_um, speed_um_s, radius_um)``, speed and radius as identified."""
         lp = self.loop
         return float(lp.L[i]), float(lp.W[i]), float(lp.v_hat[i]), float(lp.r_hat[i])
-
-    def wedge_note(self, N: int, M: int) -> str:
-        """'R7 is pressed against R6 (...); ' when D_n and D_{n-1} are wedged (:func:`pressed_together`, within
-        ``Tuning.escape_body_clearance_um``), else ''."""
-        lp = self.loop
-        sep = pressed_together(lp.est[N], self.body(N), lp.est[M], self.body(M), within_um=lp.tune.escape_body_clearance_um)
-        if sep is None:
-            return ""
-        names = lp.scn.names
-        gap = f"{sep:.0f} um apart" if sep >= 0.0 else f"{-sep:.0f} um into each other"
-        return f"{names[N]} is pressed against {names[M]} ({gap} as measured) and every primitive drives them closer; "
 
     def form_round(self, N: int, M: int, D: float, lower, last: str, frames_max: int,
                    first: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[bool, int, str]:
