@@ -9,9 +9,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from stressbots.collision import arena_gap, penetration_depth
 from stressbots.control import ControllerOptions
 from stressbots.control.loop import PlantLoop, frame_pieces
 from stressbots.generate import LITERATURE_NOISE, random_scenario
@@ -151,8 +152,9 @@ def test_a_heading_alone_far_off_is_blended_not_taken():
 @settings(max_examples=25, deadline=None)
 def test_the_predicted_track_is_where_the_robots_go(steps, dt):
     """PlantLoop.predicted_track, without noise: its last poses are where the plant takes the robots along the same steps
-    (the simulator's truth), every sample is at most ``dt`` s of driving after the one before, and each robot's samples
-    follow the exact kinematics of its primitive (P_k: ranks <= k turn on their identified circles, the rest go straight)."""
+    (the simulator's truth) while no body meets the arena edge or another body (contact stops them in the plant), every
+    sample is at most ``dt`` s of driving after the one before, and each robot's samples follow the exact kinematics of
+    its primitive (P_k: ranks <= k turn on their identified circles, the rest go straight)."""
     from stressbots.kinematics import move
 
     scn = random_scenario(3, 5, shape="tee", noise=LITERATURE_NOISE.scaled(0.0))
@@ -172,6 +174,11 @@ def test_the_predicted_track_is_where_the_robots_go(steps, dt):
                 want = move(track[row - 1, i], loop.v_hat[i] * d / cuts, curv)
                 assert np.allclose(track[row, i, :2], want[:2], atol=1e-6)
             row += 1
+    # the plant stops bodies at the arena edge and at each other (contact), which no prediction knows of
+    L, W = scn.lengths_um, scn.widths_um
+    assume(all((arena_gap(track[:, i], L[i], W[i], scn.arena_um) > 5.0).all() for i in range(3)))
+    assume(all((penetration_depth(track[:, a], L[a], W[a], track[:, b], L[b], W[b]) < -5.0).all()
+               for a in range(3) for b in range(a + 1, 3)))
     loop.drive(steps)
     truth = plant.true_poses()
     assert np.allclose(track[-1, :, :2], truth[:, :2], atol=1e-3)
