@@ -188,11 +188,11 @@ class _Gave(Exception):
     pass
 
 
-def _scripted_pair_phase(rounds_tried, moved: bool, boxed: str = "", pair_rounds: int = 2):
+def _scripted_pair_phase(rounds_tried, moved: bool, boxed: str = ""):
     """A PairPhase stand-in whose rounds fail as scripted: ``rounds_tried`` frames per round, each failing with "R1 found
     no timed path to its approach line"; D_n moves between rounds when ``moved``; ``boxed`` is its boxed note."""
     tries = iter(rounds_tried)
-    tune = Tuning(pair_rounds=pair_rounds)
+    tune = Tuning()  # two rounds of pair frames (6, then 3)
     lp = SimpleNamespace(n=2, by_rank={1: 0, 2: 1}, tune=tune, scn=SimpleNamespace(names=("R0", "R1")),
                          orbiting_below=lambda _k: [], abort=_Gave, log=lambda *_a: None,
                          est=np.array([[0.0, 0.0, 0.0], [2000.0, 0.0, 0.0]]), docked=np.zeros(2, bool),
