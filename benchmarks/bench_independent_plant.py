@@ -4,8 +4,13 @@ Runs the generality benchmark's layouts (:func:`bench_generality.layout_spec`, i
 with :class:`independent_plant.IndependentPlant` behind a protocol-only wrapper, so the controller sees
 ``observe``/``apply`` and nothing else, as an outside checker's plant would. A trial counts as a success
 only when the controller reports success AND the plant's true poses confirm it: RMS shape error after the
-best rigid alignment (own Kabsch) within the controller's tolerance and every body touching the structure
-(the contact graph connected within ``--touch-um``). Both verdicts are recorded.
+best rigid alignment (own Kabsch) within the controller's tolerance, every body touching the structure
+(the contact graph connected within ``--touch-um``) and every robot *docked in the plant's own judgement*
+(a member of its structure: G_1 or joined by docking compliance). SPEC 6 counts success as "every robot
+docked" and an outside checker asks its own plant: a robot stopped off flush against a structure corner
+(the plant's "front edge on a structure corner", "docking rotation blocked") is stuck, not docked, even
+when it sits within the shape tolerance; later robots then meet a free robot, not the structure. Both
+verdicts are recorded.
 
 With ``--baseline FILE[,FILE]`` (bench_generality JSONL records of our simulator on the same layouts and
 plant seeds) it prints, for every trial, where the two plants disagree, with the controller's last events
@@ -63,12 +68,15 @@ def judge(result, plant: ip.IndependentPlant, L, W) -> dict:
     true = plant.true_poses()
     rms, rot = ip.rigid_rms(true, result.nominal_goals, L, W)
     joined = connected(true, L, W)
-    ok = bool(result.success) and rms <= tol and joined
+    free = [plant.names[i] for i in np.flatnonzero(~plant.member)]
+    ok = bool(result.success) and rms <= tol and joined and not free
     why = None
     if result.success and not ok:
-        why = (f"claimed success but true shape error {rms:.1f} um" if rms > tol else "claimed success but the structure is not one piece")
+        why = (f"claimed success but true shape error {rms:.1f} um" if rms > tol else
+               "claimed success but the structure is not one piece" if not joined else
+               f"claimed success but the plant never docked {', '.join(free)} (stuck, not members of its structure)")
     return {"success": ok, "claimed": bool(result.success), "true_shape_um": rms, "true_rotation_deg": rot,
-            "connected": joined, "truth_failure": why}
+            "connected": joined, "not_docked": free, "truth_failure": why}
 
 
 def run_trial(scn, plan, ps: int, cap_s: float | None) -> dict:

@@ -163,3 +163,23 @@ def test_a_robot_meeting_the_bar_inside_the_cone_turns_flush_and_docks():
     front = ip.corners(got[2], 260.0, 60.0)[0, :2]
     assert front[:, 0] == pytest.approx([1030.0, 1030.0], abs=0.05)  # flush on the bar's right side
     assert [e["kind"] for e in plant.events if e["robot"] == "R2"] == ["docking", "docked", "pushing"]
+
+
+def test_the_benchmark_counts_a_robot_its_plant_never_docked_as_a_failure():
+    """SPEC 6: success is every robot docked. A robot stuck off flush in its slot sits within the shape tolerance, but
+    the plant (an outside checker's) never took it into its structure: bench_independent_plant's verdict says so."""
+    from types import SimpleNamespace
+
+    spec = importlib.util.spec_from_file_location("bench_independent_plant", _PATH.parent / "bench_independent_plant.py")
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    lengths, widths = np.array([250.0, 250.0]), np.array([60.0, 60.0])
+    goals = np.array([[0.0, -125.0, 0.0], [0.0, 125.0, math.pi]])  # G_1: front to front
+    claimed = SimpleNamespace(success=True, nominal_goals=goals)
+    for member, ok in (([True, True], True), ([True, False], False)):
+        plant = SimpleNamespace(true_poses=goals.copy, member=np.array(member), names=("R0", "R1"))
+        verdict = bench.judge(claimed, plant, lengths, widths)
+        assert verdict["success"] is ok and verdict["connected"] and verdict["true_shape_um"] < 1e-9
+        assert verdict["not_docked"] == ([] if ok else ["R1"])
+        assert (verdict["truth_failure"] is None) == ok
