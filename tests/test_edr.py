@@ -46,7 +46,9 @@ def test_closed_loop_without_noise_assembles_through_the_protocol(example):
     truth = sim.true_poses()
     assert np.allclose(result.final_observed, truth, atol=1e-6)  # noiseless camera: estimate = truth
     independent = _check_truth(scn, plan, sim, result)
-    assert independent < 1.0 and abs(independent - result.shape_error_rms_um) < 1e-9
+    # D docks 2.4 um off its slot (the noiseless loop's own placement), and B's slot at the end of D's face follows the
+    # face so that both of B's front corners land on it (control.landing): 1.4 um RMS, was 0.9 before B followed it
+    assert independent < 2.0 and abs(independent - result.shape_error_rms_um) < 1e-9
     d = result.to_dict()
     assert {"success", "seed", "robots"} <= set(d) and all({"name", "final", "goal", "docked"} <= set(r) for r in d["robots"])
 

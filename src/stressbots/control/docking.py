@@ -194,6 +194,14 @@ class DockView:
     walk_var_rad2_per_um: float = 0.0
     """Heading variance (rad^2) the drift's random walk adds per um driven (the scenario's declared drift,
     :mod:`stressbots.drift`): the part of the drift no identification predicts."""
+    slot: np.ndarray | None = None
+    """Where docking compliance is to leave the robot, when that is not ``goal`` (a chosen incidence: ``goal`` is its
+    pose at contact, :func:`~stressbots.control.landing.landing_pose`); where it stops is judged against this."""
+
+    @property
+    def flush_slot(self) -> np.ndarray:
+        """The slot a stopped robot is judged against: ``slot``, else ``goal``."""
+        return self.goal if self.slot is None else self.slot
 
 
 def _fix(view: DockView, aim_left_um: float) -> LineFix:
@@ -273,8 +281,8 @@ def line_approach(
     for _ in range(tune.approach_frames):
         view = see()
         behind, right, psi = line_coords(view.goal, view.pose)
-        if (float(np.hypot(*(view.pose[:2] - view.goal[:2]))) <= opts.dock_tol_um
-                and abs(float(angle_difference(view.pose[2], view.goal[2]))) <= math.radians(opts.dock_tol_deg)):
+        if (float(np.hypot(*(view.pose[:2] - view.flush_slot[:2]))) <= opts.dock_tol_um
+                and abs(float(angle_difference(view.pose[2], view.flush_slot[2]))) <= math.radians(opts.dock_tol_deg)):
             break  # at the structure already: push and judge
         lead, walk = aim_lead(view, behind, tune, loop_blocked)
         # line coordinates about the aim point, ``lead`` left of the slot
@@ -371,6 +379,6 @@ def settle(see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: flo
         yield [(k - 1, tx)]
         view = see()
         if float(np.hypot(*(view.pose[:2] - before[:2]))) < tune.settle_fraction * view.nominal_speed_um_s * tx:
-            return stopped_verdict(view.pose, view.goal, dock_tol_um=opts.dock_tol_um, dock_tol_deg=opts.dock_tol_deg,
+            return stopped_verdict(view.pose, view.flush_slot, dock_tol_um=opts.dock_tol_um, dock_tol_deg=opts.dock_tol_deg,
                                    flush_um=tune.flush_um, off_slot_um=tune.off_slot_um)
     return DockOutcome.GAVE_UP

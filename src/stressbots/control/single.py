@@ -28,7 +28,7 @@ import numpy as np
 from .. import paths as pathlib
 from ..kinematics import move
 from ..robots import TWO_PI, angle_difference
-from . import docking
+from . import docking, landing
 from .docking import DockOutcome, DockView
 from .gross import SteerOutcome
 from .loopview import DockingLoop
@@ -105,6 +105,9 @@ class SingleDocking:
         self.loop = loop
         self.approach = SlotApproach(loop)
         """Where robot ``i`` aims and what it can reach from where it is (queries of the loop's estimates)."""
+        self.flush_slots: dict[int, np.ndarray] = {}
+        """Robots aiming at a chosen incidence (:meth:`land`): the slot docking compliance leaves them in, their goal
+        once docked."""
 
     def dock(self, k: int, route_phase) -> None:
         """Dock D_k (k < n-1): gross motion into the approach funnel behind its slot, then the line approach.
@@ -119,6 +122,7 @@ class SingleDocking:
         """
         lp = self.loop
         i = lp.by_rank[k]
+        self.land(i)
         lp.park_orbits(k)
         orbiting = lp.orbiting_below(k)
         if lp.motion is not None and (abs(lp.motion[0]) > math.radians(5.0) or np.hypot(*(lp.motion[2] - lp.motion[1])) > 60.0):
@@ -207,6 +211,25 @@ class SingleDocking:
                                                   way_points(goal, a_pose, back, float(lp.r_hat[i]))])):
             self.back_off(i, k)
 
+    def land(self, i: int) -> None:
+        """Aim robot ``i`` where docking compliance takes it (:func:`~stressbots.control.landing.landing_pose`, docked
+        bodies as measured): its slot, moved along the face, or reached at a chosen incidence; log the change."""
+        lp = self.loop
+        poses, lengths, widths = self.approach.bodies()
+        docked = np.flatnonzero(lp.docked)
+        n = len(lp.by_rank)
+        pair = [int(np.flatnonzero(docked == lp.by_rank[k])[0]) for k in (n, n - 1) if lp.docked[lp.by_rank[k]]]
+        if len(pair) == 2:
+            poses = poses.copy()
+            poses[pair] = landing.aligned_pair(poses[pair[0]], poses[pair[1]], float(lengths[pair[0]]), float(lengths[pair[1]]))
+        land = landing.landing_pose(lp.goals[i], float(lp.L[i]), float(lp.W[i]), (poses, lengths, widths), lp.tune,
+                                     landing.noise_scale(lp.scn.noise))
+        if land.note:
+            lp.goals[i] = land.aim
+            if not np.array_equal(land.aim, land.slot):
+                self.flush_slots[i] = land.slot
+            lp.log("landing", i, f"{lp.scn.names[i]}'s slot {land.note} (docking compliance needs a front corner on a face)")
+
     # -- fine motion ----------------------------------------------------------------------------------
 
     def dock_view(self, i: int) -> DockView:
@@ -214,7 +237,7 @@ class SingleDocking:
         lp = self.loop
         return DockView(lp.est[i].copy(), float(lp.v_hat[i]), float(lp.r_hat[i]), float(lp.omega_hat[i]),
                         lp.goals[i].copy(), float(lp.L[i]), float(lp.v[i]), float(lp.straight_drift.kappa[i]),
-                        float(lp.straight_drift.walk_var_per_um))
+                        float(lp.straight_drift.walk_var_per_um), self.flush_slots.get(i))
 
     def play(self, policy) -> Any:
         """Apply the steps a policy yields, frame by frame; return its outcome (the loop is the only plant I/O)."""
@@ -252,6 +275,10 @@ class SingleDocking:
         dth = math.degrees(abs(angle_difference(pose[2], goal[2])))
         if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
             lp.docked[i] = True
+            if i in self.flush_slots:  # it was aiming at its pose at contact; the slot is where compliance leaves it
+                lp.goals[i] = self.flush_slots.pop(i)
+                dpos = float(np.hypot(*(pose[:2] - lp.goals[i, :2])))
+                dth = math.degrees(abs(angle_difference(pose[2], lp.goals[i, 2])))
             off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
             lp.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
         elif outcome is DockOutcome.STUCK:
@@ -281,7 +308,7 @@ class SingleDocking:
     def near_slot(self, i: int) -> bool:
         """Whether robot ``i`` (measured) is at its slot within the docking tolerances."""
         lp = self.loop
-        goal = lp.goals[i]
+        goal = self.flush_slots.get(i, lp.goals[i])
         return bool(
             np.hypot(*(lp.est[i, :2] - goal[:2])) <= lp.opts.dock_tol_um
             and abs(angle_difference(lp.est[i, 2], goal[2])) <= math.radians(lp.opts.dock_tol_deg)

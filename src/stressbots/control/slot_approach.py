@@ -235,7 +235,8 @@ class SlotApproach:
     def __init__(self, loop: DockingLoop):
         self.loop = loop
 
-    def _bodies(self) -> Bodies:
+    def bodies(self) -> Bodies:
+        """The docked bodies as measured: ``(poses (m, 3), lengths (m,), widths (m,))``."""
         lp = self.loop
         docked = np.flatnonzero(lp.docked)
         return lp.est[docked], lp.L[docked], lp.W[docked]
@@ -316,7 +317,7 @@ class SlotApproach:
         final arc) rather than the pose straight behind the slot: by the arena edge that pose lay outside the arena, and
         every later attempt aimed there (tuning 118:0 at 1x)."""
         lp = self.loop
-        pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self._bodies(), lp.scn.arena_um,
+        pose = fine_start(goal, lp.r[i], lp.L[i], lp.W[i], lp.opts.fine_distance_um, self.bodies(), lp.scn.arena_um,
                           straight_if_none=False)
         if pose is None and route_phase is not None:
             pose = self._route_start(route_phase, i)
@@ -334,7 +335,7 @@ class SlotApproach:
         ``Tuning.tight_aim_radius`` times its identified turning radius), docked bodies as measured."""
         lp = self.loop
         rho = lp.tune.tight_aim_radius * float(lp.r_hat[i])
-        return tight_starts(goal, rho, lp.L[i], lp.W[i], self._bodies(), lp.scn.arena_um, lp.tune.tight_aim_deg)
+        return tight_starts(goal, rho, lp.L[i], lp.W[i], self.bodies(), lp.scn.arena_um, lp.tune.tight_aim_deg)
 
     def fine_start_on(self, ph, i: int) -> np.ndarray:
         """a_i on the nominal route phase ``ph`` (:meth:`_route_start`), else :meth:`fine_start`."""
@@ -351,7 +352,7 @@ class SlotApproach:
     def approach_length(self, i: int) -> float | None:
         """How far behind robot ``i``'s slot the approach line is clear of the structure (:func:`approach_length`)."""
         lp = self.loop
-        return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self._bodies(), lp.scn.arena_um,
+        return approach_length(lp.goals[i], lp.L[i], lp.W[i], lp.tune.approach_lengths_um, self.bodies(), lp.scn.arena_um,
                                lp.tune.approach_lead_in_radii * float(lp.r_hat[i]), float(lp.r_hat[i]), lp.opts.clearance_um,
                                unreachable_ok=not lp.tune.arc_when_line_unreachable)
 
@@ -414,7 +415,7 @@ class SlotApproach:
         far = np.hypot(*(arc[:, :2] - goal[:2]).T) > lp.L[i]
         return not (lp.obstacles_hit(arc[far], i, lp.orbiting_below(k), clearance=lp.tune.escape_clearance_um)
                     or any((penetration_depth(arc[:-1], lp.L[i], lp.W[i], pj, lj, wj) > 0.5).any()
-                           for pj, lj, wj in zip(*self._bodies(), strict=True)))
+                           for pj, lj, wj in zip(*self.bodies(), strict=True)))
 
     def slot_arc(self, i: int) -> tuple[float, float, np.ndarray | None] | None:
         """``(rho, length_um, aim)``: the one interpolated clockwise arc (:func:`~stressbots.control.queries.turn_fraction`)

@@ -533,6 +533,38 @@ class DockingTuning:
     off_slot_um: float = 90.0
     """... and counts as docked off its slot up to this far along the face: its front touches the structure, so it can
     neither turn (every front point moves forward) nor reverse; recovery is impossible."""
+    landing_left_margin_um: float = 7.0
+    """A docking robot's left front corner should land at least this far (um) inside the face its slot rests on
+    (:func:`~stressbots.control.landing.landing_pose`): docking compliance turns a robot flush only about a front
+    corner on a structure edge, which corner leads depends on how the robot arrives turned (either way, measured),
+    and a docked robot sits a few um off its own slot, so the face under a later slot is not where the plan put it.
+    The line approach aims left of the slot (:func:`~stressbots.control.docking.aim_lead`), so its landings spread
+    further left: measured on an independent plant at the literature's noise, 5 % landed more than 7.1 um left of
+    their aim, 5 % more than 2.3 um right."""
+    landing_right_margin_um: float = 3.0
+    """The same for the right front corner (um)."""
+    landing_incidence_deg: float = 4.0
+    """The chosen incidence (deg) of a robot whose face has room for one leading corner only: it arrives turned this
+    much, so that the corner that leads is known. Twice the spread of the incidence at contact measured on an
+    independent plant (quartiles +-1.1 deg): the other corner then leads in about 2 % of dockings."""
+    landing_incidence_cost_um: float = 3.0
+    """What a chosen incidence counts as (um of shift) when choosing between it and moving the slot: the turned
+    approach lands its leading corner as precisely, but it is a second manoeuvre the gross motion's funnel was not
+    aimed for, and its compliance turn sweeps 4 deg of body."""
+    landing_level_tol_um: float = 2.0
+    """Parts of the structure within this (um) of the face's level under the slot are the face; anything standing
+    further out in the robot's span blocks it. It covers the measured docked bodies' tilt (a 1 deg heading error is
+    1.2 um across a 70 um rear edge)."""
+    landing_step_um: float = 0.02
+    """A jump of the face by more than this (um) between neighbouring samples (0.25 um apart) is a step, not a
+    measured tilt (a body measured 4 deg off tilts its face by under 0.02 um per sample). A corner that lands on a
+    step's inner side and turns flush meets it; an independent plant stops such a rotation at the first overlap,
+    however slight (the sides of a G_1 pair 0.2 um apart in width blocked it 4 deg short of flush, tuning 6:0). The G_1
+    pair's members are placed collinear and flush as self-alignment leaves them
+    (:func:`~stressbots.control.landing.aligned_pair`), so the step between the sides of two widths is exact."""
+    landing_max_shift_um: float = 10.0
+    """The largest move (um) of a slot along its face for its corners' landing: about the shape tolerance (10 um
+    RMS), beyond which a shifted slot costs more than a corner on the face's end risks."""
     aim_walk_sigmas: float = 1.0
     """Standard deviations of the heading drift's random walk (:func:`~stressbots.control.docking.walk_lead_um`)
     a robot on its approach line aims left of its slot by, on top of ``lead_drift_deg_per_mm`` and

@@ -1,0 +1,165 @@
+"""Where a docking robot's front corners land (stressbots.control.landing), against shapely and hand geometry."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString, Point, Polygon
+
+from stressbots.control import landing
+from stressbots.control.tuning import Tuning
+from stressbots.robots import body_corners
+from stressbots.se2 import rotate_about
+
+SLOT = np.array([0.0, 0.0, 0.0])  # heading +y: its front edge is the segment y = L/2, |x| <= W/2
+L, W = 250.0, 60.0
+
+
+def bodies(*rows):
+    """``(poses, lengths, widths)`` from rows ``(x, y, theta, length, width)``."""
+    a = np.array(rows, dtype=float)
+    return a[:, :3], a[:, 3], a[:, 4]
+
+
+def rear_of(x_um: float, width_um: float, length_um: float = 250.0):
+    """A docked robot heading +y whose rear edge is the slot's face, centred ``x_um`` right of the slot."""
+    return bodies((x_um, 0.5 * L + 0.5 * length_um, 0.0, length_um, width_um))
+
+
+def corner_inside(pose, body, margin_um: float, which: int) -> bool:
+    """Whether the robot at ``pose``'s front corner ``which`` (0 left, 1 right) lies on ``body``'s boundary at least
+    ``margin_um`` from the boundary's corners (shapely)."""
+    poly = Polygon(body_corners(body[0], body[1], body[2])[0])
+    corner = body_corners(pose, L, W)[0, which]
+    on_edge = poly.exterior.distance(Point(*corner)) < 1e-6
+    ends = min(np.hypot(*(corner - c)) for c in np.asarray(poly.exterior.coords)[:4])
+    return bool(on_edge and ends >= margin_um - 1e-6)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-40.0, 40.0), st.floats(120.0, 300.0), st.floats(-1.5, 1.5), st.floats(100.0, 300.0), st.floats(40.0, 80.0))
+def test_face_profile_is_where_a_vertical_line_first_meets_a_body(x0, y0, theta, length, width):
+    b = bodies((x0, y0, theta, length, width))
+    xs = np.linspace(-60.0, 60.0, 25)
+    depth = landing.face_profile(SLOT, L, b, xs)
+    poly = Polygon(body_corners(b[0], b[1], b[2])[0])
+    for x, d in zip(xs, depth, strict=True):
+        cut = poly.intersection(LineString([(x, -1e4), (x, 1e4)]))
+        if cut.is_empty:
+            assert d == np.inf
+            continue
+        if cut.length == 0.0:
+            continue  # the line grazes a vertex (measure zero)
+        ys = np.asarray(cut.coords)[:, 1]
+        enters, leaves = ys.min() - 0.5 * L, ys.max() - 0.5 * L  # y relative to the slot's face line (y = L/2)
+        expected = max(enters, -L) if leaves > -L else np.inf
+        assert d == pytest.approx(expected, abs=1e-6)
+
+
+def test_a_shift_dearer_than_a_chosen_incidence_turns_the_robot_instead():
+    face = rear_of(12.0, 90.0)  # face spans x in [-33, 57]: a 4 um shift, or the right corner first with no shift
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, face, Tuning())
+    assert "anticlockwise" in note and corner_inside(pose, face, Tuning().landing_right_margin_um - landing.GRID_UM, 1)
+
+
+def test_a_wide_face_keeps_the_slot():
+    long_side = bodies((0.0, 0.5 * L + 30.0, math.pi / 2, 400.0, 60.0))  # a long side across the slot's front
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, long_side, Tuning())
+    assert note == "" and np.array_equal(pose, SLOT) and np.array_equal(slot_after, SLOT)
+
+
+def test_a_face_off_to_one_side_moves_the_slot_the_least_that_lands_both_corners():
+    face = rear_of(11.0, 92.0)  # face spans x in [-35, 57]: the left corner (-30) is 5 um in, needs 7
+    tune = Tuning()
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, face, tune)
+    assert "moves" in note and pose[2] == 0.0 and pose[1] == 0.0 and np.array_equal(slot_after, pose)
+    assert pose[0] == pytest.approx(2.0, abs=0.26)  # 5 -> 7 um inside on the left (cheaper than a chosen incidence)
+    assert corner_inside(pose, face, tune.landing_left_margin_um - landing.GRID_UM - 1e-6, 0)
+    assert corner_inside(pose, face, tune.landing_right_margin_um, 1)
+
+
+@pytest.mark.parametrize("offset", [-4.0, 0.0, 3.5])
+def test_a_rear_edge_of_the_same_width_is_reached_turned_with_one_corner_on_it(offset):
+    face = rear_of(offset, W)
+    tune = Tuning()
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, face, tune)
+    assert "turned" in note
+    lead = 0 if "clockwise" in note and "anticlockwise" not in note else 1
+    need = tune.landing_left_margin_um if lead == 0 else tune.landing_right_margin_um
+    assert corner_inside(pose, face, need - landing.GRID_UM - 1e-6, lead)
+    turn = math.radians(tune.landing_incidence_deg)
+    assert abs(pose[2] - (turn if lead == 0 else 2 * math.pi - turn)) < 1e-9
+    # it does not overlap the body it touches, and compliance about that corner leaves it in the slot it reports
+    corner = body_corners(pose, L, W)[0, lead]
+    assert np.allclose(rotate_about(pose, corner, -turn if lead == 0 else turn), slot_after, atol=1e-6)
+    robot = Polygon(body_corners(pose, L, W)[0])
+    assert robot.intersection(Polygon(body_corners(face[0], face[1], face[2])[0])).area < 1e-6
+
+
+def test_compliance_about_the_leading_corner_turns_the_contact_pose_into_the_shifted_slot():
+    turn = math.radians(4.0)
+    for lead, shift in ((+1, 2.5), (-1, -3.0)):
+        pose = landing.contact_pose(SLOT, L, W, shift, 0.0, lead, turn)
+        corner = body_corners(pose, L, W)[0, 0 if lead > 0 else 1]
+        flush = rotate_about(pose, corner, -lead * turn)
+        assert np.allclose(flush[:2], [shift, 0.0], atol=1e-9)
+        assert abs(math.sin(flush[2])) < 1e-12
+
+
+def test_a_step_out_of_the_face_takes_the_leading_corner_on_its_outer_side():
+    # G_1 pair across the slot's front, junction under the slot's centre line: the right member 4 um wider
+    narrow, wide = 60.0, 64.0
+    pair = bodies((-125.0, 0.5 * L + 0.5 * narrow, math.pi / 2, 250.0, narrow),
+                  (125.0, 0.5 * L + 0.5 * wide - 2.0, 3 * math.pi / 2, 250.0, wide))
+    # the slot rests on the wide member's side (its face 2 um out of the narrow one's)
+    slot = SLOT.copy()
+    pose, slot_after, note = landing.landing_pose(slot, L, W, pair, Tuning())
+    assert "anticlockwise" in note and "right front corner" in note
+    corner = body_corners(pose, L, W)[0, 1]
+    assert corner[0] > 0.0  # on the wide member's side of the junction
+
+
+def test_aligned_pair_puts_both_front_edges_on_one_line_through_their_measured_midpoint():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        la, lb = rng.uniform(200, 300, 2)
+        a = np.array([*rng.uniform(-5, 5, 2), rng.normal(0, 0.02)])
+        b = np.array([a[0] + rng.normal(0, 2), a[1] + 0.5 * (la + lb) + rng.normal(0, 2), math.pi + rng.normal(0, 0.02)])
+        p = landing.aligned_pair(a, b, la, lb)
+        fa = p[0, :2] + 0.5 * la * np.array([math.sin(p[0, 2]), math.cos(p[0, 2])])
+        fb = p[1, :2] + 0.5 * lb * np.array([math.sin(p[1, 2]), math.cos(p[1, 2])])
+        assert np.allclose(fa, fb, atol=1e-9)
+        ma = a[:2] + 0.5 * la * np.array([math.sin(a[2]), math.cos(a[2])])
+        mb = b[:2] + 0.5 * lb * np.array([math.sin(b[2]), math.cos(b[2])])
+        assert np.allclose(fa, 0.5 * (ma + mb), atol=1e-9)
+
+
+def test_without_declared_noise_no_slot_moves():
+    """The margins are for the landing's spread, which is the declared noise's (noise_scale 0: docked robots sit in
+    their slots exactly); a face exactly as wide as the robot then takes it as planned."""
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, rear_of(0.0, W), Tuning(), scale=0.0)
+    assert note == "" and np.array_equal(pose, SLOT) and np.array_equal(slot_after, SLOT)
+    from stressbots.generate import LITERATURE_NOISE
+    from stressbots.scenario import Noise
+
+    assert landing.noise_scale(Noise()) == 0.0
+    assert landing.noise_scale(LITERATURE_NOISE.__class__(**{**LITERATURE_NOISE.__dict__,
+                                                           "camera_position_sd_um": 6.0})) == pytest.approx(3.0)
+
+
+def test_arriving_turned_the_trailing_corner_keeps_its_margin_from_a_neighbour_beside_the_slot():
+    """Where the leading corner lands decides where the trailing one ends: a landing error toward a neighbour beside
+    the slot would press the rotation to flush into it (an independent plant: 'docking rotation blocked'). Here the
+    left corner first would leave the right one 0.25 um from a neighbour, the right corner first swings the robot's
+    rear into that neighbour on the way in: the slot is centred on its face instead, clear of the neighbour."""
+    tune = Tuning()
+    face = rear_of(-3.0, W + 6.0)  # face from x = -36 to 30 (the slot's right corner)
+    neighbour = (31.0 + 30.0, 0.5 * L - 125.0, 0.0, 250.0, 60.0)  # beside the slot, its left side 1 um right of it
+    both = (np.vstack([face[0], [neighbour[:3]]]), np.append(face[1], neighbour[3]), np.append(face[2], neighbour[4]))
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, both, tune)
+    assert "turned" not in note and "centred" in note
+    flush = Polygon(body_corners(slot_after, L, W)[0])
+    assert flush.distance(Polygon(body_corners(np.array(neighbour[:3]), 250.0, 60.0)[0])) > 1.0
+    assert corner_inside(pose, face, 0.0, 0) and corner_inside(pose, face, 0.0, 1)
