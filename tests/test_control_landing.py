@@ -163,3 +163,56 @@ def test_arriving_turned_the_trailing_corner_keeps_its_margin_from_a_neighbour_b
     flush = Polygon(body_corners(slot_after, L, W)[0])
     assert flush.distance(Polygon(body_corners(np.array(neighbour[:3]), 250.0, 60.0)[0])) > 1.0
     assert corner_inside(pose, face, 0.0, 0) and corner_inside(pose, face, 0.0, 1)
+
+
+def _independent_plant():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "independent_plant.py"
+    spec = importlib.util.spec_from_file_location("independent_plant", path)
+    assert spec is not None and spec.loader is not None
+    module = sys.modules.get("independent_plant") or importlib.util.module_from_spec(spec)
+    if "independent_plant" not in sys.modules:
+        sys.modules["independent_plant"] = module
+        spec.loader.exec_module(module)
+    return module
+
+
+class _ProtocolOnly:
+    """The plant seen through SPEC 6's two calls and nothing else."""
+
+    def __init__(self, inner):
+        self._inner = inner
+
+    def observe(self):
+        return self._inner.observe()
+
+    def apply(self, waveform):
+        self._inner.apply(waveform)
+
+
+@pytest.mark.parametrize("layout_seed, n", [(1030, 4), (1057, 3)])  # bench_generality's tuning layouts 30 and 57 (tees)
+def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_seed, n):
+    """End to end through the Plant protocol, on the independent plant (SPEC 6 docking: compliance only about a front
+    corner on a face, and only against the structure): a robot docking on the rear edge or the end of a face barely
+    wider than itself is taken into the structure when it aims by the landing; with the landing off
+    (``landing_max_shift_um`` 0) the controller still counts it docked, but the plant left it stuck off flush."""
+    from dataclasses import replace
+
+    from stressbots.control import ControllerOptions, assemble, nominal_plan
+    from stressbots.generate import LITERATURE_NOISE, random_scenario
+
+    ip = _independent_plant()
+    scn = random_scenario(n, layout_seed, shape="tee", noise=LITERATURE_NOISE)
+    plan = nominal_plan(scn)
+    docked = {}
+    for on in (True, False):
+        options = None if on else ControllerOptions(tuning=replace(Tuning(), landing_max_shift_um=0.0))
+        plant = ip.IndependentPlant(scn, seed=0)
+        result = assemble(scn, _ProtocolOnly(plant), seed=0, plan=plan, options=options)
+        assert result.success  # the controller's own verdict, either way
+        assert any(e["kind"] == "landing" for e in result.events) == on
+        docked[on] = bool(plant.member.all())
+    assert docked == {True: True, False: False}
