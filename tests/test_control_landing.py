@@ -13,6 +13,8 @@ from stressbots.control.tuning import Tuning
 from stressbots.robots import body_corners
 from stressbots.se2 import rotate_about
 
+from .plants import ProtocolOnly
+
 SLOT = np.array([0.0, 0.0, 0.0])  # heading +y: its front edge is the segment y = L/2, |x| <= W/2
 L, W = 250.0, 60.0
 
@@ -180,19 +182,6 @@ def _independent_plant():
     return module
 
 
-class _ProtocolOnly:
-    """The plant seen through SPEC 6's two calls and nothing else."""
-
-    def __init__(self, inner):
-        self._inner = inner
-
-    def observe(self):
-        return self._inner.observe()
-
-    def apply(self, waveform):
-        self._inner.apply(waveform)
-
-
 @pytest.mark.parametrize("layout_seed, n", [(1030, 4), (1057, 3)])  # bench_generality's tuning layouts 30 and 57 (tees)
 def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_seed, n):
     """End to end through the Plant protocol, on the independent plant (SPEC 6 docking: compliance only about a front
@@ -211,7 +200,7 @@ def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_see
     for on in (True, False):
         options = None if on else ControllerOptions(tuning=replace(Tuning(), landing_max_shift_um=0.0))
         plant = ip.IndependentPlant(scn, seed=0)
-        result = assemble(scn, _ProtocolOnly(plant), seed=0, plan=plan, options=options)
+        result = assemble(scn, ProtocolOnly(plant), seed=0, plan=plan, options=options)
         assert result.success  # the controller's own verdict, either way
         assert any(e["kind"] == "landing" for e in result.events) == on
         docked[on] = bool(plant.member.all())
