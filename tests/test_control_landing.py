@@ -100,7 +100,7 @@ def test_a_rear_edge_of_the_same_width_is_reached_turned_with_one_corner_on_it(o
     assert robot.intersection(Polygon(body_corners(face[0], face[1], face[2])[0])).area < 1e-6
 
 
-def test_compliance_about_the_leading_corner_turns_the_contact_pose_into_the_shifted_slot():
+def test_compliance_about_the_leading_corner_turns_the_contact_pose_into_the_slot_moved_along_its_face():
     turn = math.radians(4.0)
     for lead, shift in ((+1, 2.5), (-1, -3.0)):
         pose = landing.contact_pose(SLOT, L, W, shift, 0.0, lead, turn)

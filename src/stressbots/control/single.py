@@ -215,15 +215,14 @@ class SingleDocking:
         """Aim robot ``i`` where docking compliance takes it (:func:`~stressbots.control.landing.landing_pose`, docked
         bodies as measured): its slot, moved along the face, or reached at a chosen incidence; log the change."""
         lp = self.loop
-        poses, lengths, widths = self.approach.bodies()
+        est = lp.est
+        n_, m_ = lp.by_rank[len(lp.by_rank)], lp.by_rank[len(lp.by_rank) - 1]  # the G_1 pair, D_n and D_(n-1)
+        if lp.docked[n_] and lp.docked[m_]:
+            est = est.copy()
+            est[[n_, m_]] = landing.aligned_pair(est[n_], est[m_], float(lp.L[n_]), float(lp.L[m_]))
         docked = np.flatnonzero(lp.docked)
-        n = len(lp.by_rank)
-        pair = [int(np.flatnonzero(docked == lp.by_rank[k])[0]) for k in (n, n - 1) if lp.docked[lp.by_rank[k]]]
-        if len(pair) == 2:
-            poses = poses.copy()
-            poses[pair] = landing.aligned_pair(poses[pair[0]], poses[pair[1]], float(lengths[pair[0]]), float(lengths[pair[1]]))
-        land = landing.landing_pose(lp.goals[i], float(lp.L[i]), float(lp.W[i]), (poses, lengths, widths), lp.tune,
-                                     landing.noise_scale(lp.scn.noise))
+        land = landing.landing_pose(lp.goals[i], float(lp.L[i]), float(lp.W[i]), (est[docked], lp.L[docked], lp.W[docked]),
+                                    lp.tune, landing.noise_scale(lp.scn.noise))
         if land.note:
             lp.goals[i] = land.aim
             if not np.array_equal(land.aim, land.slot):
