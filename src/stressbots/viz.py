@@ -123,7 +123,7 @@ _EVENT_MARKS = {
     "dock": ("o", "tab:green"),
     "self_align": ("D", "tab:green"),
     "stuck": ("X", "tab:red"),
-    "slide": ("v", "tab:orange"),
+    "graze": ("v", "tab:orange"),
     "blocked": ("s", "tab:red"),
     "arena": ("P", "tab:purple"),
     "contact": ("x", "0.3"),

@@ -27,7 +27,7 @@ Noise model (``scenario.noise``; all draws from the seed, see *Determinism*)
   :attr:`~stressbots.drift.DriftModel.knot_um` (25 um). The spread after 1 mm has sd
   ``heading_drift_deg_per_mm`` however the millimetre is cut into Drives (the same seed even gives the
   same drift, to rounding); the odometer advances only while a robot drives (not while it is held,
-  slides along a face or is turned by compliance);
+  slides past a corner or is turned by compliance);
 - camera (:meth:`SimulatedPlant.observe`): position N(0, sd) per axis, heading N(0, sd), and each robot
   missing (NaN row) with probability ``camera_dropout``.
 
@@ -59,7 +59,7 @@ motion pushes (also applied at the end of every Drive, so a contact made on its 
    where they met: stuck (H).
 2. **Turning robot** (arm down or chattering) whose motion pushes into anything: blocked; it stops for
    the rest of the Drive (it pivots on its stylus and cannot pivot off an obstacle). If its front edge is
-   flush against a static body (it arrived in its slot on an arc), it is **docked** there: arriving flush
+   flush against a docked body (it arrived in its slot on an arc), it is **docked** there: arriving flush
    against the structure is docking, with or without a straight push afterwards (SPEC 6).
 3. **Arena edge**: a robot pushing out of the arena stops at the edge ("arena"; ``arena_hits``).
 4. **Straight robot (arm up) against a static body** (one that does not move now: docked, stopped or
@@ -68,17 +68,16 @@ motion pushes (also applied at the end of every Drive, so a contact made on its 
    (two faces) the one the contact is not behind, and of equals the one most opposed to the robot's
    heading. ``alpha`` is the signed angle between the robot's heading and that face's inward normal.
 
-   - ``|alpha| <= 45 deg`` (the sticking cone): **docking compliance**. It rotates about the contact
-     point (the touching corner(s)) until its front edge is flush with the face, then stays there
-     pushing: docked. If the rotation would sweep into another body it stops at first touch: stuck (H).
-   - outside the cone with its *front corner* on the face: the corner does not stick; the robot slides
-     along the face without turning, at the tangential part of its velocity ``v sin|alpha|``, until the
-     corner runs :data:`~.bodies.SLIDE_OVERSHOOT_UM` past the face's end ("slide", then "slide_off"; it then drives
-     on, e.g. onto a collinear face of the next robot) or into something else (stuck). A slide is the
-     failure region H: the robot does not dock.
-   - outside the cone with the body's corner on its front edge: stuck (H).
+   - **Docking compliance** needs all that SPEC 6 names: the body is part of the structure (docked: a
+     G_1 member or a docked robot), ``|alpha| <= 45 deg`` (the sticking cone) and a *front corner* of the
+     robot on the face (or its front edge already flush). It rotates about the contact point (the
+     touching corner(s)) until its front edge is flush with the face, then stays there pushing: docked.
+     If the rotation would sweep into another body it stops at first touch: stuck (H).
+   - Otherwise it is **stuck** (H) where it met the body: a front corner outside the cone (it neither
+     turns nor slides), the body's corner on its front edge, or any front contact with a robot that is
+     not docked (a stopped or stuck robot is no structure to dock on).
    - a body's corner touching its long side: it slides past it, straight, without turning ("graze").
-   - pushing into several static bodies at once: it stops; docked if flush with one of them.
+   - pushing into several static bodies at once: it stops; docked if flush with a docked one.
 5. Any other pushing contact (e.g. into a robot that is itself moving): the pushing robot stops
    ("contact"); it is re-checked every :data:`~.bodies.RECHECK_S` while its partner moves.
 
@@ -100,7 +99,7 @@ Modules
 - :mod:`.bodies`: the bodies' shared state (poses, odometers, flags, event log), geometry kernels, tolerances;
 - :mod:`.search`: motion between contacts (closed form, drift) and the first-contact search;
 - :mod:`.contact`: the contact rules applied at each contact instant (touch graph, outcomes, memory);
-- :mod:`.compliance`: docking compliance, slides and self-aligning compliance (G_1), seed App. 3.5;
+- :mod:`.compliance`: docking compliance, grazes and self-aligning compliance (G_1), seed App. 3.5;
 - :mod:`.plant`: :class:`SimulatedPlant`, the noise streams and one Drive at a time;
 - :mod:`.runs`: a plan's waveform, open-loop runs, :func:`check_determinism`.
 """

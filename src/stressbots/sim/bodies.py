@@ -52,7 +52,7 @@ ARENA = -1
 class SimEvent:
     """Something that happened to a robot: a contact outcome or an arm anomaly.
 
-    ``kind`` is one of ``contact``, ``dock``, ``self_align``, ``stuck``, ``slide``, ``slide_off``, ``graze``,
+    ``kind`` is one of ``contact``, ``dock``, ``self_align``, ``stuck``, ``graze``, ``slide_off``,
     ``blocked``, ``arena``, ``arm_flip``, ``arm_chatter``. ``other`` names the robot touched, ``"arena"``,
     or is ``None``.
     """

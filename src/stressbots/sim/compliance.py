@@ -1,17 +1,18 @@
 """The seed's compliance (App. 3.5): what a straight robot does against a static body, and head-on meetings.
 
 Each rule reads the bodies where they touch and acts at once (compliance moves are instantaneous):
-docking compliance turns a robot flush about its contact point (:func:`dock_rule`, checked by
-:func:`sweep`), a front corner outside the sticking cone slides along the face, a corner on a long side
-grazes past, and two straight robots meeting head-on within the seed's limits form G_1
-(:func:`self_align`). Outcomes are ``(kind, detail)`` pairs of :class:`~.bodies.SimEvent` vocabulary;
+docking compliance turns a robot whose front corner meets a face of the structure (a docked robot)
+inside the sticking cone flush about that corner (:func:`dock_rule`, checked by :func:`sweep`); anything
+else against a static body's face is stuck (H), as SPEC 6 says: a front corner outside the cone, the
+structure's corner on the robot's front edge, any front contact with a robot that is not docked. A body's
+corner on a robot's long side grazes past, and two straight robots meeting head-on within the seed's
+limits form G_1 (:func:`self_align`). Outcomes are ``(kind, detail)`` pairs of :class:`~.bodies.SimEvent` vocabulary;
 ``docked`` / ``stuck`` are set on the shared :class:`~.bodies.Bodies`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 
 import numpy as np
 
@@ -24,8 +25,6 @@ from .bodies import (
     FACE_TIE_UM,
     FLUSH_TOL_RAD,
     GRAZE_TOL_UM,
-    PROBE_UM,
-    PUSH_EPS_UM,
     SELF_ALIGN_MAX_INCIDENCE_RAD,
     SELF_ALIGN_MAX_OFFSET_UM,
     SLIDE_OVERSHOOT_UM,
@@ -34,13 +33,11 @@ from .bodies import (
     TOUCH_UM,
     Bodies,
     Trig,
-    depth,
     depth_one,
     faces_touched,
     heading_of,
     local,
     rotate_about,
-    wall_gap,
     with_trig,
 )
 
@@ -116,10 +113,13 @@ def flush(b: Bodies, i: int, j: int) -> bool:
     return ff is not None and abs(ff[2]) <= FLUSH_TOL_RAD
 
 
-def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray, touching: Iterable[int]):
-    """Straight robot i pushing into static body j: docking compliance, slide or stuck.
+def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray):
+    """Straight robot i pushing into static body j: docking compliance, a graze past j's corner or stuck.
 
-    Returns ``(kind, detail, slide)`` with ``slide = (velocity (2,), duration_s)`` for a slide.
+    Docking compliance needs all of SPEC 6: j is part of the structure (docked), the incidence is inside
+    the sticking cone, and a front corner of i is on j's face (or i's front edge is already flush). The
+    robot stays stuck where it met j otherwise; it moves again when its motion no longer pushes.
+    Returns ``(kind, detail, slide)`` with ``slide = (velocity (2,), duration_s)`` for a graze.
     """
     P = b.pose
     pts, own = contact_points(b, i, j)
@@ -136,12 +136,15 @@ def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray, touching: Iterable[i
         return "contact", "stopped (contact not on its front)", None
     c, nrm, alpha = ff
     deg = math.degrees(alpha)
-    if abs(alpha) <= STICKING_CONE_RAD:
-        return _docking_compliance(b, i, c, alpha)
-    if own.any():
-        return _slide_along(b, i, j, speed, touching, c, nrm, deg)
+    b.docked[i] = False
     b.stuck[i] = True
-    return "stuck", f"incidence {deg:.1f} deg outside the sticking cone on a corner of {name_j} (H)", None
+    if not b.docked[j]:
+        return "stuck", f"front against {name_j}, which is not part of the structure (H)", None
+    if abs(alpha) > STICKING_CONE_RAD:
+        return "stuck", f"incidence {deg:.1f} deg outside the sticking cone on {name_j} (H)", None
+    if abs(alpha) > FLUSH_TOL_RAD and not own.any():
+        return "stuck", f"front edge on a corner of {name_j}: no front corner on its face (H)", None
+    return _docking_compliance(b, i, c, alpha)
 
 
 def _docking_compliance(b: Bodies, i: int, c, alpha: float):
@@ -157,44 +160,6 @@ def _docking_compliance(b: Bodies, i: int, c, alpha: float):
     b.stuck[i] = True
     b.docked[i] = False
     return "stuck", f"docking compliance ({deg:.2f} deg) obstructed by {b.label(blocker)}", None
-
-
-def _slide_along(b: Bodies, i: int, j: int, speed, touching, c, nrm, deg: float):
-    """Outside the sticking cone with i's front corner on j's face (normal ``nrm``): slide along the face
-    at the tangential part of the velocity, past its end; stuck when the slide is blocked."""
-    P = b.pose
-    h = np.array([math.sin(P[i, 2]), math.cos(P[i, 2])])
-    t = h - float(h @ nrm) * nrm
-    t /= np.linalg.norm(t)
-    vel = speed[i] * float(h @ t) * t
-    # The face of j with normal nrm: its corners; the slide ends past the one ahead.
-    cj = body_corners(P[j], 2 * b.hl[j], 2 * b.hw[j])[0]
-    on_face = cj[np.argsort(-(cj - P[j, :2]) @ nrm)[:2]]
-    dist = float(np.max((on_face - c) @ t)) + SLIDE_OVERSHOOT_UM
-    if dist > 0.0 and not slide_blocked(b, i, vel, [k for k in touching if k != j]):
-        b.stuck[i] = False
-        return ("slide", f"incidence {deg:.1f} deg outside the sticking cone: slides along {b.names[j]} (H)",
-                (vel, dist / float(np.linalg.norm(vel))))
-    b.stuck[i] = True
-    return "stuck", f"incidence {deg:.1f} deg outside the sticking cone and cannot slide (H)", None
-
-
-def slide_blocked(b: Bodies, i: int, vel, others: list[int]) -> bool:
-    """Whether sliding with ``vel`` pushes robot i into another body it touches (or the arena)."""
-    P = b.pose
-    step = PROBE_UM / max(float(np.linalg.norm(vel)), 1e-300)
-    q = P[i].copy()
-    q[:2] += vel * step
-    for k in others:
-        d0 = depth(P[i], P[k], b.hl[i], b.hw[i], b.hl[k], b.hw[k])
-        d1 = depth(q, P[k], b.hl[i], b.hw[i], b.hl[k], b.hw[k])
-        if d1 - d0 > PUSH_EPS_UM:
-            return True
-    if b.arena is not None:
-        g0 = wall_gap(P[i], b.hl[i], b.hw[i], b.arena)
-        if g0 < TOUCH_UM and g0 - wall_gap(q, b.hl[i], b.hw[i], b.arena) > PUSH_EPS_UM:
-            return True
-    return False
 
 
 def sweep(b: Bodies, i: int, c, phi: float):

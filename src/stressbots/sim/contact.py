@@ -92,7 +92,7 @@ class ContactRules:
         slide_partner: dict[int, int] = {}
         for i in sorted(pushers - done):
             mode[i] = HELD
-            slide = self.push_outcome(i, push[i], static, ctx, touching.get(i, []), outcomes)
+            slide = self.push_outcome(i, push[i], static, ctx, outcomes)
             if slide is not None:
                 j, (slide_v[i], slide_end[i]) = slide
                 mode[i] = SLIDE
@@ -171,8 +171,7 @@ class ContactRules:
         self._rule_cache[(i, j)] = (self.rule_key(i, j, straight), (kind, detail))
         return kind, detail
 
-    def push_outcome(self, i: int, cs: list[int], static: set[int], ctx: DriveRates, touching_i: list[int],
-                     outcomes: Outcomes):
+    def push_outcome(self, i: int, cs: list[int], static: set[int], ctx: DriveRates, outcomes: Outcomes):
         """The outcome of robot i pushing into the bodies ``cs`` (written to ``outcomes``); ``(j, (slide
         velocity, slide end))`` when i slides along body j, else None (i is held)."""
         b = self.b
@@ -192,13 +191,13 @@ class ContactRules:
             if hit is not None and hit[0] == key:
                 (kind, detail), slide = hit[1], None
             else:
-                kind, detail, slide = compliance.dock_rule(b, i, j, ctx[0], touching_i)
+                kind, detail, slide = compliance.dock_rule(b, i, j, ctx[0])
                 if slide is None:  # held outcomes repeat while nothing moves; slides are recomputed
                     self._rule_cache[(i, j)] = (self.rule_key(i, j, straight), (kind, detail))
             outcomes[(i, j)] = (kind, detail)
             return None if slide is None else (j, slide)
         if len(cs) > 1 and len(fronts) == len(cs):
-            flush = [j for j in cs if self.flush_cached(i, j, straight)]
+            flush = [j for j in cs if b.docked[j] and self.flush_cached(i, j, straight)]
             for j in cs:
                 outcomes[(i, j)] = ("dock", "flush against the structure") if flush else ("stuck", "pushing into several bodies")
             b.docked[i] = bool(flush)
@@ -212,7 +211,7 @@ class ContactRules:
         """A turning robot pushing into ``cs`` is blocked, or docked when flush against a static body."""
         # Arriving flush in its slot is docking, whatever the arm does (SPEC 6): a robot that turns
         # into its slot on an arc is docked there, and stays docked while it keeps pushing.
-        flush = [j for j in cs if j != ARENA and j in static and self.flush_cached(i, j, straight)]
+        flush = [j for j in cs if j != ARENA and j in static and self.b.docked[j] and self.flush_cached(i, j, straight)]
         for j in cs:
             outcomes[(i, j)] = (
                 ("dock", "arrived flush against the structure") if j in flush
@@ -269,7 +268,8 @@ class ContactRules:
         b = self.b
         within = b.within_reach()
         near = np.flatnonzero(within[i] | within[j])
-        return bytes([bool(straight[i]), bool(straight[j])]) + near.tobytes() + b.pose[near].tobytes()
+        return (bytes([bool(straight[i]), bool(straight[j])]) + near.tobytes() + b.pose[near].tobytes()
+                + b.docked[near].tobytes())
 
     def flush_cached(self, i: int, j: int, straight) -> bool:
         """:func:`.compliance.flush`, remembered while nothing near the pair moves (a blocked robot is
