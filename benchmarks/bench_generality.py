@@ -77,6 +77,25 @@ class ProtocolOnly:
         self._inner.apply(waveform)
 
 
+def judge_truth(result, sim, scn, shape_tol_um: float) -> str | None:
+    """Why the simulator's truth denies a success the controller claims, or None.
+
+    The controller judges from its estimates; SPEC 6 counts success as every robot docked and the true
+    shape within tolerance, and an outside checker asks its own plant both. So a claimed success counts
+    only if the simulator docked every robot (:attr:`~stressbots.sim.SimulatedPlant.docked`: flush against
+    the structure) and its true poses match the shape.
+    """
+    from stressbots.assessment import shape_error
+
+    free = [scn.names[i] for i in np.flatnonzero(~sim.docked)]
+    rms = shape_error(sim.true_poses(), result.nominal_goals, scn.lengths_um, scn.widths_um).rms_um
+    if free:
+        return f"claimed success but the plant never docked {', '.join(free)} (stuck, not flush against the structure)"
+    if rms > shape_tol_um:
+        return f"claimed success but true shape error {rms:.1f} um"
+    return None
+
+
 def layout_spec(set_name: str, j: int) -> tuple[int, int, str]:
     """``(layout_seed, n, shape)`` of layout ``j`` of a set."""
     n = 2 + j % 7
@@ -161,6 +180,7 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
                plan_cache: str = "", tune: str = "") -> dict:
     """Plan layout ``j`` (or load its plan from ``plan_cache``) and run its plant seeds; a JSON-able record."""
     from stressbots.control import assemble, nominal_plan, structure_targets
+    from stressbots.control.tuning import ControllerOptions
     from stressbots.errors import PlanningError
     from stressbots.generate import LITERATURE_NOISE, random_scenario
     from stressbots.sim import SimulatedPlant
@@ -195,8 +215,12 @@ def run_layout(set_name: str, j: int, plant_seeds, noise_scale: float, cap_s: fl
     for ps in (range(plant_seeds) if isinstance(plant_seeds, int) else plant_seeds):
         t0 = time.perf_counter()
         try:
-            r = assemble(scn, ProtocolOnly(SimulatedPlant(scn, seed=ps), cap_s), seed=ps, plan=plan, options=options)
+            sim = SimulatedPlant(scn, seed=ps)
+            r = assemble(scn, ProtocolOnly(sim, cap_s), seed=ps, plan=plan, options=options)
             ok, failure, sim_s, shape_err = bool(r.success), r.failure, float(r.duration_s), float(r.shape_error_rms_um)
+            truth = judge_truth(r, sim, scn, (options or ControllerOptions()).shape_tol_um)
+            if ok and truth:
+                ok, failure = False, truth
             tail = [] if ok else [f"{e['t_s']:.1f} {e['kind']} {e['robot']}: {e['detail']}" for e in r.events[-12:]]
             counts = dict(Counter(e["kind"] for e in r.events))
         except WallTimeCap as exc:
