@@ -82,7 +82,10 @@ def judge_run(scenario, plant, *, seed: int | None, failure: str | None, estimat
 
     Success needs no failure reason, every robot docked and the RMS shape error after the best rigid
     alignment (um) within ``shape_tol_um``. A plant that offers ``true_poses()`` (the simulator) is
-    asked for them only now, for the result; otherwise the controller's ``estimates`` stand in. Placement
+    asked for them only now, for the result; otherwise the controller's ``estimates`` stand in. One that
+    also offers ``docked`` (the simulator) has the last word on which robots are docked (SPEC 6: success is
+    every robot docked): a robot stopped against a structure corner a few degrees off flush sits within the
+    controller's tolerances of its slot, but it is stuck, and no later robot docks on it. Placement
     and heading errors are measured from the nominal slots (absolute placement, reported beside the shape).
     """
     from ..assessment import shape_error
@@ -91,8 +94,16 @@ def judge_run(scenario, plant, *, seed: int | None, failure: str | None, estimat
     true = plant.true_poses() if hasattr(plant, "true_poses") else None
     final = np.asarray(true if true is not None else estimates, dtype=np.float64)
     shape = shape_error(final, nominal_goals, scenario.lengths_um, scenario.widths_um)
+    docked = np.asarray(docked, dtype=bool).copy()
+    stuck = []
+    if true is not None and hasattr(plant, "docked"):  # the simulator knows which robots compliance really docked
+        stuck = [scenario.names[i] for i in np.flatnonzero(docked & ~np.asarray(plant.docked, dtype=bool))]
+        docked &= np.asarray(plant.docked, dtype=bool)
     success = failure is None and bool(np.all(docked)) and shape.rms_um <= shape_tol_um
-    if failure is None and not success:
+    if failure is None and stuck:
+        failure = (f"the plant did not dock {', '.join(stuck)}: stopped against the structure but not flush on it "
+                   "(failure region H), though the controller counted it docked")
+    elif failure is None and not success:
         failure = f"shape error {shape.rms_um:.1f} um RMS exceeds {shape_tol_um:g} um"
     return AssemblyResult(
         success=success,
@@ -102,7 +113,7 @@ def judge_run(scenario, plant, *, seed: int | None, failure: str | None, estimat
         final_observed=np.asarray(estimates, dtype=np.float64).copy(),
         goals=np.asarray(goals, dtype=np.float64).copy(),
         nominal_goals=np.asarray(nominal_goals, dtype=np.float64).copy(),
-        docked=np.asarray(docked).copy(),
+        docked=docked,
         shape_error_rms_um=float(shape.rms_um),
         shape_rotation_deg=float(shape.rotation_deg),
         placement_error_um=np.hypot(*(final[:, :2] - nominal_goals[:, :2]).T),
