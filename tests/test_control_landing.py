@@ -89,9 +89,9 @@ def test_a_rear_edge_of_the_same_width_is_reached_turned_with_one_corner_on_it(o
     pose, slot_after, note = landing.landing_pose(SLOT, L, W, face, tune)
     assert "turned" in note
     lead = 0 if "clockwise" in note and "anticlockwise" not in note else 1
-    need = tune.landing_left_margin_um if lead == 0 else tune.landing_right_margin_um
+    need = tune.landing_lead_left_margin_um if lead == 0 else tune.landing_lead_right_margin_um
     assert corner_inside(pose, face, need - landing.GRID_UM - 1e-6, lead)
-    turn = math.radians(tune.landing_incidence_deg)
+    turn = math.radians(tune.landing_incidence_deg if lead == 0 else tune.landing_incidence_anticlockwise_deg)
     assert abs(pose[2] - (turn if lead == 0 else 2 * math.pi - turn)) < 1e-9
     # it does not overlap the body it touches, and compliance about that corner leaves it in the slot it reports
     corner = body_corners(pose, L, W)[0, lead]

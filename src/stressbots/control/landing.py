@@ -34,8 +34,8 @@ from ..robots import body_corners
 from ..se2 import heading, points_to_frame, right
 from .queries import line_pose
 
-__all__ = ["Face", "Landing", "aligned_pair", "contact_pose", "corner_margins", "face_profile", "face_under", "landing_pose",
-           "nearest_distance", "nearest_shift", "noise_scale"]
+__all__ = ["Face", "Landing", "aligned_pair", "contact_pose", "corner_margins", "face_profile", "face_under", "incidence_choices",
+           "incidence_deg", "landing_pose", "nearest_distance", "nearest_shift", "noise_scale"]
 
 GRID_UM = 0.25
 """Lateral sampling of the face and of the slot's shifts (um): under a tenth of the landing margins."""
@@ -149,8 +149,9 @@ def corner_margins(face: Face, width_um: float, shifts, lead: int = 0,
     """For each candidate shift ``o`` (um, + = right) of the slot: how far (um) inside the face its left and its right
     front corner land, ``(left (k,), right (k,))``; negative where a corner misses the face (:meth:`Face.signed`).
     Arriving turned (``lead`` +-1), the trailing corner's value is instead its room to the nearest part of the
-    structure standing out beyond it (a neighbour beside the slot): where the leading corner lands decides where
-    the trailing one ends, and a landing error toward that neighbour blocks the rotation to flush.
+    structure standing out beyond it (a neighbour beside the slot, or a step of the face such as the side of the wider
+    member of a G_1 pair): where the leading corner lands decides where the trailing one ends, and a landing error
+    toward that neighbour or step blocks the rotation to flush.
 
     ``lead`` 0: the robot may arrive turned either way, so either corner may lead; +1: it arrives turned clockwise by
     ``incidence_rad``, its left corner first; -1: anticlockwise, its right corner first. Both are ``-inf`` where the
@@ -169,8 +170,9 @@ def corner_margins(face: Face, width_um: float, shifts, lead: int = 0,
         beyond = (left[:, None] - x) if lead > 0 else (x - right_[:, None])
         blocked |= np.any((beyond > 0.0) & (face.depth[None, :] < face.level - beyond / tan), axis=1)
     lm, rm = np.interp(left, xs, signed), np.interp(right_, xs, signed)
-    if lead:  # the trailing corner ends where the leading one puts it: its room is to whatever stands out beyond it
-        proud = xs[face.proud]
+    if lead:  # the trailing corner ends where the leading one puts it: its room is to whatever stands out beyond it,
+        # a step the rotation to flush would meet included (the side of the wider member of a G_1 pair)
+        proud = np.sort(np.concatenate([xs[face.proud], xs[steps] + half]))
         if lead > 0:
             k = np.searchsorted(proud, right_)
             rm = np.where(k < len(proud), proud[np.minimum(k, len(proud) - 1)] - right_, np.inf) if len(proud) else np.full(k.shape, np.inf)
@@ -207,8 +209,9 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
 
     - the slot moved along its face (not at all where it can stay), the least that lands both front corners on the
       face whichever way the robot arrives turned;
-    - a *chosen incidence*: the robot arrives turned by ``landing_incidence_deg`` (clockwise, its left corner first,
-      or anticlockwise, its right corner first), its leading corner on the face, the least shift from the slot.
+    - a *chosen incidence* (:func:`incidence_choices`): the robot arrives turned by ``landing_incidence_deg`` clockwise,
+      its left corner first, or by ``landing_incidence_anticlockwise_deg`` anticlockwise, its right corner first, its
+      leading corner its own margin (``landing_lead_*_margin_um``) inside the face, the least shift from the slot.
       The pose returned is the robot's at contact: heading turned by the incidence, leading front corner on the
       face. The line approach, aiming at it, brings the robot in on that heading; compliance turns it flush about
       that corner. The rear edge of a robot of the same width has room for one corner, not for both, and a face
@@ -219,7 +222,8 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
     both on it at all; else the slot.
     """
     slot = np.asarray(slot, dtype=np.float64)
-    reach = tune.landing_max_shift_um + width_um + length_um * math.sin(math.radians(tune.landing_incidence_deg)) + 5.0
+    turned = max(incidence_deg(tune, +1), incidence_deg(tune, -1))
+    reach = tune.landing_max_shift_um + width_um + length_um * math.sin(math.radians(turned)) + 5.0
     face = face_under(slot, length_um, width_um, bodies, tune, reach)
     if face is None or tune.landing_max_shift_um <= 0.0:
         return Landing(slot, slot, "")
@@ -232,20 +236,16 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
     o = nearest_shift(shifts, (lm >= need_l) & (rm >= need_r))
     if o is not None:
         choices.append((abs(o), 0, o))
-    psi = math.radians(tune.landing_incidence_deg)
-    for lead in (+1, -1):
-        tl, tr = corner_margins(face, width_um, shifts, lead, psi)
-        o = nearest_shift(shifts, (tl >= need_l) & (tr >= need_r))
-        if o is not None:
-            choices.append((abs(o) + tune.landing_incidence_cost_um, lead, o))
+    choices += incidence_choices(face, width_um, shifts, tune, scale)
     if choices:
         _, lead, o = min(choices, key=lambda c: c[0])
         moved = line_pose(slot, 0.0, o, 0.0)  # the slot moved o um along its face
         if lead == 0:
             return Landing(slot, slot, "") if o == 0.0 else Landing(
                 moved, moved, f"moves {abs(o):.1f} um {'right' if o > 0 else 'left'} along its face: both front corners then land on it")
-        return Landing(contact_pose(slot, length_um, width_um, o, face.level, lead, psi), moved,
-                       f"is reached turned {tune.landing_incidence_deg:g} deg {'clockwise' if lead > 0 else 'anticlockwise'}, "
+        deg = incidence_deg(tune, lead)
+        return Landing(contact_pose(slot, length_um, width_um, o, face.level, lead, math.radians(deg)), moved,
+                       f"is reached turned {deg:g} deg {'clockwise' if lead > 0 else 'anticlockwise'}, "
                        f"{'left' if lead > 0 else 'right'} front corner first, {o:+.1f} um along its face: its face has "
                        "room for that corner, not for both (or steps out)")
     slack = np.minimum(lm - need_l, rm - need_r)
@@ -254,6 +254,29 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
         moved = line_pose(slot, 0.0, float(shifts[k]), 0.0)
         return Landing(moved, moved, f"is centred on its face ({float(shifts[k]):+.1f} um): too narrow for margins")
     return Landing(slot, slot, "")
+
+
+def incidence_deg(tune, lead: int) -> float:
+    """The chosen incidence (deg) of a robot whose left (``lead`` +1: turned clockwise) or right (-1: anticlockwise)
+    front corner is to lead (``Tuning.landing_incidence_deg`` / ``landing_incidence_anticlockwise_deg``)."""
+    return tune.landing_incidence_deg if lead > 0 else tune.landing_incidence_anticlockwise_deg
+
+
+def incidence_choices(face: Face, width_um: float, shifts: np.ndarray, tune, scale: float) -> list[tuple[float, int, float]]:
+    """The chosen-incidence landings (:func:`landing_pose`) the face allows: ``(cost um, lead, shift um)`` for a left
+    (+1) and a right (-1) corner first, each the least shift that lands the leading corner its own margin
+    (``landing_lead_*_margin_um``) inside the face and leaves the trailing one its room (``landing_*_margin_um``),
+    margins times ``scale``."""
+    need = {+1: (tune.landing_lead_left_margin_um, tune.landing_right_margin_um),
+            -1: (tune.landing_left_margin_um, tune.landing_lead_right_margin_um)}
+    out = []
+    for lead in (+1, -1):
+        tl, tr = corner_margins(face, width_um, shifts, lead, math.radians(incidence_deg(tune, lead)))
+        ml, mr = (m * scale - GRID_UM for m in need[lead])
+        o = nearest_shift(shifts, (tl >= ml) & (tr >= mr))
+        if o is not None:
+            out.append((abs(o) + tune.landing_incidence_cost_um, lead, o))
+    return out
 
 
 def contact_pose(slot, length_um: float, width_um: float, shift_um: float, level_um: float, lead: int,

@@ -541,12 +541,31 @@ class DockingTuning:
     The line approach aims left of the slot (:func:`~stressbots.control.docking.aim_lead`), so its landings spread
     further left: measured on an independent plant at the literature's noise, 5 % landed more than 7.1 um left of
     their aim, 5 % more than 2.3 um right."""
-    landing_right_margin_um: float = 3.0
-    """The same for the right front corner (um)."""
+    landing_right_margin_um: float = 4.5
+    """The same for the right front corner (um). On the SPEC-strict simulator (tuning layouts 0-119, seed 0, literature
+    noise) landings aimed with both corners on the face arrived 2.5 um left of their aim on average, 5 % more than
+    4.3 um right: with 3 um, two right corners landed past the end of their face (tuning 68:1, 97:1)."""
+    landing_lead_left_margin_um: float = 10.5
+    """The left front corner's margin (um) when it is to lead alone (a chosen incidence, clockwise): it is then the only
+    contact, placed by the least shift right at its margin, and every landing error further left sticks the robot on
+    the face's corner for good. The landings spread left of their aim (``aim_lead``): measured on the SPEC-strict
+    simulator at the literature's noise (tuning layouts 0-119, seed 0), left-first landings arrived 3.0 um left of their
+    aim on average, 1 % more than 8.7 um left, and with the 7 um of ``landing_left_margin_um`` 11 of 82 stuck on the
+    face's corner."""
+    landing_lead_right_margin_um: float = 7.5
+    """The same for the right front corner leading alone (a chosen incidence, anticlockwise), um: its landings spread
+    less far right (1 % more than 6.4 um right of their aim, same measurement), but with the 3 um of
+    ``landing_right_margin_um`` the right-first landings the wider left margin brings stuck in 6 of the 120 trials."""
     landing_incidence_deg: float = 4.0
     """The chosen incidence (deg) of a robot whose face has room for one leading corner only: it arrives turned this
     much, so that the corner that leads is known. Twice the spread of the incidence at contact measured on an
     independent plant (quartiles +-1.1 deg): the other corner then leads in about 2 % of dockings."""
+    landing_incidence_anticlockwise_deg: float = 6.0
+    """The chosen incidence (deg) of a robot whose right corner is to lead: it arrives turned this much anticlockwise.
+    More than ``landing_incidence_deg`` because the approach's only corrections are clockwise bursts, which eat an
+    anticlockwise turn: measured on the SPEC-strict simulator (tuning layouts 0-119, seed 0, literature noise), 4 deg
+    chosen either way arrived at +4.5 (1 % below +0.8) clockwise but -3.6 (5 % above -0.2, the wrong corner then
+    leads) anticlockwise."""
     landing_incidence_cost_um: float = 3.0
     """What a chosen incidence counts as (um of shift) when choosing between it and moving the slot: the turned
     approach lands its leading corner as precisely, but it is a second manoeuvre the gross motion's funnel was not
