@@ -205,6 +205,19 @@ def test_structure_corner_on_the_front_edge_is_stuck_without_turning():
     no_overlap(plant)
 
 
+@pytest.mark.parametrize(("off_deg", "docks"), [(0.3, True), (1.0, False)])
+def test_a_front_edge_within_half_a_degree_of_flush_on_the_structures_corner_docks(off_deg, docks):
+    # Arriving flush is docking (SPEC 6), to the simulator's tolerance of 0.5 deg: turned flush about the corner.
+    corner = (1260.0, TOP)
+    start = pose_above(corner, 180.0 + off_deg, 20.0)
+    plant = SimulatedPlant(scenario([start] + BAR), seed=0)
+    plant.apply(straight(3.0))
+    final = plant.true_poses()[0]
+    assert bool(plant.docked[0]) is docks and bool(plant.stuck[0]) is not docks
+    assert bool(abs(final[2] - math.pi) < 1e-9) is docks
+    no_overlap(plant)
+
+
 def test_docking_compliance_obstructed_leaves_the_robot_stuck():
     blocker = (970.0, TOP + 130.0, 180.0)  # R3 docked upright on the face, x in [940, 1000]
     # R0's front-left corner lands at x = 1056; flush it would reach x = 996, inside R3.

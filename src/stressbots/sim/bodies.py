@@ -42,6 +42,9 @@ SLIDE_OVERSHOOT_UM = 1e-4  # a slide ends this far past the face's end, clear of
 FACE_TIE_UM = 1e-6  # contact faces whose lines are this close to the contact count as equally touched (um)
 SWEEP_UM = 0.5  # compliance rotations are checked every this much travel of the farthest corner (um)
 FLUSH_TOL_RAD = 1e-6  # front edge this parallel to a face counts as flush (rad)
+ARRIVE_FLUSH_RAD = math.radians(0.5)  # a front edge this near flush on the structure's corner still docks (rad):
+# SPEC 6 names no tolerance; the independent plant's choice. At zero noise a robot arrives 0.01 deg off, its corner
+# 0.03 um past the end of a face as wide as itself.
 NEAR_UM = 1.0  # an outcome is remembered (not logged again) while its pair stays this close (um)
 
 ARENA = -1

@@ -20,6 +20,7 @@ from ..kinematics import wrap
 from ..robots import angle_difference, body_corners
 from .bodies import (
     ARENA,
+    ARRIVE_FLUSH_RAD,
     BISECT_UM,
     CONTACT_TOL_UM,
     FACE_TIE_UM,
@@ -117,7 +118,8 @@ def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray):
     """Straight robot i pushing into static body j: docking compliance, a graze past j's corner or stuck.
 
     Docking compliance needs all of SPEC 6: j is part of the structure (docked), the incidence is inside
-    the sticking cone, and a front corner of i is on j's face (or i's front edge is already flush). The
+    the sticking cone, and a front corner of i is on j's face (or i's front edge is within
+    :data:`~.bodies.ARRIVE_FLUSH_RAD` of flush: it arrived flush). The
     robot stays stuck where it met j otherwise; it moves again when its motion no longer pushes.
     Returns ``(kind, detail, slide)`` with ``slide = (velocity (2,), duration_s)`` for a graze.
     """
@@ -142,7 +144,7 @@ def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray):
         return "stuck", f"front against {name_j}, which is not part of the structure (H)", None
     if abs(alpha) > STICKING_CONE_RAD:
         return "stuck", f"incidence {deg:.1f} deg outside the sticking cone on {name_j} (H)", None
-    if abs(alpha) > FLUSH_TOL_RAD and not own.any():
+    if abs(alpha) > ARRIVE_FLUSH_RAD and not own.any():
         return "stuck", f"front edge on a corner of {name_j}: no front corner on its face (H)", None
     return _docking_compliance(b, i, c, alpha)
 
