@@ -205,3 +205,24 @@ def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_see
         assert any(e["kind"] == "landing" for e in result.events) == on
         docked[on] = bool(plant.member.all())
     assert docked == {True: True, False: False}
+
+
+@pytest.mark.parametrize("gap_um", [1.0, 6.0])
+def test_a_step_beyond_the_trailing_corner_is_its_room_like_a_neighbour(gap_um):
+    """A face that steps out just beyond where the trailing corner lands (the side of the wider member of a G_1 pair)
+    stops the rotation to flush as a neighbour would: the trailing corner's room is the distance to the step."""
+    # two robots side by side ahead of the slot: the left one's rear edge is the face, the right one's rear edge stands
+    # 0.5 um further out from x = W/2 + gap_um on
+    left = (-40.0 + 0.5 * W + gap_um, 0.5 * L + 125.0, 0.0, 250.0, 80.0)
+    right = (0.5 * W + gap_um + 40.0, 0.5 * L + 125.0 - 0.5, 0.0, 250.0, 80.0)
+    tune = Tuning()
+    face = landing.face_under(SLOT, L, W, bodies(left, right), tune, 60.0)
+    assert face is not None and face.step_right.any()
+    step_x = float(face.xs[face.step_right][0] + face.half_step)
+    assert step_x == pytest.approx(0.5 * W + gap_um, abs=landing.GRID_UM)
+    _, room = landing.corner_margins(face, W, np.array([0.0]), +1, math.radians(4.0))
+    assert room[0] == pytest.approx(step_x - 0.5 * W, abs=1e-9)
+    # the chosen incidence (left corner first) then keeps the trailing corner its margin from the step, or is not offered
+    for _, lead, o in landing.incidence_choices(face, W, np.arange(-10.0, 10.25, 0.25), tune, 1.0):
+        if lead > 0:
+            assert step_x - (o + 0.5 * W) >= tune.landing_right_margin_um - landing.GRID_UM - 1e-9
