@@ -155,13 +155,16 @@ def test_arriving_turned_the_trailing_corner_keeps_its_margin_from_a_neighbour_b
     """Where the leading corner lands decides where the trailing one ends: a landing error toward a neighbour beside
     the slot would press the rotation to flush into it (an independent plant: 'docking rotation blocked'). Here the
     left corner first would leave the right one 0.25 um from a neighbour, the right corner first swings the robot's
-    rear into that neighbour on the way in: the slot is centred on its face instead, clear of the neighbour."""
+    rear into that neighbour on the way in: the safest landing is both corners on the face, each keeping about half
+    its margin, clear of the neighbour."""
     tune = Tuning()
     face = rear_of(-3.0, W + 6.0)  # face from x = -36 to 30 (the slot's right corner)
     neighbour = (31.0 + 30.0, 0.5 * L - 125.0, 0.0, 250.0, 60.0)  # beside the slot, its left side 1 um right of it
     both = (np.vstack([face[0], [neighbour[:3]]]), np.append(face[1], neighbour[3]), np.append(face[2], neighbour[4]))
     pose, slot_after, note = landing.landing_pose(SLOT, L, W, both, tune)
-    assert "turned" not in note and "centred" in note
+    assert "turned" not in note and "the safest landing keeps" in note
+    lm, rm = landing.corner_margins(landing.face_under(SLOT, L, W, both, tune, 60.0), W, np.array([pose[0]]))
+    assert min(lm[0] / tune.landing_left_margin_um, rm[0] / tune.landing_right_margin_um) > 0.4
     flush = Polygon(body_corners(slot_after, L, W)[0])
     assert flush.distance(Polygon(body_corners(np.array(neighbour[:3]), 250.0, 60.0)[0])) > 1.0
     assert corner_inside(pose, face, 0.0, 0) and corner_inside(pose, face, 0.0, 1)
@@ -223,6 +226,7 @@ def test_a_step_beyond_the_trailing_corner_is_its_room_like_a_neighbour(gap_um):
     _, room = landing.corner_margins(face, W, np.array([0.0]), +1, math.radians(4.0))
     assert room[0] == pytest.approx(step_x - 0.5 * W, abs=1e-9)
     # the chosen incidence (left corner first) then keeps the trailing corner its margin from the step, or is not offered
-    for _, lead, o in landing.incidence_choices(face, W, np.arange(-10.0, 10.25, 0.25), tune, 1.0):
+    shifts = np.arange(-10.0, 10.25, 0.25)
+    for lead, meets, _ in landing.landing_options(face, W, shifts, tune, 1.0):
         if lead > 0:
-            assert step_x - (o + 0.5 * W) >= tune.landing_right_margin_um - landing.GRID_UM - 1e-9
+            assert np.all(step_x - (shifts[meets] + 0.5 * W) >= tune.landing_right_margin_um - landing.GRID_UM - 1e-9)

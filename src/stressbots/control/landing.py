@@ -17,7 +17,8 @@ stuck off flush that the controller had counted as docked.
 :func:`landing_pose` profiles the face under the slot from the docked bodies as measured (:func:`face_under`: its
 ends, its steps, anything standing out) and picks the cheapest aim: the slot, moved along the face so that both
 corners land inside, or the robot's pose at contact turned by a chosen incidence so that a known corner leads
-(:func:`contact_pose`); else the slot centred on the face.
+(:func:`contact_pose`), each with its corners' margins; where none has them, the one whose corners keep the largest
+share of their margins (:func:`landing_options`).
 
 Everything here is a pure function of the slot, the robot's body and the measured docked bodies (um, rad).
 """
@@ -34,8 +35,8 @@ from ..robots import body_corners
 from ..se2 import heading, points_to_frame, right
 from .queries import line_pose
 
-__all__ = ["Face", "Landing", "aligned_pair", "contact_pose", "corner_margins", "face_profile", "face_under", "incidence_choices",
-           "incidence_deg", "landing_pose", "nearest_distance", "nearest_shift", "noise_scale"]
+__all__ = ["Face", "Landing", "aligned_pair", "contact_pose", "corner_margins", "face_profile", "face_under", "incidence_deg",
+           "landing_options", "landing_pose", "nearest_distance", "nearest_shift", "noise_scale"]
 
 GRID_UM = 0.25
 """Lateral sampling of the face and of the slot's shifts (um): under a tenth of the landing margins."""
@@ -203,23 +204,24 @@ class Landing(NamedTuple):
 def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, scale: float = 1.0) -> Landing:
     """Where a docking robot should aim so that docking compliance takes it (:class:`Landing`).
 
-    The choices (``tune``: :class:`~stressbots.control.tuning.DockingTuning` ``landing_*`` fields; each corner
-    ``landing_left_margin_um`` / ``landing_right_margin_um`` times ``scale`` (:func:`noise_scale`) inside the face,
-    shifts at most ``landing_max_shift_um``):
+    The choices (:func:`landing_options`; ``tune``: :class:`~stressbots.control.tuning.DockingTuning` ``landing_*``
+    fields, margins times ``scale`` (:func:`noise_scale`), shifts at most ``landing_max_shift_um``):
 
-    - the slot moved along its face (not at all where it can stay), the least that lands both front corners on the
-      face whichever way the robot arrives turned;
-    - a *chosen incidence* (:func:`incidence_choices`): the robot arrives turned by ``landing_incidence_deg`` clockwise,
-      its left corner first, or by ``landing_incidence_anticlockwise_deg`` anticlockwise, its right corner first, its
-      leading corner its own margin (``landing_lead_*_margin_um``) inside the face, the least shift from the slot.
-      The pose returned is the robot's at contact: heading turned by the incidence, leading front corner on the
-      face. The line approach, aiming at it, brings the robot in on that heading; compliance turns it flush about
-      that corner. The rear edge of a robot of the same width has room for one corner, not for both, and a face
-      that steps out (the sides of a G_1 pair of two widths) takes a corner on its outer part only. It counts as
-      ``landing_incidence_cost_um`` of shift;
+    - the slot moved along its face (not at all where it can stay), the least that lands both front corners
+      ``landing_left_margin_um`` / ``landing_right_margin_um`` inside it, whichever way the robot arrives turned;
+    - a *chosen incidence*: the robot arrives turned by ``landing_incidence_deg`` clockwise, its left corner first,
+      or by ``landing_incidence_anticlockwise_deg`` anticlockwise, its right corner first, its leading corner its own
+      margin (``landing_lead_*_margin_um``) inside the face, the least shift from the slot. The pose returned is the
+      robot's at contact: heading turned by the incidence, leading front corner on the face. The line approach,
+      aiming at it, brings the robot in on that heading; compliance turns it flush about that corner. The rear edge
+      of a robot of the same width has room for one corner, not for both, and a face that steps out (the sides of a
+      G_1 pair of two widths) takes a corner on its outer part only. It counts as ``landing_incidence_cost_um`` of
+      shift;
 
-    the cheapest wins. With neither, the slot centred on the face (equal slack for both corners) when that lands
-    both on it at all; else the slot.
+    the cheapest wins. Where no choice has its margins (a narrow face, or margins doubled at twice the noise), the
+    *safest* does: the option and shift whose corners keep the largest share of their margins (:func:`landing_options`'
+    safety); a corner given half its margin misses the face far less often than a centred robot, either of whose
+    corners may lead with none. With no corner on the face at all, the slot.
     """
     slot = np.asarray(slot, dtype=np.float64)
     turned = max(incidence_deg(tune, +1), incidence_deg(tune, -1))
@@ -228,32 +230,34 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
     if face is None or tune.landing_max_shift_um <= 0.0:
         return Landing(slot, slot, "")
     shifts = np.arange(-tune.landing_max_shift_um, tune.landing_max_shift_um + 0.5 * GRID_UM, GRID_UM)
-    # one grid step of slack: the face's ends are known to the grid (0.25 um), and without declared noise a corner
-    # exactly at the end of a face as wide as the robot is on it
-    need_l, need_r = tune.landing_left_margin_um * scale - GRID_UM, tune.landing_right_margin_um * scale - GRID_UM
-    lm, rm = corner_margins(face, width_um, shifts)
-    choices = []  # (cost um, lead, shift)
-    o = nearest_shift(shifts, (lm >= need_l) & (rm >= need_r))
-    if o is not None:
-        choices.append((abs(o), 0, o))
-    choices += incidence_choices(face, width_um, shifts, tune, scale)
+    options = landing_options(face, width_um, shifts, tune, scale)
+    choices = [(abs(o) + (tune.landing_incidence_cost_um if lead else 0.0), lead, o)
+               for lead, meets, _ in options for o in [nearest_shift(shifts, meets)] if o is not None]
+    why = "room for that corner, not for both (or steps out)"
     if choices:
         _, lead, o = min(choices, key=lambda c: c[0])
-        moved = line_pose(slot, 0.0, o, 0.0)  # the slot moved o um along its face
-        if lead == 0:
-            return Landing(slot, slot, "") if o == 0.0 else Landing(
-                moved, moved, f"moves {abs(o):.1f} um {'right' if o > 0 else 'left'} along its face: both front corners then land on it")
-        deg = incidence_deg(tune, lead)
-        return Landing(contact_pose(slot, length_um, width_um, o, face.level, lead, math.radians(deg)), moved,
-                       f"is reached turned {deg:g} deg {'clockwise' if lead > 0 else 'anticlockwise'}, "
-                       f"{'left' if lead > 0 else 'right'} front corner first, {o:+.1f} um along its face: its face has "
-                       "room for that corner, not for both (or steps out)")
-    slack = np.minimum(lm - need_l, rm - need_r)
-    k = int(np.argmax(slack))
-    if lm[k] >= 0.0 and rm[k] >= 0.0 and shifts[k] != 0.0:
-        moved = line_pose(slot, 0.0, float(shifts[k]), 0.0)
-        return Landing(moved, moved, f"is centred on its face ({float(shifts[k]):+.1f} um): too narrow for margins")
-    return Landing(slot, slot, "")
+    else:
+        safety, lead, k = max(((float(safe[k]), lead, k) for lead, _, safe in options for k in [_safest(shifts, safe)]),
+                              key=lambda c: c[0])
+        if safety <= 0.0:
+            return Landing(slot, slot, "")
+        o = float(shifts[k])
+        why = f"too little room for its margins: the safest landing keeps {safety:.0%} of them"
+    moved = line_pose(slot, 0.0, o, 0.0)  # the slot moved o um along its face
+    if lead == 0:
+        return Landing(slot, slot, "") if o == 0.0 else Landing(
+            moved, moved, f"moves {abs(o):.1f} um {'right' if o > 0 else 'left'} along its face: both front corners then land on it"
+            + ("" if choices else f" ({why})"))
+    deg = incidence_deg(tune, lead)
+    return Landing(contact_pose(slot, length_um, width_um, o, face.level, lead, math.radians(deg)), moved,
+                   f"is reached turned {deg:g} deg {'clockwise' if lead > 0 else 'anticlockwise'}, "
+                   f"{'left' if lead > 0 else 'right'} front corner first, {o:+.1f} um along its face: its face has {why}")
+
+
+def _safest(shifts: np.ndarray, safe: np.ndarray) -> int:
+    """Index of the safest shift (the least of equals)."""
+    order = np.argsort(np.abs(shifts), kind="stable")
+    return int(order[np.argmax(safe[order])])
 
 
 def incidence_deg(tune, lead: int) -> float:
@@ -262,20 +266,25 @@ def incidence_deg(tune, lead: int) -> float:
     return tune.landing_incidence_deg if lead > 0 else tune.landing_incidence_anticlockwise_deg
 
 
-def incidence_choices(face: Face, width_um: float, shifts: np.ndarray, tune, scale: float) -> list[tuple[float, int, float]]:
-    """The chosen-incidence landings (:func:`landing_pose`) the face allows: ``(cost um, lead, shift um)`` for a left
-    (+1) and a right (-1) corner first, each the least shift that lands the leading corner its own margin
-    (``landing_lead_*_margin_um``) inside the face and leaves the trailing one its room (``landing_*_margin_um``),
-    margins times ``scale``."""
-    need = {+1: (tune.landing_lead_left_margin_um, tune.landing_right_margin_um),
+def landing_options(face: Face, width_um: float, shifts: np.ndarray, tune, scale: float):
+    """For both corners on the face (lead 0) and each chosen incidence (+1 left corner first, -1 right), over the
+    candidate ``shifts``: ``(lead, meets (k,), safety (k,))``. ``meets``: both corners have their margins (times
+    ``scale``; one grid step of slack: the face's ends are known to the grid, and without declared noise a corner
+    exactly at the end of a face as wide as the robot is on it); ``safety``: the least share of its margin a corner
+    keeps (1 = all of it, <= 0: a corner off the face). A corner leading alone has its own margin
+    (``landing_lead_*_margin_um``); a trailing one, its room to what stands out beyond it."""
+    need = {0: (tune.landing_left_margin_um, tune.landing_right_margin_um),
+            +1: (tune.landing_lead_left_margin_um, tune.landing_right_margin_um),
             -1: (tune.landing_left_margin_um, tune.landing_lead_right_margin_um)}
     out = []
-    for lead in (+1, -1):
-        tl, tr = corner_margins(face, width_um, shifts, lead, math.radians(incidence_deg(tune, lead)))
-        ml, mr = (m * scale - GRID_UM for m in need[lead])
-        o = nearest_shift(shifts, (tl >= ml) & (tr >= mr))
-        if o is not None:
-            out.append((abs(o) + tune.landing_incidence_cost_um, lead, o))
+    for lead in (0, +1, -1):
+        psi = math.radians(incidence_deg(tune, lead)) if lead else 0.0
+        lm, rm = corner_margins(face, width_um, shifts, lead, psi)
+        ml, mr = (m * scale for m in need[lead])
+        meets = (lm >= ml - GRID_UM) & (rm >= mr - GRID_UM)
+        with np.errstate(invalid="ignore"):
+            safe = np.minimum(lm / max(ml, GRID_UM), rm / max(mr, GRID_UM))
+        out.append((lead, meets, np.nan_to_num(safe, nan=-np.inf)))
     return out
 
 
