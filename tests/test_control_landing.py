@@ -163,7 +163,9 @@ def test_arriving_turned_the_trailing_corner_keeps_its_margin_from_a_neighbour_b
     both = (np.vstack([face[0], [neighbour[:3]]]), np.append(face[1], neighbour[3]), np.append(face[2], neighbour[4]))
     pose, slot_after, note = landing.landing_pose(SLOT, L, W, both, tune)
     assert "turned" not in note and "the safest landing keeps" in note
-    lm, rm = landing.corner_margins(landing.face_under(SLOT, L, W, both, tune, 60.0), W, np.array([pose[0]]))
+    face_under = landing.face_under(SLOT, L, W, both, tune, 60.0)
+    assert face_under is not None
+    lm, rm = landing.corner_margins(face_under, W, np.array([pose[0]]))
     assert min(lm[0] / tune.landing_left_margin_um, rm[0] / tune.landing_right_margin_um) > 0.4
     flush = Polygon(body_corners(slot_after, L, W)[0])
     assert flush.distance(Polygon(body_corners(np.array(neighbour[:3]), 250.0, 60.0)[0])) > 1.0

@@ -25,7 +25,9 @@ SCN = random_scenario(3, 5, shape="tee")
 
 def _goals() -> np.ndarray:
     """Some target poses (3, 3): where the robots start will do, the judge only compares final with target."""
-    return np.array([r.start.as_array() for r in SCN.robots], dtype=np.float64)
+    starts = [r.start for r in SCN.robots]
+    assert all(p is not None for p in starts)
+    return np.array([(p.x, p.y, p.theta) for p in starts if p is not None], dtype=np.float64)
 
 
 def _judge(plant):
