@@ -17,6 +17,9 @@ The layout of index j has ``n = 2 + j % 7`` robots and shape ``(tee, cross, comb
 (every combination within 28 layouts). Layouts the planner cannot plan (no nominal plan: issue 15) and
 layouts the generator cannot place are counted separately, not as controller failures.
 
+A trial counts as a success only when the controller reports one *and* the simulator agrees (:func:`judge_truth`:
+it docked every robot, and the true shape is within tolerance), as an outside checker asks its own plant.
+
 Reported: successes over all trials with the 95 % Wilson interval; per-layout successes; failure reasons
 grouped (numbers and robot names replaced by ``#`` / ``R``); median and 95th percentile wall time per
 assembly for 4 and 8 robots (controller + simulator; the nominal plan, shared by a layout's trials,
