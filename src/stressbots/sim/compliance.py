@@ -136,7 +136,7 @@ def dock_rule(b: Bodies, i: int, j: int, speed: np.ndarray):
             return "graze", f"slides past a corner of {name_j}", (speed[i] * h, dist / speed[i])
         b.stuck[i] = False
         return "contact", "stopped (contact not on its front)", None
-    c, nrm, alpha = ff
+    c, _, alpha = ff
     deg = math.degrees(alpha)
     b.docked[i] = False
     b.stuck[i] = True
