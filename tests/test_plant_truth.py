@@ -66,3 +66,18 @@ def test_the_benchmark_judges_a_claimed_success_from_the_simulators_truth(docked
     assert (got is None) if why is None else (why in got)
     if why == "never docked":
         assert SCN.names[2] in got
+
+
+def test_the_wrapped_simulators_of_simulate_and_the_image_camera_say_which_robots_they_docked():
+    """``simulate``, the demo and ``--camera images`` wrap the simulator; the judge can ask them which robots it docked
+    only if they pass ``docked`` on (else a robot stuck off flush passes as docked there and fails in montecarlo)."""
+    from stressbots.lab.plants import SyntheticLab
+    from stressbots.pipeline import _WatchedPlant
+    from stressbots.sim import SimulatedPlant
+    from stressbots.waveform import Drive
+
+    sim = SimulatedPlant(SCN, seed=0)
+    sim.apply([Drive(0.0, 1.0, 0.5)])
+    for wrapped in (_WatchedPlant(sim, None), SyntheticLab(SCN, plant=sim)):
+        assert np.array_equal(wrapped.docked, sim.docked)
+        assert np.array_equal(wrapped.true_poses(), sim.true_poses())

@@ -59,8 +59,9 @@ OUTPUT_FILES: tuple[tuple[str, str], ...] = (
 class _WatchedPlant:
     """The simulator behind the Plant protocol, telling a callback the simulated time after each apply.
 
-    Only ``observe`` and ``apply`` are the protocol; ``true_poses`` is forwarded because
-    :func:`stressbots.control.assemble` reports the true final pose of a plant that offers it.
+    Only ``observe`` and ``apply`` are the protocol; ``true_poses`` and ``docked`` are forwarded because
+    :func:`stressbots.control.assemble` reports the true final pose of a plant that offers it, and asks it which
+    robots it docked (SPEC 6: success is every robot docked).
     """
 
     def __init__(self, plant, on_time: Callable[[float], None] | None):
@@ -77,6 +78,10 @@ class _WatchedPlant:
 
     def true_poses(self) -> np.ndarray:
         return self._plant.true_poses()
+
+    @property
+    def docked(self) -> np.ndarray:
+        return self._plant.docked
 
 
 @dataclass(frozen=True, eq=False)

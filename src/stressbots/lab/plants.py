@@ -137,6 +137,11 @@ class SyntheticLab:
         return self.plant.true_poses()
 
     @property
+    def docked(self) -> np.ndarray:
+        """The simulator's docked flags: which robots its compliance docked (the run's judge asks)."""
+        return self.plant.docked
+
+    @property
     def time_s(self) -> float:
         return self.plant.time_s
 
