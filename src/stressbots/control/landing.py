@@ -237,11 +237,12 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
     if choices:
         _, lead, o = min(choices, key=lambda c: c[0])
     else:
-        safety, lead, k = max(((float(safe[k]), lead, k) for lead, _, safe in options for k in [_safest(shifts, safe)]),
-                              key=lambda c: c[0])
-        if safety <= 0.0:
+        lead, _, safe = max(options, key=lambda opt: float(opt[2].max()))
+        safety = float(safe.max())
+        best = nearest_shift(shifts, safe >= safety)
+        if safety <= 0.0 or best is None:
             return Landing(slot, slot, "")
-        o = float(shifts[k])
+        o = best
         why = f"too little room for its margins: the safest landing keeps {safety:.0%} of them"
     moved = line_pose(slot, 0.0, o, 0.0)  # the slot moved o um along its face
     if lead == 0:
@@ -252,12 +253,6 @@ def landing_pose(slot, length_um: float, width_um: float, bodies: Bodies, tune, 
     return Landing(contact_pose(slot, length_um, width_um, o, face.level, lead, math.radians(deg)), moved,
                    f"is reached turned {deg:g} deg {'clockwise' if lead > 0 else 'anticlockwise'}, "
                    f"{'left' if lead > 0 else 'right'} front corner first, {o:+.1f} um along its face: its face has {why}")
-
-
-def _safest(shifts: np.ndarray, safe: np.ndarray) -> int:
-    """Index of the safest shift (the least of equals)."""
-    order = np.argsort(np.abs(shifts), kind="stable")
-    return int(order[np.argmax(safe[order])])
 
 
 def incidence_deg(tune, lead: int) -> float:
