@@ -2,7 +2,7 @@
 
 Each expected outcome is computed here independently: first contact by scanning the closed-form motion
 (SPEC 3 formulas written out) against :func:`stressbots.collision.penetration_depth` and bisecting,
-then the rule's geometry (rotation about the contact point, slide along the face, G_1 junction) by hand.
+then the rule's geometry (rotation about the contact point, stuck where it met, G_1 junction) by hand.
 
 The static "structure" is a G_1 pair pushing head-on: R1 heading +x and R2 heading -x, front edges
 flush at x = 1000, so the bar spans x in [740, 1260], y in [970, 1030] (top face y = 1030).

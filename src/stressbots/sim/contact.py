@@ -74,7 +74,7 @@ class ContactRules:
         if not ((d0 > -NEAR_UM).any() or (g0 < NEAR_UM).any()):  # nothing near anything: all free
             self.contacts = {}
             return Motion(mode, slide_v, slide_end, excluded, False)
-        push, approach, touching = self.touch_graph(kappa, d0, g0)
+        push, approach = self.touch_graph(kappa, d0, g0)
         pushers = set(push)
         static = pushers | set(np.flatnonzero(speed <= 0).tolist()) | forced
         outcomes: Outcomes = {}
@@ -112,10 +112,9 @@ class ContactRules:
         return Motion(mode, slide_v, slide_end, excluded, recheck)
 
     def touch_graph(self, kappa: np.ndarray, d0: np.ndarray, g0: np.ndarray):
-        """``(push, approach, touching)`` of the touching pairs: whom each robot's own motion pushes into
-        (the arena edge last), the approach rate of each ordered pair (um per um driven) and whom each
-        robot touches. Base curvatures ``kappa`` (1/um), depths ``d0`` of every pair and wall gaps ``g0``
-        (um) now.
+        """``(push, approach)`` of the touching pairs: whom each robot's own motion pushes into (the arena
+        edge last) and the approach rate of each ordered pair (um per um driven). Base curvatures ``kappa``
+        (1/um), depths ``d0`` of every pair and wall gaps ``g0`` (um) now.
 
         Each touching robot is moved alone by :data:`~.bodies.PROBE_UM` on its arc (drift included) and
         the depths are taken again. A handful of pairs per evaluation: plain floats
@@ -124,19 +123,16 @@ class ContactRules:
         b = self.b
         push: dict[int, list[int]] = {}
         approach: dict[tuple[int, int], float] = {}
-        touching: dict[int, list[int]] = {}
         t = np.flatnonzero(d0 > -TOUCH_UM)
         pairs = list(zip(b.I[t].tolist(), b.J[t].tolist(), d0[t].tolist(), strict=True))
         walls = np.flatnonzero(g0 < TOUCH_UM).tolist() if b.arena is not None else []
         if not (pairs or walls):
-            return push, approach, touching
+            return push, approach
         now, probe = self._probes(sorted({k for a, c, _ in pairs for k in (a, c)} | set(walls)), kappa)
         hl, hw = b.hl.tolist(), b.hw.tolist()
         for x, y, d in pairs:
             rx = depth_one(probe[x], now[y], hl[x], hw[x], hl[y], hw[y]) - d
             ry = depth_one(now[x], probe[y], hl[x], hw[x], hl[y], hw[y]) - d
-            touching.setdefault(x, []).append(y)
-            touching.setdefault(y, []).append(x)
             approach[(x, y)] = rx / PROBE_UM
             approach[(y, x)] = ry / PROBE_UM
             if rx > PUSH_EPS_UM:
@@ -147,7 +143,7 @@ class ContactRules:
         for i in walls:
             if g[i] - wall_gap_one(probe[i], hl[i], hw[i], b.arena) > PUSH_EPS_UM:
                 push.setdefault(i, []).append(ARENA)
-        return push, approach, touching
+        return push, approach
 
     def _probes(self, robots: list[int], kappa: np.ndarray) -> tuple[dict[int, Trig], dict[int, Trig]]:
         """The poses of ``robots`` now and each moved alone by :data:`~.bodies.PROBE_UM` on its arc of base
