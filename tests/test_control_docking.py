@@ -442,3 +442,75 @@ def test_the_plain_six_degree_aim_is_looped_back_under_a_strong_identified_drift
     loops back from at once."""
     assert _looped_back(450.0, 250.0, math.radians(12.0) / 1000.0, math.radians(6.0))
     assert not _looped_back(450.0, 250.0, 0.0, math.radians(6.0))
+
+
+# -- the chosen incidence kept over the final run ----------------------------------------------------------------
+
+
+def _incidence_view(heading_deg: float, planned_deg: float) -> DockView:
+    """A robot 100 um behind its pose at contact, on its line, heading ``heading_deg`` from its slot's (+ = clockwise);
+    the pose at contact turned ``planned_deg`` from the slot (the landing's chosen incidence)."""
+    goal = np.array([0.0, 200.0, math.radians(planned_deg) % (2 * math.pi)])
+    pose = np.array([0.0, 100.0, math.radians(heading_deg) % (2 * math.pi)])
+    return DockView(pose, 100.0, 150.0, 100.0 / 150.0, goal, 250.0, 100.0, slot=np.array([0.0, 200.0, 0.0]))
+
+
+def _fix_of(view: DockView) -> LineFix:
+    from stressbots.control.queries import line_coords
+
+    b, r, p = line_coords(view.goal, view.pose)
+    return LineFix(b, r, p, contact_offset(b, r, p, view.length_um))
+
+
+def test_a_right_first_landing_reached_square_loops_back_instead_of_sticking():
+    """Aimed at 6 deg anticlockwise (right corner first) but turned only 1 deg anticlockwise: its left corner would
+    lead, off the face; with the incidence kept (half of it) it loops back while a loop is clear, and drives on (no
+    burst: a clockwise turn would take more) when not. Without the rule it drives in."""
+    from stressbots.control.docking import _frame
+
+    view = _incidence_view(-1.0, -6.0)
+    fix = _fix_of(view)
+    keep = ControllerOptions()  # the default keeps half
+    off = ControllerOptions(tuning=Tuning(incidence_keep_share=0.0))
+    assert _frame(fix, view, 2, keep, 1.0, lambda: False, lambda *_: None) is None
+    blocked = _frame(fix, view, 2, keep, 1.0, lambda: True, lambda *_: None)
+    assert blocked is not None and all(k == 1 for k, _ in blocked)
+    assert _frame(fix, view, 2, off, 1.0, lambda: False, lambda *_: None) is not None
+
+
+@given(st.floats(-3.0, 1.5), st.floats(3.0, 8.0))
+@settings(max_examples=40, deadline=None)
+def test_a_left_first_landing_turned_too_little_gets_a_burst_to_its_kept_incidence(heading_deg, planned_deg):
+    """Aimed turned ``planned`` clockwise (left corner first) but under half of it: the frame opens with a clockwise
+    burst (P_k) of at least the missing turn (identified turn rate), capped at the largest re-aim burst."""
+    from stressbots.control.docking import _frame
+
+    view = _incidence_view(heading_deg, planned_deg)
+    psi = math.radians(heading_deg - planned_deg)  # from its aim, the pose at contact; placed right of the aim's line
+    right = 0.5 - 100.0 * math.tan(psi) - 125.0 * math.sin(psi)  # so that it would dock 0.5 um right of its aim
+    from stressbots.control.queries import line_pose
+
+    view = DockView(line_pose(view.goal, 100.0, right, psi), view.speed_um_s, view.radius_um, view.turn_rate_rad_s, view.goal,
+                    view.length_um, view.nominal_speed_um_s, slot=view.slot)
+    assert abs(_fix_of(view).offset_um - 0.5) < 1e-6
+    opts = ControllerOptions()
+    plain = _frame(_fix_of(view), view, 2, ControllerOptions(tuning=Tuning(incidence_keep_share=0.0)), 1.0, lambda: True,
+                   lambda *_: None)
+    assert plain is not None and plain[0][0] == 1  # without the rule: straight on, no burst
+    steps = _frame(_fix_of(view), view, 2, opts, 1.0, lambda: True, lambda *_: None)
+    assert steps is not None and steps[0][0] == 2
+    missing = math.radians(0.5 * planned_deg - heading_deg)
+    turned = steps[0][1] * view.turn_rate_rad_s
+    assert turned >= min(missing, math.radians(opts.tuning.reaim_max_deg)) - 1e-9
+
+
+def test_the_incidence_rule_leaves_plain_landings_alone():
+    """No chosen incidence (no ``slot``): the same frame with the rule on and off."""
+    from stressbots.control.docking import _frame
+
+    view = DockView(np.array([0.0, 100.0, math.radians(-2.0) % (2 * math.pi)]), 100.0, 150.0, 100.0 / 150.0,
+                    np.array([0.0, 200.0, 0.0]), 250.0, 100.0)
+    fix = _fix_of(view)
+    off = ControllerOptions(tuning=Tuning(incidence_keep_share=0.0))
+    assert _frame(fix, view, 2, ControllerOptions(), 1.0, lambda: True, lambda *_: None) == _frame(fix, view, 2, off, 1.0,
+                                                                                                  lambda: True, lambda *_: None)
