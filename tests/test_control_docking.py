@@ -514,3 +514,21 @@ def test_the_incidence_rule_leaves_plain_landings_alone():
     off = ControllerOptions(tuning=Tuning(incidence_keep_share=0.0))
     assert _frame(fix, view, 2, ControllerOptions(), 1.0, lambda: True, lambda *_: None) == _frame(fix, view, 2, off, 1.0,
                                                                                                   lambda: True, lambda *_: None)
+
+
+def test_a_right_first_landing_far_left_loops_back_rather_than_spend_its_incidence():
+    """Aimed at 6 deg anticlockwise, turned 4: it may spare 1 deg of clockwise burst (half of 6 kept). 25 um left of its
+    aim's line that leaves it over ``small_miss_um`` left: it loops back where a loop is clear; where not, it takes
+    exactly the spare degree and drives on."""
+    from stressbots.control.docking import _frame
+    from stressbots.control.queries import line_pose
+
+    base = _incidence_view(-4.0, -6.0)
+    view = DockView(line_pose(base.goal, 100.0, -25.0, math.radians(2.0)), base.speed_um_s, base.radius_um,
+                    base.turn_rate_rad_s, base.goal, base.length_um, base.nominal_speed_um_s, slot=base.slot)
+    fix = _fix_of(view)
+    opts = ControllerOptions()
+    assert _frame(fix, view, 2, opts, 1.0, lambda: False, lambda *_: None) is None
+    steps = _frame(fix, view, 2, opts, 1.0, lambda: True, lambda *_: None)
+    assert steps is not None and steps[0][0] == 2
+    assert steps[0][1] * view.turn_rate_rad_s == pytest.approx(math.radians(1.0), abs=1e-9)

@@ -335,8 +335,12 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
                       min(fix.offset_um, -(fix.behind_um + 0.5 * view.length_um) * (keep - now)))
     if fix.offset_um < -tune.reaim_tol_um:
         turn = reaim_turn_rad(fix, view.length_um, 1e3)
-        if lead < 0:  # a clockwise burst takes from the anticlockwise incidence: no more than it can spare
-            turn = min(turn, max(-keep - now, 0.0))
+        if lead < 0 and turn > max(-keep - now, 0.0):  # a clockwise burst takes from the anticlockwise incidence
+            turn = max(-keep - now, 0.0)  # no more than it can spare
+            left_um = -fix.offset_um - turn * (max(fix.behind_um, 0.0) + 0.5 * view.length_um)
+            if left_um > tune.small_miss_um + relax_um and not loop_blocked():
+                log("miss", f"would dock {left_um:.0f} um left of its aim keeping its incidence: loops back")
+                return None
         if turn > burst_max:  # too far left for a burst: merge, or loop back
             m = merge(fix.behind_um, fix.right_um, fix.psi_rad, r)
             if m is not None:
