@@ -324,19 +324,16 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
     final = fix.behind_um <= tune.final_run_um
     frame_s = tune.final_frame_s if final else min(tx, (fix.behind_um - tune.final_run_um) / v + 1e-3)
     burst: Steps = []
-    lead, now, keep = incidence_bounds(view, tune.incidence_keep_share) if final else (0, 0.0, 0.0)
-    if lead < 0 and now > -keep:  # turned too little anticlockwise: its left corner, not its right, would lead
-        if not loop_blocked():
-            log("miss", f"is turned {math.degrees(now):+.1f} deg from its slot, its aim {math.degrees(-keep):+.1f} deg or "
-                        "more: its right front corner would not lead; loops back")
+    spare = math.inf  # the largest clockwise burst (rad) a kept incidence allows
+    if final:
+        kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log)
+        if kept is None:
             return None
-    elif lead > 0 and now < keep:  # turned too little clockwise: a burst turns it so that its left corner leads
-        fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad,
-                      min(fix.offset_um, -(fix.behind_um + 0.5 * view.length_um) * (keep - now)))
+        fix, spare = kept
     if fix.offset_um < -tune.reaim_tol_um:
         turn = reaim_turn_rad(fix, view.length_um, 1e3)
-        if lead < 0 and turn > max(-keep - now, 0.0):  # a clockwise burst takes from the anticlockwise incidence
-            turn = max(-keep - now, 0.0)  # no more than it can spare
+        if turn > spare:  # no more than the anticlockwise incidence can spare
+            turn = spare
             left_um = -fix.offset_um - turn * (max(fix.behind_um, 0.0) + 0.5 * view.length_um)
             if left_um > tune.small_miss_um + relax_um and not loop_blocked():
                 log("miss", f"would dock {left_um:.0f} um left of its aim keeping its incidence: loops back")
@@ -396,6 +393,24 @@ def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, flo
     if abs(planned) < 1e-9:
         return 0, 0.0, 0.0
     return (1 if planned > 0 else -1), float(angle_difference(view.pose[2], view.slot[2])), keep_share * abs(planned)
+
+
+def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log) -> tuple[LineFix, float] | None:
+    """A frame's ``fix`` and the largest clockwise burst (rad) that keep the chosen incidence (:func:`incidence_bounds`);
+    None: loop back. A left-first robot turned too little clockwise gets its predicted offset moved left so that the
+    re-aim burst turns it up to the kept incidence; a right-first one may spare only what its incidence has beyond it,
+    and loops back (where a loop is clear) once it has none."""
+    lead, now, keep = incidence_bounds(view, keep_share)
+    if lead < 0:
+        if now > -keep and not loop_blocked():
+            log("miss", f"is turned {math.degrees(now):+.1f} deg from its slot, its aim {math.degrees(-keep):+.1f} deg or "
+                        "more: its right front corner would not lead; loops back")
+            return None
+        return fix, max(-keep - now, 0.0)
+    if lead > 0 and now < keep:
+        fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad,
+                      min(fix.offset_um, -(fix.behind_um + 0.5 * view.length_um) * (keep - now)))
+    return fix, math.inf
 
 
 def _merge_steps(m, fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float) -> Steps:
