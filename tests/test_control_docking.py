@@ -481,27 +481,32 @@ def test_a_right_first_landing_reached_square_loops_back_instead_of_sticking():
 @given(st.floats(-3.0, 1.4), st.floats(3.0, 8.0))
 @settings(max_examples=40, deadline=None)
 def test_a_left_first_landing_turned_too_little_gets_a_burst_to_its_kept_incidence(heading_deg, planned_deg):
-    """Aimed turned ``planned`` clockwise (left corner first) but under half of it: the frame opens with a clockwise
-    burst (P_k) of at least the missing turn (identified turn rate), capped at the largest re-aim burst."""
+    """Aimed turned ``planned`` clockwise (left corner first) but under half of it, placed so that it would dock 0.5 um
+    right of its aim: in its run-in (20 um out) the frame opens with a clockwise burst (P_k) of at least the missing
+    turn (identified turn rate), capped at the largest re-aim burst; 100 um out it drives straight on (the bursts that
+    follow the shrinking lead turn it clockwise anyway), as it does everywhere without the rule."""
     from stressbots.control.docking import _frame
-
-    view = _incidence_view(heading_deg, planned_deg)
-    psi = math.radians(heading_deg - planned_deg)  # from its aim, the pose at contact; placed right of the aim's line
-    right = 0.5 - 100.0 * math.tan(psi) - 125.0 * math.sin(psi)  # so that it would dock 0.5 um right of its aim
     from stressbots.control.queries import line_pose
 
-    view = DockView(line_pose(view.goal, 100.0, right, psi), view.speed_um_s, view.radius_um, view.turn_rate_rad_s, view.goal,
-                    view.length_um, view.nominal_speed_um_s, slot=view.slot)
-    assert abs(_fix_of(view).offset_um - 0.5) < 1e-6
-    opts = ControllerOptions()
-    plain = _frame(_fix_of(view), view, 2, ControllerOptions(tuning=Tuning(incidence_keep_share=0.0)), 1.0, lambda: True,
-                   lambda *_: None)
-    assert plain is not None and plain[0][0] == 1  # without the rule: straight on, no burst
-    steps = _frame(_fix_of(view), view, 2, opts, 1.0, lambda: True, lambda *_: None)
-    assert steps is not None and steps[0][0] == 2
-    missing = math.radians(0.5 * planned_deg - heading_deg)
-    turned = steps[0][1] * view.turn_rate_rad_s
-    assert turned >= min(missing, math.radians(opts.tuning.reaim_max_deg)) - 1e-9
+    base = _incidence_view(heading_deg, planned_deg)
+    psi = math.radians(heading_deg - planned_deg)  # from its aim, the pose at contact; placed right of the aim's line
+    off = ControllerOptions(tuning=Tuning(incidence_keep_share=0.0))
+    for behind in (20.0, 100.0):
+        right = 0.5 - behind * math.tan(psi) - 125.0 * math.sin(psi)  # so that it would dock 0.5 um right of its aim
+        view = DockView(line_pose(base.goal, behind, right, psi), base.speed_um_s, base.radius_um, base.turn_rate_rad_s,
+                        base.goal, base.length_um, base.nominal_speed_um_s, slot=base.slot)
+        assert abs(_fix_of(view).offset_um - 0.5) < 1e-6
+        plain = _frame(_fix_of(view), view, 2, off, 1.0, lambda: True, lambda *_: None)
+        assert plain is not None and plain[0][0] == 1  # without the rule: straight on, no burst
+        steps = _frame(_fix_of(view), view, 2, ControllerOptions(), 1.0, lambda: True, lambda *_: None)
+        assert steps is not None
+        if behind > 30.0:
+            assert steps[0][0] == 1
+            continue
+        assert steps[0][0] == 2
+        missing = math.radians(0.5 * planned_deg - heading_deg)
+        turned = steps[0][1] * view.turn_rate_rad_s
+        assert turned >= min(missing, math.radians(ControllerOptions().tuning.reaim_max_deg)) - 1e-9
 
 
 def test_the_incidence_rule_leaves_plain_landings_alone():

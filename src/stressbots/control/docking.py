@@ -326,7 +326,8 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
     burst: Steps = []
     spare = math.inf  # the largest clockwise burst (rad) a kept incidence allows
     if final:
-        kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log)
+        kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log,
+                               run_in=max(fix.behind_um, 0.0) <= v * tune.final_frame_s)
         if kept is None:
             return None
         fix, spare = kept
@@ -395,11 +396,14 @@ def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, flo
     return (1 if planned > 0 else -1), float(angle_difference(view.pose[2], view.slot[2])), keep_share * abs(planned)
 
 
-def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log) -> tuple[LineFix, float] | None:
+def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log,
+                    run_in: bool = True) -> tuple[LineFix, float] | None:
     """A frame's ``fix`` and the largest clockwise burst (rad) that keep the chosen incidence (:func:`incidence_bounds`);
-    None: loop back. A left-first robot turned too little clockwise gets its predicted offset moved left so that the
-    re-aim burst turns it up to the kept incidence; a right-first one may spare only what its incidence has beyond it,
-    and loops back (where a loop is clear) once it has none."""
+    None: loop back. A left-first robot turned too little clockwise gets, in its ``run_in`` (the last frame), its
+    predicted offset moved left so that the re-aim burst turns it up to the kept incidence: earlier, the bursts that
+    follow the shrinking lead turn it clockwise anyway, and one taken 200 um out only sent it right of its line (the
+    example, seed 6598635715548540). A right-first one may spare only what its incidence has beyond it, and loops back
+    (where a loop is clear) once it has none."""
     lead, now, keep = incidence_bounds(view, keep_share)
     if lead < 0:
         if now > -keep and not loop_blocked():
@@ -407,7 +411,7 @@ def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocke
                         "more: its right front corner would not lead; loops back")
             return None
         return fix, max(-keep - now, 0.0)
-    if lead > 0 and now < keep:
+    if lead > 0 and now < keep and run_in:
         fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad,
                       min(fix.offset_um, -(fix.behind_um + 0.5 * view.length_um) * (keep - now)))
     return fix, math.inf

@@ -494,7 +494,7 @@ class DockingTuning:
     incidence_keep_share: float = 0.5
     """Share of a chosen incidence (``landing_incidence_*deg``) a robot keeps over its final run, so that the corner
     chosen to lead does (:func:`~stressbots.control.docking.incidence_bounds`): one to arrive turned clockwise (left
-    corner first) gets a burst up to it; one to arrive turned anticlockwise takes no burst beyond it, and loops back,
+    corner first) gets a burst up to it in its run-in; one to arrive turned anticlockwise takes no burst beyond it, and loops back,
     where a loop is clear, once past it or when that burst would leave it more than ``small_miss_um`` left of its aim
     (a one-way robot cannot turn back). Half: the camera's heading error at twice
     the literature's noise (1-2 deg filtered) then still leaves the chosen corner first. 0: not kept. On the tuning
