@@ -482,25 +482,27 @@ def test_a_right_first_landing_reached_square_loops_back_instead_of_sticking():
 @settings(max_examples=40, deadline=None)
 def test_a_left_first_landing_turned_too_little_gets_a_burst_to_its_kept_incidence(heading_deg, planned_deg):
     """Aimed turned ``planned`` clockwise (left corner first) but under half of it, placed so that it would dock 0.5 um
-    right of its aim: in its run-in (20 um out) the frame opens with a clockwise burst (P_k) of at least the missing
-    turn (identified turn rate), capped at the largest re-aim burst; 100 um out it drives straight on (the bursts that
-    follow the shrinking lead turn it clockwise anyway), as it does everywhere without the rule."""
+    right of its pose at contact (no lead left to give back): 20 um out (its run-in) and 100 um out the frame opens
+    with a clockwise burst (P_k) of at least the missing turn (identified turn rate), capped at the largest re-aim
+    burst. 100 um out and 30 um left of that pose, the bursts still to come give back more than the missing turn: it
+    drives straight on. Without the rule it drives straight on in all three."""
     from stressbots.control.docking import _frame
     from stressbots.control.queries import line_pose
 
     base = _incidence_view(heading_deg, planned_deg)
-    psi = math.radians(heading_deg - planned_deg)  # from its aim, the pose at contact; placed right of the aim's line
+    psi = math.radians(heading_deg - planned_deg)  # from its aim, the pose at contact
     off = ControllerOptions(tuning=Tuning(incidence_keep_share=0.0))
-    for behind in (20.0, 100.0):
-        right = 0.5 - behind * math.tan(psi) - 125.0 * math.sin(psi)  # so that it would dock 0.5 um right of its aim
+    for behind, docks_at in ((20.0, 0.5), (100.0, 0.5), (100.0, -30.0)):
+        right = docks_at - behind * math.tan(psi) - 125.0 * math.sin(psi)  # docks ``docks_at`` um right of that pose
         view = DockView(line_pose(base.goal, behind, right, psi), base.speed_um_s, base.radius_um, base.turn_rate_rad_s,
                         base.goal, base.length_um, base.nominal_speed_um_s, slot=base.slot)
-        assert abs(_fix_of(view).offset_um - 0.5) < 1e-6
-        plain = _frame(_fix_of(view), view, 2, off, 1.0, lambda: True, lambda *_: None)
+        fix = _fix_of(view)
+        fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad, fix.offset_um - docks_at + 0.5)  # its aim 0.5 um left
+        plain = _frame(fix, view, 2, off, 1.0, lambda: True, lambda *_: None)
         assert plain is not None and plain[0][0] == 1  # without the rule: straight on, no burst
-        steps = _frame(_fix_of(view), view, 2, ControllerOptions(), 1.0, lambda: True, lambda *_: None)
+        steps = _frame(fix, view, 2, ControllerOptions(), 1.0, lambda: True, lambda *_: None)
         assert steps is not None
-        if behind > 30.0:
+        if docks_at < 0.0:
             assert steps[0][0] == 1
             continue
         assert steps[0][0] == 2

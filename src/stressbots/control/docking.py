@@ -399,11 +399,12 @@ def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, flo
 def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log,
                     run_in: bool = True) -> tuple[LineFix, float] | None:
     """A frame's ``fix`` and the largest clockwise burst (rad) that keep the chosen incidence (:func:`incidence_bounds`);
-    None: loop back. A left-first robot turned too little clockwise gets, in its ``run_in`` (the last frame), its
-    predicted offset moved left so that the re-aim burst turns it up to the kept incidence: earlier, the bursts that
-    follow the shrinking lead turn it clockwise anyway, and one taken 200 um out only sent it right of its line (the
-    example, seed 6598635715548540). A right-first one may spare only what its incidence has beyond it, and loops back
-    (where a loop is clear) once it has none."""
+    None: loop back. A left-first robot that would arrive turned too little clockwise gets its predicted offset moved
+    left so that the re-aim burst turns it up to the kept incidence. Before its ``run_in`` (the last frame) the bursts
+    still to come count: they give back the lead it is left of its pose at contact, ``offset / (behind + L/2)`` of
+    clockwise turn (a burst for the whole bound 200 um out only sent the example's B right of its line, seed
+    6598635715548540). A right-first one may spare only what its incidence has beyond it, and loops back (where a loop
+    is clear) once it has none."""
     lead, now, keep = incidence_bounds(view, keep_share)
     if lead < 0:
         if now > -keep and not loop_blocked():
@@ -411,9 +412,11 @@ def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocke
                         "more: its right front corner would not lead; loops back")
             return None
         return fix, max(-keep - now, 0.0)
-    if lead > 0 and now < keep and run_in:
-        fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad,
-                      min(fix.offset_um, -(fix.behind_um + 0.5 * view.length_um) * (keep - now)))
+    if lead > 0:
+        lever = max(fix.behind_um, 0.0) + 0.5 * view.length_um
+        coming = 0.0 if run_in else max(-contact_offset(*line_coords(view.goal, view.pose), view.length_um), 0.0) / lever
+        if now + coming < keep:  # the bursts that give back its lead left of its aim count: they turn it clockwise
+            fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad, min(fix.offset_um, -lever * (keep - now - coming)))
     return fix, math.inf
 
 
