@@ -478,7 +478,7 @@ def test_a_right_first_landing_reached_square_loops_back_instead_of_sticking():
     assert _frame(fix, view, 2, off, 1.0, lambda: False, lambda *_: None) is not None
 
 
-@given(st.floats(-3.0, 1.4), st.floats(3.0, 8.0))
+@given(st.floats(-3.0, 1.0), st.floats(3.0, 8.0))  # at least 0.5 deg short: a burst over the 1 um re-aim tolerance
 @settings(max_examples=40, deadline=None)
 def test_a_left_first_landing_turned_too_little_gets_a_burst_to_its_kept_incidence(heading_deg, planned_deg):
     """Aimed turned ``planned`` clockwise (left corner first) but under half of it, placed so that it would dock 0.5 um

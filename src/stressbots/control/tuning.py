@@ -493,13 +493,13 @@ class DockingTuning:
     """Frame length (s) of the final run: shorter than t_x, so a drift is seen while it can be corrected."""
     incidence_keep_share: float = 0.5
     """Share of a chosen incidence (``landing_incidence_*deg``) a robot keeps over its final run, so that the corner
-    chosen to lead does (:func:`~stressbots.control.docking.incidence_bounds`): one to arrive turned clockwise (left
-    corner first) gets a burst up to it in its run-in; one to arrive turned anticlockwise takes no burst beyond it, and loops back,
-    where a loop is clear, once past it or when that burst would leave it more than ``small_miss_um`` left of its aim
-    (a one-way robot cannot turn back). Half: the camera's heading error at twice
-    the literature's noise (1-2 deg filtered) then still leaves the chosen corner first. 0: not kept. On the tuning
-    layouts at 2x (seeds 0-1) 194/240 against 190 without, trials with a robot stuck 5 against 12 (the shape error
-    took most of the rest: 19 against 14); at 1x 114/120 both (seed 0)."""
+    chosen to lead does (:func:`~stressbots.control.docking.incidence_bounds`). One to arrive turned clockwise (left
+    corner first) gets a burst up to it, counting the clockwise bursts that will give back its lead; one to arrive
+    turned anticlockwise takes no burst beyond it, and loops back, where a loop is clear, once past it or when that
+    burst would leave it more than ``small_miss_um`` left of its aim (a one-way robot cannot turn back). Half: the
+    camera's heading error at twice the literature's noise (1-2 deg filtered) then still leaves the chosen corner
+    first. 0: not kept. Session 28, against 0: tuning layouts at 2x (seeds 0-1) 195/240 against 190, trials with a
+    robot stuck 12 -> 7; held-out 1x 296/300 against 295 (no layout below 4/5)."""
     reaim_tol_um: float = 1.0
     """In the final run, a predicted offset further left than this is corrected by a clockwise burst."""
     lead_drift_deg_per_mm: float = 2.0
