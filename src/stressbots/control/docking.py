@@ -38,8 +38,8 @@ from .loopview import Steps
 from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions, Tuning
 
-__all__ = ["DockOutcome", "DockView", "LineFix", "compliant_aim", "contact_offset", "incidence_bounds", "lead_um", "line_approach",
-           "loops_back", "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
+__all__ = ["DockOutcome", "DockView", "LineFix", "burst_lever_um", "compliant_aim", "contact_offset", "incidence_bounds", "lead_um",
+           "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
 
 
 
@@ -149,8 +149,17 @@ def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float) -> float:
     """
     if fix.offset_um >= 0.0:
         return 0.0
-    lever = max(fix.behind_um, 0.0) + 0.5 * length_um
-    return float(min(-fix.offset_um / lever, math.radians(max_deg)))
+    return float(min(-fix.offset_um / burst_lever_um(fix.behind_um, length_um), math.radians(max_deg)))
+
+
+def burst_lever_um(behind_um: float, length_um: float) -> float:
+    """What a clockwise burst moves the predicted docking offset (um per rad): the centre line swings over the
+    ``behind_um`` left to the face, and compliance adds half the robot's length (:func:`contact_offset`).
+
+    >>> burst_lever_um(100.0, 250.0), burst_lever_um(-3.0, 250.0)
+    (225.0, 125.0)
+    """
+    return max(behind_um, 0.0) + 0.5 * length_um
 
 
 def stopped_verdict(pose, goal, *, dock_tol_um: float, dock_tol_deg: float, flush_um: float, off_slot_um: float) -> DockOutcome:
@@ -255,7 +264,7 @@ def aim_lead(view: DockView, behind_um: float, tune: Tuning, loop_blocked: Calla
     right of the slot would bet on it, and what it really does (it carries the robot left) clockwise bursts fix."""
     kappa = math.degrees(max(view.drift_rad_per_um, 0.0)) * 1000.0 + tune.lead_drift_deg_per_mm
     lead = lead_um(behind_um, view.length_um, kappa, tune.aim_left_um)
-    lead += math.radians(tune.aim_heading_sigma_deg) * (max(behind_um, 0.0) + 0.5 * view.length_um)
+    lead += math.radians(tune.aim_heading_sigma_deg) * burst_lever_um(behind_um, view.length_um)
     sigmas = tune.aim_walk_sigmas + (tune.blocked_walk_sigmas if tune.blocked_walk_sigmas > 0.0 and loop_blocked() else 0.0)
     walk = walk_lead_um(behind_um, view.length_um, view.walk_var_rad2_per_um, sigmas)
     return lead + walk, walk
@@ -335,7 +344,7 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
         turn = reaim_turn_rad(fix, view.length_um, 1e3)
         if turn > spare:  # no more than the anticlockwise incidence can spare
             turn = spare
-            left_um = -fix.offset_um - turn * (max(fix.behind_um, 0.0) + 0.5 * view.length_um)
+            left_um = -fix.offset_um - turn * burst_lever_um(fix.behind_um, view.length_um)
             if left_um > tune.small_miss_um + relax_um and not loop_blocked():
                 log("miss", f"would dock {left_um:.0f} um left of its aim keeping its incidence: loops back")
                 return None
@@ -397,7 +406,7 @@ def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, flo
 
 
 def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log,
-                    run_in: bool = True) -> tuple[LineFix, float] | None:
+                    run_in: bool) -> tuple[LineFix, float] | None:
     """A frame's ``fix`` and the largest clockwise burst (rad) that keep the chosen incidence (:func:`incidence_bounds`);
     None: loop back. A left-first robot that would arrive turned too little clockwise gets its predicted offset moved
     left so that the re-aim burst turns it up to the kept incidence. Before its ``run_in`` (the last frame) the bursts
@@ -413,7 +422,7 @@ def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocke
             return None
         return fix, max(-keep - now, 0.0)
     if lead > 0:
-        lever = max(fix.behind_um, 0.0) + 0.5 * view.length_um
+        lever = burst_lever_um(fix.behind_um, view.length_um)
         coming = 0.0 if run_in else max(-contact_offset(*line_coords(view.goal, view.pose), view.length_um), 0.0) / lever
         if now + coming < keep:  # the bursts that give back its lead left of its aim count: they turn it clockwise
             fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad, min(fix.offset_um, -lever * (keep - now - coming)))
