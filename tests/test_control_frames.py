@@ -183,3 +183,19 @@ def test_the_predicted_track_is_where_the_robots_go(steps, dt):
     truth = plant.true_poses()
     assert np.allclose(track[-1, :, :2], truth[:, :2], atol=1e-3)
     assert np.allclose(angle_difference(track[-1, :, 2], truth[:, 2]), 0.0, atol=1e-6)
+
+
+def test_a_look_moves_nobody_keeps_the_arms_and_counts_its_time():
+    """``PlantLoop.look``: m frames read under Holds alone; the simulator's true poses and arm states are unchanged, the
+    loop's and the plant's clocks advance by m frame intervals, and a step list after it drives as before."""
+    scn = random_scenario(3, 5, noise=LITERATURE_NOISE.scaled(2.0))
+    plant = _Counting(SimulatedPlant(scn, seed=1))
+    loop = PlantLoop(scn, plant, budget_s=100.0, who="test", frame_interval_s=0.05, frames_per_step=3)
+    loop.drive([(2, 0.5), (1, 0.3)])
+    poses, arms, t, frames = plant.plant.true_poses(), plant.plant.arm_states.copy(), plant.plant.time_s, plant.frames
+    loop.look(8, 3.0)
+    assert plant.frames == frames + 8
+    assert np.array_equal(plant.plant.true_poses(), poses) and np.array_equal(plant.plant.arm_states, arms)
+    assert math.isclose(plant.plant.time_s - t, 0.4) and math.isclose(loop.t, 1.2)
+    loop.drive([(1, 0.2)])
+    assert not np.array_equal(plant.plant.true_poses(), poses)

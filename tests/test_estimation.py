@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from stressbots.estimation import Estimator
 from stressbots.kinematics import advance, move
+from stressbots.robots import angle_difference
 
 
 def _camera(rng, poses, pos_sd=2.0, head_sd=math.radians(1.0)):
@@ -109,3 +110,56 @@ def test_predictions_in_plain_floats_are_move_step_after_step_bit_for_bit():
             p = np.where(frozen[:, None], p, move(p, est.speed * d, curvature))
         p[:, 2] = np.mod(p[:, 2], 2 * np.pi)
         assert np.array_equal(est.predict(steps, frozen), p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 12), st.floats(0.0, 10.0), st.integers(0, 2**31 - 1))
+def test_a_look_is_the_weighted_mean_of_the_still_frames_and_the_estimate(m, prior, seed):
+    """Frames of robots that did not move: a free robot's pose becomes (prior x estimate + sum of frames) / (prior + m)
+    (headings about the estimate); a robot not seen in any frame keeps its estimate. Brute force on the arrays."""
+    rng = np.random.default_rng(seed)
+    truth = np.array([[100.0, 200.0, 0.02], [900.0, 400.0, 6.27]])
+    est = Estimator(_camera(rng, truth), truth, np.full(2, 100.0), np.full(2, 200.0))
+    before = est.pose.copy()
+    frames = np.stack([_camera(rng, truth, pos_sd=3.0, head_sd=math.radians(2.0)) for _ in range(m)])
+    frames[:, 1] = np.nan  # the second robot is never seen
+    est.look(frames, np.zeros(2, dtype=bool), prior)
+    dth = np.asarray(angle_difference(frames[:, 0, 2], before[0, 2]))
+    want_xy = (prior * before[0, :2] + frames[:, 0, :2].sum(axis=0)) / (prior + m)
+    want_th = before[0, 2] + dth.sum() / (prior + m)
+    assert np.allclose(est.pose[0, :2], want_xy)
+    assert abs(float(angle_difference(est.pose[0, 2], want_th))) < 1e-12
+    assert np.array_equal(est.pose[1], before[1])
+
+
+def test_a_look_sharpens_the_estimate_against_the_truth():
+    """Twelve still frames at twice the literature's camera noise (4 um, 2 deg) bring a filtered estimate closer to the
+    truth: over 200 robots the mean errors fall by more than a third (independent truth: the poses the frames were
+    drawn about)."""
+    rng = np.random.default_rng(7)
+    truth = np.column_stack([rng.uniform(0, 3000, 200), rng.uniform(0, 3000, 200), rng.uniform(0, 2 * math.pi, 200)])
+    est = Estimator(_camera(rng, truth, 4.0, math.radians(2.0)), truth, np.full(200, 100.0), np.full(200, 200.0))
+    for _ in range(6):  # the fixed-gain filter's steady state, robots still
+        est.update([(np.zeros(200, dtype=bool), 0.0)], np.zeros(200, dtype=bool), _camera(rng, truth, 4.0, math.radians(2.0)))
+    err0 = np.hypot(*(est.pose[:, :2] - truth[:, :2]).T).mean(), np.abs(angle_difference(est.pose[:, 2], truth[:, 2])).mean()
+    frames = np.stack([_camera(rng, truth, 4.0, math.radians(2.0)) for _ in range(12)])
+    est.look(frames, np.zeros(200, dtype=bool), 3.0)
+    err1 = np.hypot(*(est.pose[:, :2] - truth[:, :2]).T).mean(), np.abs(angle_difference(est.pose[:, 2], truth[:, 2])).mean()
+    assert err1[0] < 0.67 * err0[0] and err1[1] < 0.67 * err0[1], (err0, err1)
+
+
+def test_a_held_robot_adds_the_looks_frames_to_the_mean_since_it_stopped():
+    """A docked robot is at the mean of all its frames since it stopped, the look's frames counted one by one."""
+    rng = np.random.default_rng(3)
+    truth = np.array([[500.0, 500.0, 1.0]])
+    frozen = np.array([True])
+    est = Estimator(_camera(rng, truth), truth, np.array([100.0]), np.array([200.0]))
+    seen = []
+    for _ in range(3):
+        f = _camera(rng, truth)
+        seen.append(f[0])
+        est.update([(np.array([False]), 0.5)], frozen, f)
+    frames = np.stack([_camera(rng, truth) for _ in range(5)])
+    seen.extend(frames[:, 0])
+    est.look(frames, frozen, 3.0)
+    assert np.allclose(est.pose[0], np.mean(seen, axis=0))

@@ -21,7 +21,7 @@ from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
 from ..estimation import Estimator
 from ..robots import orbit_radii
-from ..waveform import Synthesizer
+from ..waveform import Hold, Synthesizer
 from .straight_drift import StraightDrift, StraightDriftSettings
 
 __all__ = ["PlantLoop", "frame_pieces"]
@@ -168,6 +168,28 @@ class PlantLoop:
                 p = self.estimator.predict([(self.rank <= k, d / cuts)], frozen, start=p)
                 out.append(p)
         return np.stack(out)
+
+    def look(self, frames: int, prior_frames: float) -> None:
+        """Read ``frames`` camera frames while nobody moves, ``frame_interval_s`` s apart, and let the estimator take their
+        mean (:meth:`~stressbots.estimation.Estimator.look`, the estimate counting as ``prior_frames`` frames).
+
+        Each frame is preceded by a Hold at the drive band's low level: a constant level inside the band flips no arm
+        (the band's rule), and without a Drive no robot moves (SPEC 4), so the frames differ by camera noise only. The
+        Holds' time counts against the budget like any step's."""
+        dt = self.frame_interval_s or 0.05
+        if frames <= 0:
+            return
+        if self.t + frames * dt > self.budget_s + 1e-9:
+            raise self.over_budget()
+        level = self.analysis.electrodes.drive_low_V
+        shots = []
+        for _ in range(frames):
+            self.plant.apply((Hold(level, dt),))
+            shots.append(np.asarray(self.plant.observe(), dtype=np.float64))
+        self.estimator.look(np.stack(shots), self.docked.copy(), prior_frames)
+        self.t += frames * dt
+        self.trace_t.append(self.t)
+        self.trace_p.append(self.est.copy())
 
     def drive(self, steps: Sequence[tuple[int, float]]) -> None:
         """Apply primitive steps ``(k, duration_s)``, then update the estimates from the next frame."""

@@ -11,7 +11,7 @@ obstacle queries, steering). Each phase's own protocol extends one of them.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -21,10 +21,19 @@ if TYPE_CHECKING:
     from .gross import SteerOutcome
     from .straight_drift import StraightDrift
 
-__all__ = ["DockingLoop", "LoopView", "Steps"]
+__all__ = ["DockingLoop", "Look", "LoopView", "Steps"]
 
 Steps = list[tuple[int, float]]
 """Primitive steps ``(k, duration_s)``: apply P_k for that long."""
+
+
+class Look(NamedTuple):
+    """What a policy yields instead of steps to have the loop read ``frames`` camera frames while nobody moves
+    (:meth:`~stressbots.control.loop.PlantLoop.look`): the estimate of a robot about to dock, sharpened."""
+
+    frames: int
+    prior_frames: float
+    """How many frames' worth the estimate counts against their mean."""
 
 
 class LoopView(Protocol):
