@@ -22,6 +22,7 @@ from stressbots.control.docking import (
     reaim_turn_rad,
     stopped_verdict,
 )
+from stressbots.control.loopview import Look
 from stressbots.control.queries import turn_fraction
 from stressbots.control.tuning import ControllerOptions, Tuning
 from stressbots.kinematics import move
@@ -181,7 +182,8 @@ def run_policy(rig: FaceRig, opts: ControllerOptions):
     try:
         steps = next(policy)
         while True:
-            rig.apply(steps)
+            if not isinstance(steps, Look):  # a look moves nobody (the rig's estimates are the truth)
+                rig.apply(steps)
             steps = policy.send(None)
     except StopIteration as stop:
         return stop.value
@@ -381,7 +383,7 @@ def test_an_aim_by_the_arena_edge_is_replaced_by_a_tight_arcs_start_inside_it():
 
 
 @settings(max_examples=20, deadline=None)
-@given(behind=st.floats(0.0, 600.0), w=st.floats(1e-6, 3e-5), extra=st.floats(0.5, 3.0))
+@given(behind=st.floats(31.0, 600.0), w=st.floats(1e-6, 3e-5), extra=st.floats(0.5, 3.0))  # before the run-in
 def test_the_aim_leads_further_left_by_the_extra_walk_sigmas_only_while_a_loop_back_is_blocked(behind, w, extra):
     """``aim_lead``: with ``Tuning.blocked_walk_sigmas`` the walk part grows from ``aim_walk_sigmas`` to
     ``aim_walk_sigmas + blocked_walk_sigmas`` standard deviations (independent truth: :func:`walk_lead_um`, itself
@@ -389,7 +391,7 @@ def test_the_aim_leads_further_left_by_the_extra_walk_sigmas_only_while_a_loop_b
     from stressbots.control.docking import aim_lead, walk_lead_um
 
     view = DockView(np.zeros(3), 100.0, 150.0, 0.6, np.array([0.0, 200.0, 0.0]), 250.0, 100.0, 0.0, w)
-    base = Tuning()
+    base = Tuning(blocked_walk_sigmas=0.0)
     tune = Tuning(blocked_walk_sigmas=extra)
     lead0, walk0 = aim_lead(view, behind, base, lambda: True)
     assert aim_lead(view, behind, tune, lambda: False) == (lead0, walk0)
@@ -539,3 +541,120 @@ def test_a_right_first_landing_far_left_loops_back_rather_than_spend_its_inciden
     steps = _frame(fix, view, 2, opts, 1.0, lambda: True, lambda *_: None)
     assert steps is not None and steps[0][0] == 2
     assert steps[0][1] * view.turn_rate_rad_s == pytest.approx(math.radians(1.0), abs=1e-9)
+
+
+# -- session 29: bursts solved on their arc, the lead's limits, the look before the run-in ---------------------
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(20.0, 300.0), st.floats(-20.0, -1.0), st.floats(-6.0, 6.0), st.floats(150.0, 350.0), st.floats(150.0, 350.0))
+def test_a_burst_solved_on_its_arc_docks_the_robot_on_its_aim(behind, right, psi_deg, L, r):
+    """``reaim_turn_rad`` with a radius: the robot moved along the clockwise arc by :func:`move` (independent of
+    ``burst_offset``'s closed form) and then driven straight in docks, by :func:`contact_offset` from that pose, within
+    0.05 um of its aim, wherever the burst ends before the face."""
+    from stressbots.control.docking import burst_offset
+    from stressbots.control.queries import line_coords, line_pose
+
+    psi = math.radians(psi_deg)
+    fix = LineFix(behind, right, psi, contact_offset(behind, right, psi, L))
+    if fix.offset_um >= 0.0:
+        return
+    turn = reaim_turn_rad(fix, L, 90.0, r)
+    goal = np.array([0.0, 0.0, 0.0])
+    after = move(line_pose(goal, behind, right, psi), r * turn, 1.0 / r)
+    b, x, p = line_coords(goal, after)
+    if b <= 0.0:
+        return  # the arc itself reaches the face: no straight run-in is left to predict
+    assert abs(contact_offset(b, x, p, L) - burst_offset(fix, turn, r, L)) < 1e-6
+    assert abs(contact_offset(b, x, p, L)) <= 0.05
+
+
+def test_a_burst_on_its_arc_turns_more_than_the_straight_lever_says_close_to_the_face():
+    """30 um out, 12 um left: the arc carries the robot toward the face while it turns, so the straight lever
+    ``behind + L/2`` overstates the offset a turn takes back; the solved turn is larger and lands on the aim."""
+    from stressbots.control.docking import burst_offset
+
+    fix = LineFix(30.0, -12.0, 0.0, -12.0)
+    linear, on_arc = reaim_turn_rad(fix, 250.0, 90.0), reaim_turn_rad(fix, 250.0, 90.0, 250.0)
+    assert on_arc > linear
+    assert burst_offset(fix, linear, 250.0, 250.0) < -0.5
+    assert abs(burst_offset(fix, on_arc, 250.0, 250.0)) < 1e-6
+
+
+def _lead_view(behind: float, heading_deg: float = 0.0, planned_deg: float = 0.0) -> DockView:
+    goal = np.array([0.0, 0.0, math.radians(planned_deg) % (2 * math.pi)])
+    from stressbots.control.queries import line_pose
+
+    pose = line_pose(goal, behind, 0.0, math.radians(heading_deg - planned_deg))
+    slot = None if planned_deg == 0.0 else np.zeros(3)
+    return DockView(pose, 100.0, 200.0, 0.5, goal, 250.0, 100.0, 0.0, 2e-5, slot=slot)
+
+
+def test_the_lead_is_dropped_at_the_run_in_and_kept_before_it():
+    """``aim_lead``: one frame from the face (100 um/s x ``final_frame_s``) the run-in is the last decision and keeps
+    ``run_in_lead_share`` (0) of the lead; a frame further out the whole lead stands (it is room for later bursts)."""
+    from stressbots.control.docking import aim_lead
+
+    tune = Tuning()
+    assert aim_lead(_lead_view(25.0), 25.0, tune, lambda: False) == (0.0, 0.0)
+    lead, walk = aim_lead(_lead_view(40.0), 40.0, tune, lambda: False)
+    assert lead > walk > 0.0
+    keep_all = Tuning(run_in_lead_share=1.0)
+    assert aim_lead(_lead_view(25.0), 25.0, keep_all, lambda: False)[0] > 0.0
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.floats(60.0, 400.0), st.floats(-9.0, -1.0))
+def test_a_right_first_robot_leads_no_further_than_its_spare_incidence_takes_back(behind, heading_deg):
+    """A right-first landing (6 deg anticlockwise chosen, half kept): its lead left of its aim is at most the offset the
+    clockwise turn its incidence spares takes back, ``max(-keep - now, 0) (behind + L/2)``; a square landing's is not
+    capped."""
+    from stressbots.control.docking import aim_lead, burst_lever_um
+
+    tune = Tuning()
+    view = _lead_view(behind, heading_deg, -6.0)
+    lead, walk = aim_lead(view, behind, tune, lambda: True)
+    spare = max(math.radians(6.0 * tune.incidence_keep_share) * -1.0 - math.radians(heading_deg), 0.0)
+    assert lead <= spare * burst_lever_um(behind, 250.0) + 1e-9
+    assert walk <= lead + 1e-9
+    square, _ = aim_lead(_lead_view(behind, heading_deg + 6.0), behind, tune, lambda: True)
+    assert square >= lead
+
+
+@pytest.mark.parametrize("frames", [0, 12])
+def test_the_line_approach_looks_once_before_its_run_in(frames):
+    """With ``look_frames`` the policy yields exactly one Look, when the robot is within ``look_at_um`` (+ slack) of its
+    face and still short of it; without, none. Either way the robot docks."""
+    from stressbots.control.docking import LOOK_SLACK_UM
+
+    tune = Tuning(look_frames=frames)
+    rig = FaceRig(np.array([0.0, -0.5 * 250.0 - 400.0, 0.0]), 0.0)
+    policy = line_approach(rig.view, 2, ControllerOptions(tuning=tune), 1.0, loop_blocked=lambda: True, log=lambda *_: None)
+    looks = []
+    try:
+        steps = next(policy)
+        while True:
+            if isinstance(steps, Look):
+                looks.append(-0.5 * rig.L - rig.pose[1])  # how far behind the slot's centre line it looked
+                assert steps.frames == frames
+            else:
+                rig.apply(steps)
+            steps = policy.send(None)
+    except StopIteration as stop:
+        assert stop.value is DockOutcome.DOCKED
+    assert len(looks) == (1 if frames else 0)
+    if looks:
+        assert 0.0 < looks[0] <= tune.look_at_um + LOOK_SLACK_UM
+
+
+def test_a_right_first_robot_keeps_its_lead_at_the_run_in():
+    """At the run-in a right-first landing keeps its (capped) lead, a square one drops it: a right miss would leave the
+    right-first robot's leading corner off its face for good."""
+    from stressbots.control.docking import aim_lead
+
+    tune = Tuning()
+    right_first = _lead_view(25.0, -8.0, -6.0)  # turned 8 deg anticlockwise: 5 deg of spare turn over the kept 3
+    lead, _ = aim_lead(right_first, 25.0, tune, lambda: False)
+    assert lead > 0.0
+    assert lead == aim_lead(right_first, 25.0, Tuning(run_in_lead_share=1.0), lambda: False)[0]
+    assert aim_lead(_lead_view(25.0), 25.0, tune, lambda: False)[0] == 0.0

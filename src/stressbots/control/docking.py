@@ -34,13 +34,18 @@ from enum import Enum
 import numpy as np
 
 from ..robots import angle_difference
-from .loopview import Steps
+from .loopview import Look, Steps
 from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions, Tuning
 
 __all__ = ["DockOutcome", "DockView", "LineFix", "burst_lever_um", "compliant_aim", "contact_offset", "incidence_bounds", "lead_um",
-           "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
+           "burst_offset", "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
 
+
+
+LOOK_SLACK_UM = 2.0
+"""um. A robot within this of its look point (``Tuning.look_at_um``) looks there: its frames end a ms past the point,
+and its estimate scatters about it."""
 
 
 class DockOutcome(Enum):
@@ -136,12 +141,14 @@ def compliant_aim(pose, goal, r: float, length_um: float, tol_um: float = 0.01) 
     return goal[:2] + x * right_unit
 
 
-def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float) -> float:
+def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float, radius_um: float | None = None) -> float:
     """Clockwise turn (rad, >= 0) that brings a negative predicted offset back to zero, at most ``max_deg``.
 
-    A turn by ``d`` adds about ``(behind + L/2) d`` to :func:`contact_offset` (the arc's own sideways step,
-    ``r (1 - cos d)``, is second order). Zero when the robot would end on or right of its slot: a one-way
-    robot cannot turn left.
+    A turn by ``d`` adds about ``(behind + L/2) d`` to :func:`contact_offset`. With ``radius_um`` (the robot's
+    turning radius) the turn is solved on the arc itself (:func:`burst_offset`): the arc carries the robot
+    ``r sin d`` closer to the face, so the straight-line lever overstates what a burst of a few degrees does close
+    to the face (at 26 um out, 5 deg on a 250 um radius leaves the robot 4 um short and the estimate 1 um too
+    far left). Zero when the robot would end on or right of its slot: a one-way robot cannot turn left.
 
     >>> fix = LineFix(200.0, 0.0, 0.0, -6.5)
     >>> round(math.degrees(reaim_turn_rad(fix, 250.0, 5.0)), 3)
@@ -149,7 +156,31 @@ def reaim_turn_rad(fix: LineFix, length_um: float, max_deg: float) -> float:
     """
     if fix.offset_um >= 0.0:
         return 0.0
-    return float(min(-fix.offset_um / burst_lever_um(fix.behind_um, length_um), math.radians(max_deg)))
+    cap = math.radians(max_deg)
+    linear = -fix.offset_um / burst_lever_um(fix.behind_um, length_um)
+    if radius_um is None:
+        return float(min(linear, cap))
+    lo, hi = 0.0, min(cap, 4.0 * linear)
+    if burst_offset(fix, hi, radius_um, length_um) < 0.0:
+        return float(hi)
+    for _ in range(40):  # the offset grows monotonically with the turn over this range
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if burst_offset(fix, mid, radius_um, length_um) < 0.0 else (lo, mid)
+    return float(hi)
+
+
+def burst_offset(fix: LineFix, turn_rad: float, radius_um: float, length_um: float) -> float:
+    """:func:`contact_offset` (um) after a clockwise burst of ``turn_rad`` on an arc of ``radius_um`` from ``fix``.
+
+    >>> fix = LineFix(100.0, -5.0, 0.0, contact_offset(100.0, -5.0, 0.0, 250.0))
+    >>> round(burst_offset(fix, 0.0, 200.0, 250.0), 6)
+    -5.0
+    """
+    s, c = math.sin(turn_rad), 1.0 - math.cos(turn_rad)
+    sp, cp = math.sin(fix.psi_rad), math.cos(fix.psi_rad)
+    right = fix.right_um + radius_um * (s * sp + c * cp)
+    behind = fix.behind_um - radius_um * (s * cp - c * sp)
+    return contact_offset(behind, right, fix.psi_rad + turn_rad, length_um)
 
 
 def burst_lever_um(behind_um: float, length_um: float) -> float:
@@ -261,19 +292,32 @@ def aim_lead(view: DockView, behind_um: float, tune: Tuning, loop_blocked: Calla
     planned far out overshoots by that much, and a one-way robot fixes only what ends up to the left), and
     ``Tuning.aim_walk_sigmas`` of the walk, ``Tuning.blocked_walk_sigmas`` more while ``loop_blocked()`` (a miss to
     the right is then for good: driven in or trapped). An identified counter-clockwise drift counts as none: aiming
-    right of the slot would bet on it, and what it really does (it carries the robot left) clockwise bursts fix."""
+    right of the slot would bet on it, and what it really does (it carries the robot left) clockwise bursts fix.
+
+    A right-first landing (:func:`incidence_bounds`) leads no further than the bursts its kept incidence spares can
+    take back (a larger lead docked right-first robots up to 30 um left of their slots, tuning 2x). At the run-in, the
+    last decision, the others keep ``Tuning.run_in_lead_share`` of their lead (nothing later takes it back); a
+    right-first one keeps all of it: a miss to the right sets its front edge on the face's corner (stuck, H, for
+    good), one to the left costs shape only (tuning layouts at 1x, seed 0: trials with a robot stuck 4 -> 1)."""
     kappa = math.degrees(max(view.drift_rad_per_um, 0.0)) * 1000.0 + tune.lead_drift_deg_per_mm
     lead = lead_um(behind_um, view.length_um, kappa, tune.aim_left_um)
     lead += math.radians(tune.aim_heading_sigma_deg) * burst_lever_um(behind_um, view.length_um)
     sigmas = tune.aim_walk_sigmas + (tune.blocked_walk_sigmas if tune.blocked_walk_sigmas > 0.0 and loop_blocked() else 0.0)
     walk = walk_lead_um(behind_um, view.length_um, view.walk_var_rad2_per_um, sigmas)
-    return lead + walk, walk
+    lead += walk
+    first, now, keep = incidence_bounds(view, tune.incidence_keep_share)
+    if first < 0:  # a right-first robot can take back only what its anticlockwise incidence spares
+        cap = max(-keep - now, 0.0) * burst_lever_um(behind_um, view.length_um)
+        lead, walk = min(lead, cap), min(walk, cap)
+    if first >= 0 and behind_um <= tune.final_run_um and max(behind_um, 0.0) <= view.speed_um_s * tune.final_frame_s:
+        lead, walk = lead * tune.run_in_lead_share, walk * tune.run_in_lead_share  # the run-in: no burst comes after it
+    return lead, walk
 
 
 def line_approach(
     see: Callable[[], DockView], k: int, opts: ControllerOptions, tx: float, *, loop_blocked: Callable[[], bool],
     log: Callable[[str, str], None], attempt: int = 0,
-) -> Generator[Steps, None, DockOutcome]:
+) -> Generator[Steps | Look, None, DockOutcome]:
     """Fine motion along the approach line of robot ``D_k`` (P_k turns it, P_{k-1} drives it straight).
 
     ``attempt`` (0 first): each earlier miss widens the offsets accepted without a loop by
@@ -283,20 +327,28 @@ def line_approach(
     Merge (straight, interpolated clockwise arc) onto the line, then drive along it aiming
     :func:`lead_um` left of the slot, with a clockwise burst whenever the predicted docking offset
     (:func:`contact_offset`) falls further left than that; the last ``Tuning.final_run_um`` go in frames of
-    ``Tuning.final_frame_s``. Drive in, push, wait for the robot to stop and judge where
-    (:func:`stopped_verdict`). ``see()`` gives the latest view after each yielded list of steps was applied.
+    ``Tuning.final_frame_s``. ``Tuning.look_at_um`` short of the face it stops once and the loop reads
+    ``Tuning.look_frames`` still frames (it yields a :class:`~stressbots.control.loopview.Look`); the last re-aim
+    burst and the run-in are decided on that estimate. Drive in, push, wait for the robot to stop and judge where
+    (:func:`stopped_verdict`). ``see()`` gives the latest view after each yielded list of steps (or look) was applied.
     """
     tune = opts.tuning
+    look_at = tune.look_at_um if tune.look_frames > 0 else None  # None once it looked
     for _ in range(tune.approach_frames):
         view = see()
         behind, right, psi = line_coords(view.goal, view.pose)
         if (float(np.hypot(*(view.pose[:2] - view.flush_slot[:2]))) <= opts.dock_tol_um
-                and abs(float(angle_difference(view.pose[2], view.flush_slot[2]))) <= math.radians(opts.dock_tol_deg)):
+                and abs(float(angle_difference(view.pose[2], view.flush_slot[2]))) <= math.radians(opts.dock_tol_deg)
+                and line_coords(view.flush_slot, view.pose)[0] <= tune.at_face_um):
             break  # at the structure already: push and judge
+        if look_at is not None and behind <= look_at + LOOK_SLACK_UM:
+            look_at = None
+            yield Look(tune.look_frames, tune.look_prior_frames)  # stop and look before the last decisions
+            continue
         lead, walk = aim_lead(view, behind, tune, loop_blocked)
         # line coordinates about the aim point, ``lead`` left of the slot
         fix = LineFix(behind, right + lead, psi, contact_offset(behind, right + lead, psi, view.length_um))
-        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt, walk)
+        steps = _frame(fix, view, k, opts, tx, loop_blocked, log, attempt, walk, look_at)
         if steps is None:
             return DockOutcome.MISSED
         yield steps
@@ -314,34 +366,36 @@ def loops_back(view: DockView, k: int, opts: ControllerOptions, tx: float, *, lo
     are too coarse (after a miss in place)."""
     policy = line_approach(lambda: view, k, opts, tx, loop_blocked=loop_blocked, log=lambda *_: None, attempt=attempt)
     try:
-        next(policy)
+        while isinstance(next(policy), Look):
+            pass
     except StopIteration as stop:
         return stop.value is DockOutcome.MISSED
     return False
 
 
 def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float, loop_blocked, log, attempt: int = 0,
-           walk_um: float = 0.0) -> Steps | None:
+           walk_um: float = 0.0, look_at_um: float | None = None) -> Steps | None:
     """The steps of one frame along the line (``fix`` relative to the aim point); None: loop back.
 
     Misses to the right are judged ``walk_um`` (:func:`walk_lead_um`) right of the aim point: that lead is
-    room for the random walk to use, not an error (a loop would not dock any closer)."""
+    room for the random walk to use, not an error (a loop would not dock any closer). ``look_at_um``: where the robot
+    is yet to stop and look (``Tuning.look_at_um``); its frame ends there, and no run-in comes before the look."""
     tune = opts.tuning
     relax_um = tune.miss_relax_um * attempt
     burst_max = math.radians(tune.reaim_max_deg * (1 + attempt))
     v, r = view.speed_um_s, view.radius_um
     final = fix.behind_um <= tune.final_run_um
-    frame_s = tune.final_frame_s if final else min(tx, (fix.behind_um - tune.final_run_um) / v + 1e-3)
+    frame_s = _frame_s(fix.behind_um, v, tx, tune, look_at_um)
     burst: Steps = []
-    spare = math.inf  # the largest clockwise burst (rad) a kept incidence allows
+    spare, least = math.inf, 0.0  # the largest and least clockwise burst (rad) a kept incidence allows
     if final:
         kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log,
                                run_in=max(fix.behind_um, 0.0) <= v * tune.final_frame_s)
         if kept is None:
             return None
-        fix, spare = kept
+        fix, spare, least = kept
     if fix.offset_um < -tune.reaim_tol_um:
-        turn = reaim_turn_rad(fix, view.length_um, 1e3)
+        turn = max(reaim_turn_rad(fix, view.length_um, 1e3, r), least)
         if turn > spare:  # no more than the anticlockwise incidence can spare
             turn = spare
             left_um = -fix.offset_um - turn * burst_lever_um(fix.behind_um, view.length_um)
@@ -375,9 +429,18 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
                         f"{math.degrees(fix.psi_rad):.1f} deg): loops back")
             return None
     left_s = max(fix.behind_um, 0.0) / v
-    if final and left_s <= tune.final_frame_s:
+    if final and left_s <= tune.final_frame_s and look_at_um is None:
         return burst + [(k - 1, left_s + opts.push_s)]
     return burst + [(k - 1, frame_s)]
+
+
+def _frame_s(behind_um: float, v: float, tx: float, tune: Tuning, look_at_um: float | None) -> float:
+    """How long (s) a frame ``behind_um`` out on the line drives: ``Tuning.final_frame_s`` in the final run, else up to
+    its start (at most t_x); never past the look point."""
+    frame_s = tune.final_frame_s if behind_um <= tune.final_run_um else min(tx, (behind_um - tune.final_run_um) / v + 1e-3)
+    if look_at_um is not None and behind_um > look_at_um:
+        frame_s = min(frame_s, (behind_um - look_at_um) / v + 1e-3)
+    return frame_s
 
 
 def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, float]:
@@ -406,10 +469,11 @@ def incidence_bounds(view: DockView, keep_share: float) -> tuple[int, float, flo
 
 
 def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocked, log,
-                    run_in: bool) -> tuple[LineFix, float] | None:
-    """A frame's ``fix`` and the largest clockwise burst (rad) that keep the chosen incidence (:func:`incidence_bounds`);
-    None: loop back. A left-first robot that would arrive turned too little clockwise gets its predicted offset moved
-    left so that the re-aim burst turns it up to the kept incidence. Before its ``run_in`` (the last frame) the bursts
+                    run_in: bool) -> tuple[LineFix, float, float] | None:
+    """A frame's ``fix`` and the largest and the least clockwise burst (rad) that keep the chosen incidence
+    (:func:`incidence_bounds`); None: loop back. A left-first robot that would arrive turned too little clockwise gets
+    its predicted offset moved left, and a least burst, so that the re-aim burst turns it up to the kept incidence
+    (solved on its arc the burst alone may turn it a little less). Before its ``run_in`` (the last frame) the bursts
     still to come count: they give back the lead it is left of its pose at contact, ``offset / (behind + L/2)`` of
     clockwise turn (a burst for the whole bound 200 um out only sent the example's B right of its line, seed
     6598635715548540). A right-first one may spare only what its incidence has beyond it, and loops back (where a loop
@@ -420,13 +484,14 @@ def _keep_incidence(fix: LineFix, view: DockView, keep_share: float, loop_blocke
             log("miss", f"is turned {math.degrees(now):+.1f} deg from its slot, its aim {math.degrees(-keep):+.1f} deg or "
                         "more: its right front corner would not lead; loops back")
             return None
-        return fix, max(-keep - now, 0.0)
+        return fix, max(-keep - now, 0.0), 0.0
     if lead > 0:
         lever = burst_lever_um(fix.behind_um, view.length_um)
         coming = 0.0 if run_in else max(-contact_offset(*line_coords(view.goal, view.pose), view.length_um), 0.0) / lever
         if now + coming < keep:  # the bursts that give back its lead left of its aim count: they turn it clockwise
             fix = LineFix(fix.behind_um, fix.right_um, fix.psi_rad, min(fix.offset_um, -lever * (keep - now - coming)))
-    return fix, math.inf
+            return fix, math.inf, keep - now - coming
+    return fix, math.inf, 0.0
 
 
 def _merge_steps(m, fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: float) -> Steps:

@@ -31,7 +31,7 @@ from ..robots import TWO_PI, angle_difference
 from . import docking, landing
 from .docking import DockOutcome, DockView
 from .gross import SteerOutcome
-from .loopview import DockingLoop
+from .loopview import DockingLoop, Look
 from .queries import line_pose, waypoint_region
 from .slot_approach import SlotApproach
 
@@ -42,8 +42,12 @@ class SingleLoop(DockingLoop, Protocol):
     """What single-robot docking uses of the closed loop (:class:`~stressbots.control.loop.PlantLoop` and the controller)."""
 
     events: list[dict]
+    nominal_goals: np.ndarray
+    """The plan's slots (n, 3), the shape the run is judged against."""
     t: float
     """Simulated time (s) of the latest frame."""
+
+    def look(self, frames: int, prior_frames: float) -> None: ...
 
     def park_orbits(self, k: int) -> None: ...
 
@@ -243,7 +247,10 @@ class SingleDocking:
         try:
             steps = next(policy)
             while True:
-                self.loop.drive(steps)
+                if isinstance(steps, Look):
+                    self.loop.look(steps.frames, steps.prior_frames)
+                else:
+                    self.loop.drive(steps)
                 steps = policy.send(None)
         except StopIteration as stop:
             return stop.value

@@ -500,6 +500,29 @@ class DockingTuning:
     camera's heading error at twice the literature's noise (1-2 deg filtered) then still leaves the chosen corner
     first. 0: not kept. Session 28, against 0: tuning layouts at 2x (seeds 0-1) 195/240 against 190, trials with a
     robot stuck 12 -> 7; held-out 1x 296/300 against 295 (no layout below 4/5)."""
+    at_face_um: float = 5.0
+    """um. A robot on its approach line within the docking tolerance of its slot is taken to be at the structure (it
+    pushes, and is judged) only if it is also at most this far behind its face: short of that it still gets its look,
+    its last re-aim burst and its run-in. With the 30 um tolerance alone, robots 25 um short pushed straight in on the
+    heading of their last frame (session 28), and the run-in decision was made a frame earlier, 30-75 um out."""
+    look_at_um: float = 30.0
+    """um behind its face at which a docking robot stops and looks (``look_frames``), once per approach: its last
+    re-aim burst and its run-in are decided on the sharpened estimate. Close, so that little of the heading drift's
+    walk comes after it (1 deg over 30 um at twice the literature's noise, 2 um of docking offset on a 250 um robot),
+    but far enough for a burst of several degrees to turn the robot before its front meets the face."""
+    look_frames: int = 12
+    """Camera frames read while nobody moves at ``look_at_um`` (0: no look). A moving robot's filtered heading is off by
+    about 1.1 deg at twice the literature's noise, 2.5 um of docking offset; the mean of 12 still frames halves that
+    (0.54 deg, position 2.2 -> 1.3 um; tuning layouts 0-119, seed 0, measured against the simulator's truth). 12
+    frames are 0.6 s per docking."""
+    look_prior_frames: float = 3.0
+    """How many frames' worth the filtered estimate counts against the look's mean (its steady state keeps about a third
+    of a frame's position variance and a quarter of its heading variance)."""
+    run_in_lead_share: float = 0.0
+    """Share of the aim's lead left of the slot (``aim_left_um`` .. ``blocked_walk_sigmas``) kept at the run-in, the
+    approach's last decision, by all but right-first landings (:func:`~stressbots.control.docking.aim_lead`). The lead
+    is room for later clockwise bursts to take back; after the run-in there are none, so a lead kept there is a bias:
+    at 1 robots that took a burst docked 4.7 um left of their slots on average (held-out 2x, seeds 0-1)."""
     reaim_tol_um: float = 1.0
     """In the final run, a predicted offset further left than this is corrected by a clockwise burst."""
     lead_drift_deg_per_mm: float = 2.0
@@ -599,12 +622,13 @@ class DockingTuning:
     ``aim_heading_sigma_deg``. The walk is the part of the drift nobody predicts, and its docking offset
     grows with the declared noise (sd 4.6 um from 200 um out at the literature's figure, 9 um at 2x): at 2x,
     robots docked 10-25 um right of their slots, an offset a one-way robot cannot take back."""
-    blocked_walk_sigmas: float = 0.0
+    blocked_walk_sigmas: float = 1.5
     """Standard deviations added to ``aim_walk_sigmas`` while a loop back from where the robot is would meet the
     structure, a lower orbit or the arena edge: a miss to the right is then driven in (``late_miss_um``) or traps the
-    robot, while a miss to the left still costs only a clockwise burst. 0: at 1 the three 2x shape-error trials traced
-    (held-out 46:0, 47:0, 47:1) assembled, but held-out 2x seeds 0, 1 scored 92/120 against 94 with 5 shape errors
-    against 3, and tuning 1x 239/240 (session 18)."""
+    robot, while a miss to the left still costs only a clockwise burst, and with the look before the run-in
+    (``look_frames``) and bursts solved on their arc a precise one. Session 29, tuning layouts 0-119 at 2x (seed 0):
+    robots that docked more than 15 um right of their slots 9 -> 3 and more than 10 um off either way 24 -> 16, against
+    0 with the look. Before the look (session 18) 1 scored within the noise of 0."""
 
 
 @dataclass(frozen=True)
