@@ -198,3 +198,57 @@ def test_structure_targets_clear_of_later_orbits():
         for b in range(scn.n):
             if rank[b] < rank[a]:
                 assert not body.intersects(shapely.Point(*centres[b]).buffer(rs[b], 256)), (a, b)
+
+
+# -- the slots follow the structure as docked (session 29) --------------------------------------------------------
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(-20.0, 20.0), st.floats(-20.0, 20.0), st.floats(-4.0, 4.0), st.integers(2, 5), st.integers(0, 2**31 - 1))
+def test_refit_slots_moves_the_rest_with_the_rigid_motion_the_docked_ones_took(dx, dy, phi_deg, m, seed):
+    """Docked robots estimated exactly where one rigid motion (clockwise ``phi`` about the origin, then ``(dx, dy)``)
+    takes their slots: every other slot is moved by that same motion (brute force with :func:`se2`-free arithmetic),
+    and ``retarget`` with the returned motion moves any nominal pose the same way."""
+    from stressbots.control.slot_approach import retarget
+    from stressbots.control.targets import refit_slots
+
+    rng = np.random.default_rng(seed)
+    n = m + 3
+    nominal = np.column_stack([rng.uniform(500, 2500, n), rng.uniform(500, 2500, n), rng.uniform(0, 2 * math.pi, n)])
+    phi = math.radians(phi_deg)
+    c, s = math.cos(phi), math.sin(phi)
+
+    def moved(p):
+        x, y = p[..., 0], p[..., 1]
+        return np.stack([x * c + y * s + dx, -x * s + y * c + dy, np.mod(p[..., 2] + phi, 2 * math.pi)], axis=-1)
+
+    docked = np.zeros(n, dtype=bool)
+    docked[:m] = True
+    est = np.where(docked[:, None], moved(nominal), np.nan)
+    fit = refit_slots(nominal, est, docked, rng.uniform(200, 300, n), rng.uniform(50, 80, n))
+    assert fit is not None
+    slots, motion = fit
+    want = moved(nominal)
+    assert np.allclose(slots[:, :2], want[:, :2], atol=1e-6)
+    assert np.allclose(angle_difference(slots[:, 2], want[:, 2]), 0.0, atol=1e-9)
+    assert np.allclose(retarget(nominal[-1], motion)[:2], want[-1, :2], atol=1e-6)
+
+
+def test_refit_slots_needs_two_docked_robots():
+    from stressbots.control.targets import refit_slots
+
+    g = np.array([[0.0, 0.0, 0.0], [0.0, 300.0, 0.0]])
+    assert refit_slots(g, g, np.array([True, False]), np.full(2, 250.0), np.full(2, 60.0)) is None
+
+
+def test_refit_slots_splits_one_robots_miss_with_the_rest():
+    """Three docked in a row, the middle one 9 um to the right of its slot: by symmetry the best fit of their corners
+    only translates, by the mean of the three offsets, so the next slot moves 3 um right (not 9, not 0)."""
+    from stressbots.control.targets import refit_slots
+
+    g = np.array([[0.0, 0.0, 0.0], [0.0, 300.0, 0.0], [0.0, 600.0, 0.0], [0.0, 900.0, 0.0]])
+    est = g.copy()
+    est[1, 0] += 9.0
+    fit = refit_slots(g, est, np.array([True, True, True, False]), np.full(4, 250.0), np.full(4, 60.0))
+    assert fit is not None
+    assert np.allclose(fit[0][3], [3.0, 900.0, 0.0], atol=1e-9)

@@ -34,6 +34,7 @@ from .gross import SteerOutcome
 from .loopview import DockingLoop, Look
 from .queries import line_pose, waypoint_region
 from .slot_approach import SlotApproach
+from .targets import refit_slots
 
 __all__ = ["SingleDocking", "SingleLoop", "before_on_route", "way_points"]
 
@@ -286,10 +287,21 @@ class SingleDocking:
                 dpos = float(np.hypot(*(pose[:2] - lp.goals[i, :2])))
                 dth = math.degrees(abs(angle_difference(pose[2], lp.goals[i, 2])))
             off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
+            self.refit()
             lp.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
         elif outcome is DockOutcome.STUCK:
             lp.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
         return outcome
+
+    def refit(self) -> None:
+        """Move the slots of the robots yet to dock, and the nominal route's frame, with the structure as docked
+        (:func:`~stressbots.control.targets.refit_slots`): the judge aligns the whole structure, not G_1 alone."""
+        lp = self.loop
+        fit = refit_slots(lp.nominal_goals, lp.est, lp.docked, lp.L, lp.W)
+        if fit is not None:
+            rest = ~lp.docked
+            lp.goals[rest] = fit[0][rest]
+            lp.motion = fit[1]
 
     def fine_dock(self, i: int, k: int) -> bool:
         """Fine motion (S_2f) into the slot, then push; True when docked."""

@@ -6,12 +6,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..assessment import kabsch_2d
 from ..collision import arena_gap, bodies_hit_discs
 from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
-from ..robots import orbit_radii, turning_centres
+from ..robots import TWO_PI, body_corners, orbit_radii, turning_centres
 
-__all__ = ["PLAN_CLEARANCE_UM", "Targets", "nominal_plan", "structure_targets"]
+__all__ = ["PLAN_CLEARANCE_UM", "Targets", "nominal_plan", "refit_slots", "structure_targets"]
 
 PLAN_CLEARANCE_UM = 40.0
 """Clearance of the nominal plans the controller follows: room for tens of um of control error."""
@@ -75,3 +76,33 @@ def structure_targets(scenario) -> Targets:
     if best is None:
         raise PlanningError("no target structure for these robots")
     return Targets(np.asarray(best[1], dtype=np.float64))
+
+
+def refit_slots(nominal_goals: np.ndarray, estimates: np.ndarray, docked: np.ndarray, lengths_um: np.ndarray,
+                widths_um: np.ndarray) -> tuple[np.ndarray, tuple[float, np.ndarray, np.ndarray]] | None:
+    """The slots moved with the rigid motion that best maps the docked robots' nominal bodies onto their estimates.
+
+    The judge scores the shape after the best rigid alignment of every robot's body corners (SPEC 6), so a robot yet
+    to dock is best aimed at its slot in the frame the docked ones actually took, not the frame G_1 alone took: a
+    robot docked a few um along its face then pulls the later slots a share of that with it, and the errors of later
+    robots stop adding to it. ``(slots (n, 3), motion)`` with ``motion = (phi_rad clockwise, c_nom, c_meas)`` as
+    :func:`~stressbots.control.slot_approach.retarget` takes it; None with fewer than two robots docked.
+
+    >>> nominal = np.array([[0.0, 0.0, 0.0], [0.0, 300.0, 0.0], [0.0, 600.0, 0.0]])
+    >>> est = nominal + np.array([5.0, 0.0, 0.0])
+    >>> slots, _ = refit_slots(nominal, est, np.array([True, True, False]), np.full(3, 250.0), np.full(3, 60.0))
+    >>> np.round(slots[2], 6).tolist()
+    [5.0, 600.0, 0.0]
+    """
+    d = np.flatnonzero(np.asarray(docked, dtype=bool))
+    if len(d) < 2:
+        return None
+    src = body_corners(nominal_goals[d], lengths_um[d], widths_um[d]).reshape(-1, 2)
+    dst = body_corners(estimates[d], lengths_um[d], widths_um[d]).reshape(-1, 2)
+    rot, t = kabsch_2d(src, dst)
+    phi = -float(np.arctan2(rot[1, 0], rot[0, 0]))  # clockwise, the heading convention
+    slots = np.asarray(nominal_goals, dtype=np.float64).copy()
+    slots[:, :2] = slots[:, :2] @ rot.T + t
+    slots[:, 2] = np.mod(slots[:, 2] + phi, TWO_PI)
+    c_nom = nominal_goals[d, :2].mean(axis=0)
+    return slots, (phi, c_nom, rot @ c_nom + t)
