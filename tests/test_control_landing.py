@@ -138,11 +138,14 @@ def test_aligned_pair_puts_both_front_edges_on_one_line_through_their_measured_m
         assert np.allclose(fa, 0.5 * (ma + mb), atol=1e-9)
 
 
-def test_without_declared_noise_no_slot_moves():
-    """The margins are for the landing's spread, which is the declared noise's (noise_scale 0: docked robots sit in
-    their slots exactly); a face exactly as wide as the robot then takes it as planned."""
-    pose, slot_after, note = landing.landing_pose(SLOT, L, W, rear_of(0.0, W), Tuning(), scale=0.0)
+def test_without_declared_noise_the_margins_are_the_least_margin():
+    """The margins are for the landing's spread, which is the declared noise's (noise_scale 0), but never under
+    ``landing_min_margin_um``: a face 2 um wider than the robot on each side takes it as planned; on a face exactly as
+    wide its corners would sit on the face's very ends, so the landing is not the plain slot."""
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, rear_of(0.0, W + 4.0), Tuning(), scale=0.0)
     assert note == "" and np.array_equal(pose, SLOT) and np.array_equal(slot_after, SLOT)
+    pose, slot_after, note = landing.landing_pose(SLOT, L, W, rear_of(0.0, W), Tuning(), scale=0.0)
+    assert note != "" and not np.array_equal(pose, SLOT)
     from stressbots.generate import LITERATURE_NOISE
     from stressbots.scenario import Noise
 
@@ -187,12 +190,14 @@ def _independent_plant():
     return module
 
 
-@pytest.mark.parametrize("layout_seed, n", [(1030, 4), (1057, 3)])  # bench_generality's tuning layouts 30 and 57 (tees)
-def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_seed, n):
+@pytest.mark.parametrize("layout_seed, n, needs_landing", [(1030, 4, False), (1057, 3, True)])  # tuning layouts 30, 57
+def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_seed, n, needs_landing):
     """End to end through the Plant protocol, on the independent plant (SPEC 6 docking: compliance only about a front
     corner on a face, and only against the structure): a robot docking on the rear edge or the end of a face barely
     wider than itself is taken into the structure when it aims by the landing; with the landing off
-    (``landing_max_shift_um`` 0) the controller still counts it docked, but the plant left it stuck off flush."""
+    (``landing_max_shift_um`` 0) the controller still counts it docked, but on layout 57 the plant left it stuck off
+    flush (on layout 30 it did too until session 29's run-in, decided after a still look, made it land precisely
+    enough without)."""
     from dataclasses import replace
 
     from stressbots.control import ControllerOptions, assemble, nominal_plan
@@ -209,7 +214,7 @@ def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_see
         assert result.success  # the controller's own verdict, either way
         assert any(e["kind"] == "landing" for e in result.events) == on
         docked[on] = bool(plant.member.all())
-    assert docked == {True: True, False: False}
+    assert docked == {True: True, False: not needs_landing}
 
 
 @pytest.mark.parametrize("gap_um", [1.0, 6.0])

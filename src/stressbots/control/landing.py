@@ -264,8 +264,8 @@ def incidence_deg(tune, lead: int) -> float:
 def landing_options(face: Face, width_um: float, shifts: np.ndarray, tune, scale: float):
     """For both corners on the face (lead 0) and each chosen incidence (+1 left corner first, -1 right), over the
     candidate ``shifts``: ``(lead, meets (k,), safety (k,))``. ``meets``: both corners have their margins (times
-    ``scale``; one grid step of slack: the face's ends are known to the grid, and without declared noise a corner
-    exactly at the end of a face as wide as the robot is on it); ``safety``: the least share of its margin a corner
+    ``scale``, at least ``landing_min_margin_um``; one grid step of slack: the face's ends are known to the grid);
+    ``safety``: the least share of its margin a corner
     keeps (1 = all of it, <= 0: a corner off the face). A corner leading alone has its own margin
     (``landing_lead_*_margin_um``); a trailing one, its room to what stands out beyond it."""
     need = {0: (tune.landing_left_margin_um, tune.landing_right_margin_um),
@@ -275,7 +275,7 @@ def landing_options(face: Face, width_um: float, shifts: np.ndarray, tune, scale
     for lead in (0, +1, -1):
         psi = math.radians(incidence_deg(tune, lead)) if lead else 0.0
         lm, rm = corner_margins(face, width_um, shifts, lead, psi)
-        ml, mr = (m * scale for m in need[lead])
+        ml, mr = (max(m * scale, tune.landing_min_margin_um) for m in need[lead])
         meets = (lm >= ml - GRID_UM) & (rm >= mr - GRID_UM)
         with np.errstate(invalid="ignore"):
             safe = np.minimum(lm / max(ml, GRID_UM), rm / max(mr, GRID_UM))

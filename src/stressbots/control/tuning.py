@@ -588,6 +588,11 @@ class DockingTuning:
     """The same for the right front corner leading alone (a chosen incidence, anticlockwise), um: its landings spread
     less far right (1 % more than 6.4 um right of their aim, same measurement), but with the 3 um of
     ``landing_right_margin_um`` the right-first landings the wider left margin brings stuck in 6 of the 120 trials."""
+    landing_min_margin_um: float = 1.0
+    """The least margin (um) a landing corner keeps whatever the declared noise (the margins above scale with it): a
+    robot within ``reaim_tol_um`` of its aim takes no burst, so even without noise it docks up to that far off. With
+    none, a robot as wide as the face it docks on aimed its corners at the face's very ends, and once the run-in
+    dropped its lead (``run_in_lead_share``) the noiseless example's B met D's corner with its own and stuck."""
     landing_incidence_deg: float = 4.0
     """The chosen incidence (deg) of a robot whose face has room for one leading corner only: it arrives turned this
     much, so that the corner that leads is known. Twice the spread of the incidence at contact measured on an
