@@ -287,8 +287,8 @@ class SingleDocking:
                 dpos = float(np.hypot(*(pose[:2] - lp.goals[i, :2])))
                 dth = math.degrees(abs(angle_difference(pose[2], lp.goals[i, 2])))
             off = "" if outcome is DockOutcome.DOCKED else " (off its slot, flush against the structure: it cannot leave)"
-            self.refit()
             lp.log("docked", i, f"{dpos:.1f} um, {dth:.1f} deg from the slot{off}")
+            self.refit()
         elif outcome is DockOutcome.STUCK:
             lp.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
         return outcome
