@@ -13,7 +13,9 @@ is decided by two things the earlier controller looked at only in part:
 that offset cheaply only clockwise (a short turn adds to ``psi``), so the policy re-aims with short
 clockwise bursts close to the slot, in frames shorter than t_x (:class:`~stressbots.control.tuning.Tuning`
 ``final_frame_s``): heading drift over the last hundred um is what the earlier single open-loop run
-could not see.
+could not see. The last of them, with the run-in, is decided after a still look
+(``Tuning.look_at_um`` short of the face the policy yields a :class:`~stressbots.control.loopview.Look`: the mean of
+still frames halves a moving robot's heading error) and solved on the burst's own arc (:func:`burst_offset`).
 
 A robot whose *front* touches anything can never leave it: turning about its turning centre (to its
 right, outside the body) moves every point of its front edge forward, and it cannot reverse. So a robot
@@ -38,9 +40,9 @@ from .loopview import Look, Steps
 from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions, Tuning
 
-__all__ = ["DockOutcome", "DockView", "LineFix", "burst_lever_um", "compliant_aim", "contact_offset", "incidence_bounds", "lead_um",
-           "burst_offset", "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict", "walk_lead_um"]
-
+__all__ = ["LOOK_SLACK_UM", "DockOutcome", "DockView", "LineFix", "burst_lever_um", "burst_offset", "compliant_aim", "contact_offset",
+           "incidence_bounds", "lead_um", "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict",
+           "walk_lead_um"]
 
 
 LOOK_SLACK_UM = 2.0
