@@ -41,7 +41,7 @@ from .queries import interpolated_steps, line_coords, merge, turn_fraction
 from .tuning import ControllerOptions, Tuning
 
 __all__ = ["LOOK_SLACK_UM", "DockOutcome", "DockView", "LineFix", "burst_lever_um", "burst_offset", "compliant_aim", "contact_offset",
-           "incidence_bounds", "lead_um", "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict",
+           "incidence_bounds", "is_run_in", "lead_um", "line_approach", "loops_back", "reaim_turn_rad", "settle", "stopped_verdict",
            "walk_lead_um"]
 
 
@@ -311,7 +311,7 @@ def aim_lead(view: DockView, behind_um: float, tune: Tuning, loop_blocked: Calla
     if first < 0:  # a right-first robot can take back only what its anticlockwise incidence spares
         cap = max(-keep - now, 0.0) * burst_lever_um(behind_um, view.length_um)
         lead, walk = min(lead, cap), min(walk, cap)
-    if first >= 0 and behind_um <= tune.final_run_um and max(behind_um, 0.0) <= view.speed_um_s * tune.final_frame_s:
+    if first >= 0 and is_run_in(behind_um, view.speed_um_s, tune):
         lead, walk = lead * tune.run_in_lead_share, walk * tune.run_in_lead_share  # the run-in: no burst comes after it
     return lead, walk
 
@@ -391,8 +391,7 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
     burst: Steps = []
     spare, least = math.inf, 0.0  # the largest and least clockwise burst (rad) a kept incidence allows
     if final:
-        kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log,
-                               run_in=max(fix.behind_um, 0.0) <= v * tune.final_frame_s)
+        kept = _keep_incidence(fix, view, tune.incidence_keep_share, loop_blocked, log, run_in=is_run_in(fix.behind_um, v, tune))
         if kept is None:
             return None
         fix, spare, least = kept
@@ -434,6 +433,12 @@ def _frame(fix: LineFix, view: DockView, k: int, opts: ControllerOptions, tx: fl
     if final and left_s <= tune.final_frame_s and look_at_um is None:
         return burst + [(k - 1, left_s + opts.push_s)]
     return burst + [(k - 1, frame_s)]
+
+
+def is_run_in(behind_um: float, v: float, tune: Tuning) -> bool:
+    """Whether a robot ``behind_um`` out on its line, driving at ``v`` um/s, is at its run-in: in the final run and
+    within one final frame (``Tuning.final_frame_s``) of the face, the approach's last decision."""
+    return behind_um <= tune.final_run_um and max(behind_um, 0.0) <= v * tune.final_frame_s
 
 
 def _frame_s(behind_um: float, v: float, tx: float, tune: Tuning, look_at_um: float | None) -> float:

@@ -24,7 +24,11 @@ from ..robots import orbit_radii
 from ..waveform import Hold, Synthesizer
 from .straight_drift import StraightDrift, StraightDriftSettings
 
-__all__ = ["PlantLoop", "frame_pieces"]
+__all__ = ["LOOK_FRAME_S", "PlantLoop", "frame_pieces"]
+
+LOOK_FRAME_S = 0.05
+"""s between the still frames of a look (:meth:`PlantLoop.look`) when the loop reads one frame per step list (no
+``frame_interval_s``): the controller's default frame interval (``ControllerOptions.frame_interval_s``)."""
 
 
 def frame_pieces(steps: Sequence[tuple[int, float]], interval_s: float | None, frames: int = 1) -> list[list[tuple[int, float]]]:
@@ -176,7 +180,7 @@ class PlantLoop:
         Each frame is preceded by a Hold at the drive band's low level: a constant level inside the band flips no arm
         (the band's rule), and without a Drive no robot moves (SPEC 4), so the frames differ by camera noise only. The
         Holds' time counts against the budget like any step's."""
-        dt = self.frame_interval_s or 0.05
+        dt = self.frame_interval_s or LOOK_FRAME_S
         if frames <= 0:
             return
         if self.t + frames * dt > self.budget_s + 1e-9:

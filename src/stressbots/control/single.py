@@ -297,14 +297,14 @@ class SingleDocking:
         """Move the slots of the robots yet to dock, and the nominal route's frame, with the structure as docked
         (:func:`~stressbots.control.targets.refit_slots`): the judge aligns the whole structure, not G_1 alone."""
         lp = self.loop
-        fit = refit_slots(lp.nominal_goals, lp.est, lp.docked, lp.L, lp.W)
+        rest = ~lp.docked
+        fit = refit_slots(lp.nominal_goals, lp.est, lp.docked, lp.L, lp.W) if rest.any() else None
         if fit is None:
             return
-        rest = ~lp.docked
         moved = np.hypot(*(fit[0][rest, :2] - lp.goals[rest, :2]).T)
         lp.goals[rest] = fit[0][rest]
         lp.motion = fit[1]
-        if moved.size and float(moved.max()) > 5.0:
+        if float(moved.max()) > 5.0:
             lp.log("refit", None, f"the slots still to fill follow the structure as docked: moved up to {moved.max():.1f} um "
                                   f"({math.degrees(fit[1][0]):.1f} deg from nominal)")
 

@@ -10,7 +10,8 @@ from ..assessment import kabsch_2d
 from ..collision import arena_gap, bodies_hit_discs
 from ..electrostatics import analyse_scenario
 from ..errors import PlanningError
-from ..robots import TWO_PI, body_corners, orbit_radii, turning_centres
+from ..robots import body_corners, orbit_radii, turning_centres
+from ..se2 import rotate_about
 
 __all__ = ["PLAN_CLEARANCE_UM", "Targets", "nominal_plan", "refit_slots", "structure_targets"]
 
@@ -101,8 +102,8 @@ def refit_slots(nominal_goals: np.ndarray, estimates: np.ndarray, docked: np.nda
     dst = body_corners(estimates[d], lengths_um[d], widths_um[d]).reshape(-1, 2)
     rot, t = kabsch_2d(src, dst)
     phi = -float(np.arctan2(rot[1, 0], rot[0, 0]))  # clockwise, the heading convention
-    slots = np.asarray(nominal_goals, dtype=np.float64).copy()
-    slots[:, :2] = slots[:, :2] @ rot.T + t
-    slots[:, 2] = np.mod(slots[:, 2] + phi, TWO_PI)
     c_nom = nominal_goals[d, :2].mean(axis=0)
-    return slots, (phi, c_nom, rot @ c_nom + t)
+    c_meas = rot @ c_nom + t
+    slots = rotate_about(nominal_goals, c_nom, phi)
+    slots[:, :2] += c_meas - c_nom
+    return slots, (phi, c_nom, c_meas)
