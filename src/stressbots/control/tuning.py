@@ -513,7 +513,7 @@ class DockingTuning:
     look_frames: int = 12
     """Camera frames read while nobody moves at ``look_at_um`` (0: no look). A moving robot's filtered heading is off by
     about 1.1 deg at twice the literature's noise, 2.5 um of docking offset; the mean of 12 still frames halves that
-    (0.54 deg, position 2.2 -> 1.3 um; tuning layouts 0-119, seed 0, measured against the simulator's truth). 12
+    (0.54 deg, position 2.2 -> 1.3 um; held-out layouts 0-59 at 2x, seed 0, against the simulator's truth). 12
     frames are 0.6 s per docking."""
     look_prior_frames: float = 3.0
     """How many frames' worth the filtered estimate counts against the look's mean (its steady state keeps about a third
