@@ -1,6 +1,7 @@
 """Where a docking robot's front corners land (stressbots.control.landing), against shapely and hand geometry."""
 
 import math
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -195,9 +196,10 @@ def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_see
     """End to end through the Plant protocol, on the independent plant (SPEC 6 docking: compliance only about a front
     corner on a face, and only against the structure): a robot docking on the rear edge or the end of a face barely
     wider than itself is taken into the structure when it aims by the landing; with the landing off
-    (``landing_max_shift_um`` 0) the controller still counts it docked, but on layout 57 the plant left it stuck off
-    flush (on layout 30 it did too until session 29's run-in, decided after a still look, made it land precisely
-    enough without)."""
+    (``landing_max_shift_um`` 0) on layout 57 the plant leaves it stuck off flush (on layout 30 it did too until
+    session 29's run-in, decided after a still look, made it land precisely enough without). The controller's verdict
+    agrees with the plant either way: it counted such a robot docked until session 30's flush check
+    (``Tuning.flush_look_frames``) saw it turned off its face."""
     from dataclasses import replace
 
     from stressbots.control import ControllerOptions, assemble, nominal_plan
@@ -211,9 +213,9 @@ def test_an_independent_plant_docks_every_robot_only_with_the_landing(layout_see
         options = None if on else ControllerOptions(tuning=replace(Tuning(), landing_max_shift_um=0.0))
         plant = ip.IndependentPlant(scn, seed=0)
         result = assemble(scn, ProtocolOnly(plant), seed=0, plan=plan, options=options)
-        assert result.success  # the controller's own verdict, either way
-        assert any(e["kind"] == "landing" for e in result.events) == on
         docked[on] = bool(plant.member.all())
+        assert result.success == docked[on], result.failure  # the controller's own verdict: no false claim
+        assert any(e["kind"] == "landing" for e in result.events) == on
     assert docked == {True: True, False: not needs_landing}
 
 
@@ -237,3 +239,81 @@ def test_a_step_beyond_the_trailing_corner_is_its_room_like_a_neighbour(gap_um):
     for lead, meets, _ in landing.landing_options(face, W, shifts, tune, 1.0):
         if lead > 0:
             assert np.all(step_x - (shifts[meets] + 0.5 * W) >= tune.landing_right_margin_um - landing.GRID_UM - 1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(-5.0, 5.0), st.floats(-0.6, 0.6), st.sampled_from([0, 1]), st.floats(-math.pi, math.pi), st.floats(-500.0, 500.0))
+def test_contact_misalignment_is_the_turn_off_the_touched_edge_whatever_the_frame(x_um, psi, side, phi, shift):
+    """A robot turned by ``psi`` about the front corner that rests on a rear edge (a side face when ``side``; the corner
+    within the face) is ``psi``
+    off flush, and a rigid motion of the whole scene changes nothing (hand geometry)."""
+    ahead = rear_of(x_um, 70.0)
+    if side:  # a body lying across the slot: its long side is the face
+        ahead = bodies((x_um, 0.5 * L + 35.0, 0.5 * math.pi, 250.0, 70.0))
+    lead = 1.0 if psi >= 0.0 else -1.0  # turned clockwise, the left front corner stays on the face
+    corner = np.array([-lead * 0.5 * W, 0.5 * L])
+    pose = rotate_about(SLOT, corner, psi)
+    centre = np.array([shift, -shift])
+    moved = (rotate_about(ahead[0], centre, phi), ahead[1], ahead[2])
+    found = landing.contact_misalignment(rotate_about(pose, centre, phi), L, W, moved, 2.0)
+    assert found is not None and found[1] == 0
+    assert found[0] == pytest.approx(psi, abs=1e-9)
+
+
+def test_contact_misalignment_picks_the_flush_one_of_two_touched_bodies_and_none_out_of_reach():
+    two = bodies((-40.0, 0.5 * L + 125.0, 0.0, 250.0, 70.0), (45.0, 0.5 * L + 125.0, math.radians(4.0), 250.0, 70.0))
+    assert landing.contact_misalignment(SLOT, L, W, two, 5.0) == (0.0, 0)
+    short = SLOT + np.array([0.0, -20.0, 0.0])
+    assert landing.contact_misalignment(short, L, W, two, 5.0) is None
+
+
+class _StillLoop:
+    """The part of the closed loop :meth:`SingleDocking._flush_verdict` reads: estimates, a look that reads
+    ``frames`` still frames (counted), the event log. Robot 0 is docked ahead of robot 1's slot."""
+
+    def __init__(self, pose_1, camera_heading_sd_rad: float = 0.0):
+        from types import SimpleNamespace
+
+        from stressbots.scenario import Noise
+
+        self.tune = Tuning(flush_look_frames=12)
+        self.est = np.array([[0.0, 0.5 * L + 125.0, 0.0], pose_1], dtype=float)
+        self.L, self.W = np.array([250.0, L]), np.array([70.0, W])
+        self.docked = np.array([True, False])
+        self.goals = np.array([self.est[0], SLOT])
+        self.scn = SimpleNamespace(names=["R0", "R1"], noise=Noise(camera_heading_sd_rad=camera_heading_sd_rad))
+        self.events: list[dict] = []
+        self.looked = 0
+
+    def look(self, frames: int, prior_frames: float) -> None:
+        self.looked += frames
+
+    def log(self, kind: str, robot=None, detail: str = "") -> None:
+        self.events.append({"kind": kind, "robot": robot, "detail": detail})
+
+
+@pytest.mark.parametrize("turn_deg, docked", [(0.0, True), (0.2, True), (-0.2, True), (0.6, False), (-3.0, False)])
+def test_a_robot_stopped_turned_off_the_face_it_touches_is_stuck_not_docked(turn_deg, docked):
+    """Docking compliance leaves a docked robot parallel to its face; one stopped on a corner keeps its incidence. The
+    verdict looks first (the look's frames), then allows flush_tol_deg plus the look's error (here none declared)."""
+    from stressbots.control.docking import DockOutcome
+    from stressbots.control.single import SingleDocking
+
+    lead = 1.0 if turn_deg >= 0.0 else -1.0
+    pose = rotate_about(SLOT, np.array([-lead * 0.5 * W, 0.5 * L]), math.radians(turn_deg))
+    loop = _StillLoop(pose)
+    verdict = SingleDocking(cast(Any, loop))._flush_verdict(1, DockOutcome.DOCKED)
+    assert loop.looked == loop.tune.flush_look_frames
+    assert (verdict is DockOutcome.DOCKED) is docked
+    assert any(e["kind"] == "not-flush" and "R0's edge" in e["detail"] for e in loop.events) is not docked
+
+
+def test_the_flush_tolerance_widens_with_the_declared_camera_heading_error():
+    """2 deg declared per frame, 12 + 3 frames: 3 sigma is 1.55 deg, so a 1.5 deg turn is within the look's error."""
+    from stressbots.control.docking import DockOutcome
+    from stressbots.control.single import SingleDocking
+
+    pose = rotate_about(SLOT, np.array([-0.5 * W, 0.5 * L]), math.radians(1.5))
+    assert SingleDocking(cast(Any, _StillLoop(pose)))._flush_verdict(1, DockOutcome.DOCKED) is DockOutcome.STUCK
+    noisy = _StillLoop(pose, camera_heading_sd_rad=math.radians(2.0))
+    assert SingleDocking(cast(Any, noisy))._flush_verdict(1, DockOutcome.DOCKED) is DockOutcome.DOCKED

@@ -35,8 +35,8 @@ from ..robots import body_corners
 from ..se2 import heading, points_to_frame, right
 from .queries import line_pose
 
-__all__ = ["Face", "Landing", "aligned_pair", "contact_pose", "corner_margins", "face_profile", "face_under", "incidence_deg",
-           "landing_options", "landing_pose", "nearest_distance", "nearest_shift", "noise_scale"]
+__all__ = ["Face", "Landing", "aligned_pair", "contact_misalignment", "contact_pose", "corner_margins", "face_profile",
+           "face_under", "incidence_deg", "landing_options", "landing_pose", "nearest_distance", "nearest_shift", "noise_scale"]
 
 GRID_UM = 0.25
 """Lateral sampling of the face and of the slot's shifts (um): under a tenth of the landing margins."""
@@ -322,6 +322,40 @@ def aligned_pair(pose_a, pose_b, length_a_um: float, length_b_um: float) -> np.n
     u = heading(th)
     return np.array([[*(mid - 0.5 * length_a_um * u), np.mod(th, 2.0 * math.pi)],
                      [*(mid + 0.5 * length_b_um * u), np.mod(th + math.pi, 2.0 * math.pi)]])
+
+
+def contact_misalignment(pose, length_um: float, width_um: float, bodies: Bodies, reach_um: float) -> tuple[float, int] | None:
+    """How far (rad) a stopped robot is turned from flush: its heading against the edges of the docked bodies its front
+    edge touches, modulo a quarter turn (any edge of a body can be a face), the smallest over those bodies, with that
+    body's index in ``bodies``; None when no body comes within ``reach_um`` of its front edge.
+
+    Docking compliance leaves a docked robot exactly parallel to the edge it docked on (SPEC 6); one whose front edge
+    met a corner of the structure instead stops turned by its incidence (failure region H), within the docking
+    tolerances of its slot all the same. A still robot's mean heading tells the two apart where its position cannot.
+
+    >>> bodies = (np.array([[0.0, 250.0, 0.0]]), np.array([250.0]), np.array([70.0]))   # a robot's rear edge at y = 125
+    >>> contact_misalignment(np.array([0.0, 0.0, 0.0]), 250.0, 70.0, bodies, 5.0)
+    (0.0, 0)
+    >>> round(contact_misalignment(np.array([3.0, -2.0, 0.03]), 250.0, 70.0, bodies, 5.0)[0], 6)
+    0.03
+    >>> contact_misalignment(np.array([0.0, -50.0, 0.0]), 250.0, 70.0, bodies, 5.0) is None   # 50 um short of the face
+    True
+    """
+    from ..collision import penetration_depth
+
+    pose = np.asarray(pose, dtype=np.float64)
+    poses, lengths, widths = bodies
+    if len(poses) == 0:
+        return None
+    probe = pose.copy()  # a strip reach_um deep on either side of the front edge
+    probe[:2] = pose[:2] + 0.5 * length_um * heading(pose[2])
+    touch = penetration_depth(probe, 2.0 * reach_um, width_um, poses, lengths, widths) > 0.0
+    if not touch.any():
+        return None
+    quarter = 0.5 * math.pi
+    off = np.mod(pose[2] - np.asarray(poses)[:, 2] + 0.5 * quarter, quarter) - 0.5 * quarter
+    j = int(np.flatnonzero(touch)[np.argmin(np.abs(off[touch]))])
+    return float(off[j]), j
 
 
 def noise_scale(noise) -> float:

@@ -36,6 +36,10 @@ from .queries import line_pose, waypoint_region
 from .slot_approach import SlotApproach
 from .targets import refit_slots
 
+FLUSH_REACH_UM = 10.0
+"""um. The bodies a stopped robot's front edge comes this close to, as measured, are the ones it may be flush against
+(:meth:`SingleDocking._flush_verdict`): a few times the position error of a still look."""
+
 __all__ = ["SingleDocking", "SingleLoop", "before_on_route", "way_points"]
 
 
@@ -277,6 +281,8 @@ class SingleDocking:
     def dock_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
         """Record a docking outcome: docked robots join the structure; the others are logged."""
         lp = self.loop
+        if outcome in (DockOutcome.DOCKED, DockOutcome.DOCKED_OFF_SLOT):
+            outcome = self._flush_verdict(i, outcome)
         pose, goal = lp.est[i], lp.goals[i]
         dpos = float(np.hypot(*(pose[:2] - goal[:2])))
         dth = math.degrees(abs(angle_difference(pose[2], goal[2])))
@@ -292,6 +298,32 @@ class SingleDocking:
         elif outcome is DockOutcome.STUCK:
             lp.log("stuck", i, f"stopped {dpos:.0f} um / {dth:.0f} deg from the slot (failure region H)")
         return outcome
+
+    def _flush_verdict(self, i: int, outcome: DockOutcome) -> DockOutcome:
+        """``outcome`` (docked), or STUCK when robot ``i``, stopped at its slot, is not flush against the body it touches.
+
+        A still look (``Tuning.flush_look_frames``) sharpens its heading; turned from that body's edges by more than the
+        look's heading error allows (``Tuning.flush_tol_deg``, ``Tuning.flush_tol_sigmas``), it stopped on a corner of
+        the structure (failure region H) and backs off to try again, instead of being counted docked and docked against
+        by the robots after it."""
+        lp, tune = self.loop, self.loop.tune
+        if tune.flush_look_frames <= 0:
+            return outcome
+        lp.look(tune.flush_look_frames, tune.look_prior_frames)
+        others = np.flatnonzero(lp.docked)
+        others = others[others != i]
+        found = landing.contact_misalignment(lp.est[i], float(lp.L[i]), float(lp.W[i]), (lp.est[others], lp.L[others], lp.W[others]),
+                                             FLUSH_REACH_UM)
+        if found is None:
+            return outcome
+        sd = float(lp.scn.noise.camera_heading_sd_rad) / math.sqrt(tune.flush_look_frames + tune.look_prior_frames)
+        tol = math.radians(tune.flush_tol_deg) + tune.flush_tol_sigmas * sd
+        mis, j = found
+        if abs(mis) <= tol:
+            return outcome
+        lp.log("not-flush", i, f"{lp.scn.names[i]} stopped turned {math.degrees(mis):+.1f} deg from {lp.scn.names[others[j]]}'s edge "
+                               f"(at most {math.degrees(tol):.1f} deg is flush): it met a corner of the structure (failure region H)")
+        return DockOutcome.STUCK
 
     def refit(self) -> None:
         """Move the slots of the robots yet to dock, and the nominal route's frame, with the structure as docked
