@@ -74,11 +74,12 @@ class PairTuning:
     """Turns of the structure about the G_1 junction tried when G_1 is re-planned (clockwise)."""
     frame_shifts_um: tuple[float, ...] = (0.0, 200.0, 400.0)
     """Shifts of the structure tried when G_1 is re-planned (each in 8 directions)."""
-    frame_for_approach_room: bool = False
+    frame_for_approach_room: bool = True
     """Whether G_1 first aims at a pair frame in which every later robot has room to come round onto its approach
-    (:meth:`~stressbots.control.pair.PairPhase.room_frame`) when the nominal frame leaves one without. Off: on the
-    layouts where it fires it fixed the tee dead ends by a wall at 1x (tuning +6 -3, held-out +1 -0) but lost at 2x
-    (held-out +1 -3) and on the independent plant (+2 -4): a wash (design.md 3.9, session 14)."""
+    (:meth:`~stressbots.control.pair.PairPhase.room_frame`) when the nominal frame leaves one without. Session 14
+    measured it a wash (tuning 1x +6 -3, held-out 2x +1 -3, independent plant +2 -4) and left it off; the controller
+    around it has changed since, and in session 30 the 33 tuning trials at 2x (seeds 0-1) where it fires went from
+    14 to 27 successes (234/240 at 1x, as without it): on by default (design.md 3.9)."""
     approach_room_um: float = 0.0
     """um. Room a later robot's approach needs (:func:`~stressbots.control.pair_geometry.approach_room`): its orbit disc
     one turning radius behind the start of its fine motion fits inside the arena (0: just)."""
