@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..collision import penetration_depth
 from ..generate import LITERATURE_NOISE
 from ..robots import body_corners
 from ..se2 import heading, points_to_frame, right
@@ -341,8 +342,6 @@ def contact_misalignment(pose, length_um: float, width_um: float, bodies: Bodies
     >>> contact_misalignment(np.array([0.0, -50.0, 0.0]), 250.0, 70.0, bodies, 5.0) is None   # 50 um short of the face
     True
     """
-    from ..collision import penetration_depth
-
     pose = np.asarray(pose, dtype=np.float64)
     poses, lengths, widths = bodies
     if len(poses) == 0:

@@ -304,8 +304,9 @@ class SingleDocking:
 
         A still look (``Tuning.flush_look_frames``) sharpens its heading; turned from that body's edges by more than the
         look's heading error allows (``Tuning.flush_tol_deg``, ``Tuning.flush_tol_sigmas``), it stopped on a corner of
-        the structure (failure region H) and backs off to try again, instead of being counted docked and docked against
-        by the robots after it."""
+        the structure (failure region H) and is not counted docked (nor docked against by the robots after it). The
+        caller's recovery backs it off; a one-way robot pushing against a corner can rarely leave it, so mostly the run
+        ends honestly stuck instead of claiming a structure the plant does not hold."""
         lp, tune = self.loop, self.loop.tune
         if tune.flush_look_frames <= 0:
             return outcome
