@@ -224,7 +224,7 @@ class Estimator:
             self._still_n[held] += count[held]
             self.pose[held] = self._still_sum[held] / self._still_n[held][:, None]
         free = ok & ~frozen
-        w = (count / (count + max(prior_frames, 0.0)))[free]
+        w = count[free] / (count[free] + max(prior_frames, 0.0))  # free robots were seen: count > 0
         self.pose[free] += w[:, None] * (mean[free] - self.pose[free])
         self.pose[:, 2] = np.mod(self.pose[:, 2], TWO_PI)
         self._last[free] = mean[free]
